@@ -1,0 +1,1 @@
+"""Declarative experiment files run by ``backlash run FILE``."""

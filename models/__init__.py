@@ -1,0 +1,1 @@
+"""Physics effects and feed-drive twin, physics baselines, shallow network and trainers, discovery."""

@@ -1,0 +1,1 @@
+"""backlash-pipeline: readings I/O, CLI, tracking, reports and drift monitoring."""

@@ -1,0 +1,1 @@
+"""One module per ``backlash`` subcommand (see ``pipeline.cli``)."""

@@ -1,0 +1,69 @@
+"""Names of the readings table (SCHEMA.md section 1). These are public contracts: never rename.
+
+After ``pipeline.readings.read_readings`` a frame always has every column in ``REQUIRED``
+plus ``visit`` and ``repeat`` (defaults filled in) and ``deviation_um`` (computed from
+``measured`` when absent), with these normalised values:
+
+- ``method`` is ``"linear"`` or ``"pendulum"``; ``direction`` is ``"+"`` or ``"-"``;
+- ``machine_id``, ``axis``, ``test_id``, ``visit`` are str; ``cycle`` and ``repeat`` int;
+- ``deviation_um`` is in um for linear axes (X, Y, Z) and arcsec for rotary axes (A, B, C);
+- optional columns appear only when the input had them.
+"""
+
+from __future__ import annotations
+
+REQUIRED = ("machine_id", "axis", "test_id", "method", "target", "direction", "cycle")
+DEVIATION = "deviation_um"
+MEASURED = "measured"
+OPTIONAL = (
+    "visit", "repeat", "started_at", "measured_at", "feed_mm_min", "dwell_s",
+    "machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct", "operating_hours",
+)
+NUMERIC_OPTIONAL = (
+    "feed_mm_min", "dwell_s", "machine_temp_c", "ambient_temp_c", "pressure_hpa",
+    "humidity_pct", "operating_hours",
+)
+DATETIME_OPTIONAL = ("started_at", "measured_at")
+CONDITIONS = ("feed_mm_min", "dwell_s", "machine_temp_c", "ambient_temp_c", "pressure_hpa",
+              "humidity_pct")
+
+# A test: one run with one method, one feed, one set of conditions.
+TEST_KEYS = ("machine_id", "axis", "visit", "test_id")
+# A linear and a pendulum test are paired when they share these (SCHEMA.md).
+PAIR_KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat")
+
+METHODS = ("linear", "pendulum")
+DIRECTIONS = ("+", "-")
+LINEAR_AXES = ("X", "Y", "Z")
+ROTARY_AXES = ("A", "B", "C")
+
+DIRECTION_ALIASES = {
+    "+": "+", "fwd": "+", "up": "+", "1": "+", "+1": "+", "1.0": "+", "+1.0": "+",
+    "-": "-", "bwd": "-", "down": "-", "-1": "-", "-1.0": "-",
+}
+METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "pend": "pendulum"}
+
+EFFECTS = (
+    "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
+    "lead_error_linear", "lead_error_periodic", "thermal_expansion", "thermal_drift",
+    "air_refraction", "abbe", "dwell_settling",
+)
+NO_EFFECT = "none"
+
+
+def is_rotary(axis: str) -> bool:
+    return str(axis).upper() in ROTARY_AXES
+
+
+def deviation_unit(axis: str) -> str:
+    """Unit of ``deviation_um`` and of every ISO figure for this axis."""
+    return "arcsec" if is_rotary(axis) else "um"
+
+
+def position_unit(axis: str) -> str:
+    return "deg" if is_rotary(axis) else "mm"
+
+
+def deviation_scale(axis: str) -> float:
+    """Factor from position units to deviation units: mm -> um or deg -> arcsec."""
+    return 3600.0 if is_rotary(axis) else 1000.0
