@@ -97,6 +97,8 @@ def detect_format(path: Path) -> str:
     if path.suffix.lower() == ".parquet":
         return "canonical"
     head = _head(path)
+    if not head.strip():
+        raise InputError("empty file; expected a header row and readings", file=path)
     if "TGT_DATA[" in head or "REF_DATA_" in head:
         return "ecmc"
     header = head.splitlines()[0].lower() if head.strip() else ""

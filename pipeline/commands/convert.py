@@ -1,0 +1,26 @@
+"""``backlash convert``: any accepted layout -> a validated canonical readings table."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "Read a readings file (canonical, paper Table 2 or ecmc), validate it, write CSV/Parquet."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
+    parser.add_argument("--format", default="auto", choices=("auto", "canonical", "paper", "ecmc"),
+                        help="input layout (default: detect)")
+    parser.add_argument("--out", required=True, help="output file, .csv or .parquet")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from pipeline.readings import read_readings, write_readings
+
+    frame = read_readings(args.file, args.format)
+    write_readings(frame, args.out)
+    tests = frame.groupby(["machine_id", "axis", "visit", "test_id"]).ngroups
+    print(f"{len(frame)} readings in {tests} tests -> {args.out}", file=sys.stderr)
+    return 0

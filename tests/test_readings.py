@@ -1,0 +1,252 @@
+"""Readings I/O: the three layouts, aliases, unit handling, and every bad input we refuse."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.cli import main
+from pipeline.readings import read_readings, write_readings
+
+TARGETS = (0.0, 50.0, 100.0)
+
+
+def valid_table(cycles: int = 3, method: str = "linear") -> pd.DataFrame:
+    """A small canonical test: 3 targets x 2 directions x 3 cycles, B_i = -4 um."""
+    rows = []
+    for cycle in range(1, cycles + 1):
+        for direction, offset in (("+", -2.0), ("-", 2.0)):
+            for target in TARGETS:
+                rows.append({
+                    "machine_id": "M1", "axis": "X", "test_id": "T1", "method": method,
+                    "target": target, "direction": direction, "cycle": cycle,
+                    "deviation_um": 0.01 * target + offset + 0.1 * cycle,
+                    "feed_mm_min": 500.0, "pressure_hpa": 1013.0,
+                })
+    return pd.DataFrame(rows)
+
+
+def write_csv(tmp_path, frame: pd.DataFrame, name: str = "readings.csv"):
+    path = tmp_path / name
+    frame.to_csv(path, index=False)
+    return path
+
+
+def convert(tmp_path, path, capsys, *extra):
+    """Run `backlash convert` and return (exit code, stderr lines, output path)."""
+    out = tmp_path / "out" / "converted.csv"
+    code = main(["convert", str(path), "--out", str(out), *extra])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    return code, err, out
+
+
+# ------------------------------------------------------------------------ good input
+
+
+def test_canonical_csv_round_trip_through_parquet(tmp_path):
+    frame = read_readings(write_csv(tmp_path, valid_table()))
+    assert list(frame.columns[:8]) == ["machine_id", "axis", "test_id", "method", "target",
+                                       "direction", "cycle", "deviation_um"]
+    assert frame["visit"].eq("1").all() and frame["repeat"].eq(1).all()
+    write_readings(frame, tmp_path / "r.parquet")
+    again = read_readings(tmp_path / "r.parquet")
+    pd.testing.assert_frame_equal(frame.reset_index(drop=True), again, check_dtype=False)
+
+
+def test_aliases_are_normalised(tmp_path):
+    table = valid_table()
+    table["direction"] = table["direction"].map({"+": "FWD", "-": "down"})
+    table["method"] = "Lin"
+    table.loc[0, "direction"] = "+1"
+    frame = read_readings(write_csv(tmp_path, table))
+    assert set(frame["direction"]) == {"+", "-"} and set(frame["method"]) == {"linear"}
+    assert (frame.loc[frame["direction"] == "+", "deviation_um"]
+            < frame.loc[frame["direction"] == "-", "deviation_um"].mean()).all()
+
+
+def test_measured_column_gives_deviation_in_um(tmp_path):
+    table = valid_table()
+    table["measured"] = table["target"] + table["deviation_um"] / 1000.0
+    frame = read_readings(write_csv(tmp_path, table.drop(columns="deviation_um")))
+    np.testing.assert_allclose(frame["deviation_um"], table["deviation_um"], atol=1e-9)
+
+
+def test_rotary_axis_measured_in_degrees_gives_arcsec(tmp_path):
+    table = valid_table().assign(axis="C")
+    table["measured"] = table["target"] + table["deviation_um"] / 3600.0
+    frame = read_readings(write_csv(tmp_path, table.drop(columns="deviation_um")))
+    np.testing.assert_allclose(frame["deviation_um"], table["deviation_um"], atol=1e-9)
+
+
+def test_ecmc_forward_is_plus_direction(ess_file):
+    frame = read_readings(ess_file)
+    first = frame[(frame["direction"] == "+") & (frame["target"] == 15.0) & (frame["cycle"] == 1)]
+    # REF_DATA_FWD[1,1]=15.0931842960383320 with TGT_DATA[1]=15
+    assert first["deviation_um"].item() == pytest.approx(93.184296038332, abs=1e-9)
+    assert len(frame) == 50 and frame["method"].eq("linear").all()
+
+
+def test_paper_table_absolute_rows_are_converted_with_a_warning(tmp_path, capsys):
+    # Rows shaped like the paper's Table 2: two rows of deviations, two rows of positions.
+    wide = pd.DataFrame({
+        "No": [1, 2, 3, 4],
+        "Pos. [mm]": [250, 250, 250, 250],
+        "Dev_lin_f [mm]": [-0.0172, -0.0169, 249.9828, 249.9831],
+        "Dev_lin_r [mm]": [-0.0235, -0.0233, 249.9765, 249.9767],
+        "Speed [mm/min]": [500, 500, 500, 500],
+        "T_e [°C]": [26.9] * 4,
+        "Dev_pend_f [mm]": [0.024, 0.0243, 250.024, 250.0243],
+        "Dev_pend_r [mm]": [0.0181, 0.0173, 250.0181, 250.0173],
+    })
+    frame = read_readings(write_csv(tmp_path, wide, "table2.csv"))
+    assert "absolute positions" in capsys.readouterr().err
+    lin_up = frame[(frame["method"] == "linear") & (frame["direction"] == "+")]
+    np.testing.assert_allclose(lin_up["deviation_um"], [-17.2, -16.9, -17.2, -16.9], atol=1e-6)
+    assert sorted(frame["cycle"].unique()) == [1, 2, 3, 4]
+    assert frame["ambient_temp_c"].eq(26.9).all() and frame["feed_mm_min"].eq(500).all()
+    assert set(frame["method"]) == {"linear", "pendulum"}
+
+
+def test_convert_writes_parquet(tmp_path, capsys, psi_file):
+    out = tmp_path / "psi.parquet"
+    assert main(["convert", str(psi_file), "--out", str(out)]) == 0
+    assert len(pd.read_parquet(out)) == 50
+
+
+# ------------------------------------------------------------------------ bad input
+
+
+def _csv_text(tmp_path, text: str, name: str = "bad.csv"):
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _edit(tmp_path, edit):
+    table = valid_table()
+    table = edit(table)
+    return write_csv(tmp_path, table, "bad.csv")
+
+
+def _set(row, col, value):
+    def edit(t):
+        t = t.astype({col: object})
+        t.loc[row, col] = value
+        return t
+    return edit
+
+
+BAD_TABLES = {
+    # name: (edit of a valid table, expected words in the message, column, data row or None)
+    "missing_required_column": (lambda t: t.drop(columns="cycle"), "missing required column",
+                                "cycle", None),
+    "unknown_direction": (_set(4, "direction", "sideways"), "unknown direction", "direction", 4),
+    "unknown_method": (_set(2, "method", "spiral"), "unknown method", "method", 2),
+    "nan_deviation": (_set(5, "deviation_um", ""), "missing value", "deviation_um", 5),
+    "non_numeric_target": (_set(3, "target", "fifty"), "not a number", "target", 3),
+    "fractional_cycle": (_set(1, "cycle", 1.5), "whole number", "cycle", 1),
+    "unknown_axis": (lambda t: t.assign(axis="Q"), "unknown axis", "axis", 0),
+    "no_deviation_or_measured": (lambda t: t.drop(columns="deviation_um"), "deviation_um",
+                                 "deviation_um", None),
+    "duplicate_reading": (lambda t: pd.concat([t, t.iloc[[7]]], ignore_index=True),
+                          "duplicate reading", "cycle", 18),
+    "one_direction_only": (lambda t: t[~((t["target"] == 50.0) & (t["direction"] == "-"))],
+                           "only", "direction", None),
+    "fewer_than_two_cycles": (lambda t: t[t["cycle"] == 1], "at least 2 cycles", "cycle", None),
+    "mixed_methods_in_one_test": (_set(0, "method", "pendulum"), "mixes linear and pendulum",
+                                  "method", None),
+    "mixed_units": (_set(9, "deviation_um", 0.0025), "mixed units", "deviation_um", 9),
+    "deviation_in_mm": (lambda t: t.assign(deviation_um=t["deviation_um"] / 1000.0),
+                        "look like mm", "deviation_um", 0),
+    "measured_in_um": (lambda t: t.drop(columns="deviation_um").assign(
+        measured=(t["target"] * 1000.0 + t["deviation_um"])), "expected a position in mm",
+        "measured", 0),
+    "pressure_in_pa": (_set(6, "pressure_hpa", 101325.0), "hPa", "pressure_hpa", 6),
+    "zero_feed": (_set(0, "feed_mm_min", 0.0), "feed rate", "feed_mm_min", 0),
+    "bad_date": (lambda t: t.assign(started_at="2026-13-45"), "ISO 8601", "started_at", 0),
+    "empty_machine_id": (_set(3, "machine_id", ""), "empty machine_id", "machine_id", 3),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_TABLES))
+def test_bad_table_gives_one_line_exit_2_and_no_output(tmp_path, capsys, case):
+    edit, words, column, data_row = BAD_TABLES[case]
+    path = _edit(tmp_path, edit)
+    code, err, out = convert(tmp_path, path, capsys)
+    assert code == 2
+    assert len(err) == 1, err
+    assert str(path) in err[0] and words in err[0]
+    assert f"column {column!r}" in err[0]
+    if data_row is not None:
+        assert f"row {data_row + 2}," in err[0]  # header is row 1
+    assert not out.exists() and not any(out.parent.glob("*")) if out.parent.exists() else True
+
+
+@pytest.mark.parametrize("case, text, words", [
+    ("empty_file", "", "empty file"),
+    ("header_only", "machine_id,axis,test_id,method,target,direction,cycle,deviation_um\n",
+     "no data rows"),
+    ("semicolon_delimiter", "machine_id;axis;test_id;method;target;direction;cycle;deviation_um\n"
+     "M;X;T;linear;0;+;1;1.0\n", "semicolons"),
+    ("unknown_layout", "time,value\n1,2\n", "unknown format"),
+    ("malformed_csv", "machine_id,axis,test_id,method,target,direction,cycle,deviation_um\n"
+     'M,X,T,linear,0,+,1,"1.0\n', "malformed CSV"),
+])
+def test_bad_file_gives_one_line_exit_2(tmp_path, capsys, case, text, words):
+    path = _csv_text(tmp_path, text)
+    code, err, out = convert(tmp_path, path, capsys)
+    assert code == 2 and len(err) == 1 and words in err[0] and str(path) in err[0], err
+    assert not out.exists()
+
+
+def test_missing_file(tmp_path, capsys):
+    code, err, _ = convert(tmp_path, tmp_path / "nope.csv", capsys)
+    assert code == 2 and "no such file" in err[0] and "nope.csv" in err[0]
+
+
+def test_binary_file(tmp_path, capsys):
+    path = tmp_path / "image.csv"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00")
+    code, err, _ = convert(tmp_path, path, capsys)
+    assert code == 2 and "binary" in err[0]
+
+
+def test_broken_parquet(tmp_path, capsys):
+    path = tmp_path / "broken.parquet"
+    path.write_text("not parquet")
+    code, err, _ = convert(tmp_path, path, capsys)
+    assert code == 2 and "cannot read Parquet" in err[0] and len(err) == 1
+
+
+def test_unknown_output_type_writes_nothing(tmp_path, capsys):
+    path = write_csv(tmp_path, valid_table())
+    code = main(["convert", str(path), "--out", str(tmp_path / "x.xlsx")])
+    assert code == 2 and "expected a .csv or .parquet" in capsys.readouterr().err
+    assert not (tmp_path / "x.xlsx").exists()
+
+
+def test_unknown_format_option_is_refused(tmp_path, capsys):
+    path = write_csv(tmp_path, valid_table())
+    with pytest.raises(SystemExit) as exit_info:
+        main(["convert", str(path), "--format", "excel", "--out", str(tmp_path / "o.csv")])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'excel'" in capsys.readouterr().err
+
+
+def test_ecmc_reference_without_target(tmp_path, capsys):
+    path = _csv_text(tmp_path, "UNIT=mm\nTGT_DATA[1]=0\nREF_DATA_FWD[2,1]=1.0\n", "x_ISO230.dat")
+    code, err, _ = convert(tmp_path, path, capsys)
+    assert code == 2 and "TGT_DATA[2]" in err[0]
+
+
+def test_ecmc_non_numeric_value_names_the_line(tmp_path, capsys):
+    path = _csv_text(tmp_path, "UNIT=mm\nTGT_DATA[1]=0\nREF_DATA_FWD[1,1]=abc\n", "y_ISO230.dat")
+    code, err, _ = convert(tmp_path, path, capsys)
+    assert code == 2 and "row 3" in err[0] and "'abc' is not a number" in err[0]
+
+
+def test_paper_table_missing_column(tmp_path, capsys):
+    path = _csv_text(tmp_path, "Pos. [mm],Dev_lin_f [mm],Dev_lin_r [mm]\n0,0.001,0.002\n")
+    code, err, _ = convert(tmp_path, path, capsys, "--format", "paper")
+    assert code == 2 and "missing paper Table-2 column 'dev_pend_f_mm'" in err[0]
