@@ -30,3 +30,17 @@ def _isolated_tracking(tmp_path, monkeypatch):
     """Every test tracks into its own SQLite store, never into the working tree."""
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
     monkeypatch.setenv("BACKLASH_ARTIFACTS", str(tmp_path / "mlartifacts"))
+
+
+@pytest.fixture(scope="session")
+def postgres_url():
+    """URL of a real PostgreSQL server on loopback (installed and started here)."""
+    from pg_server import Unavailable, start
+
+    try:
+        url, stop = start()
+    except Unavailable as why:
+        print(f"\nPostgreSQL tests skipped: {why}")
+        pytest.skip(f"PostgreSQL unavailable: {why}")
+    yield url
+    stop()
