@@ -1,0 +1,61 @@
+"""The ISO 230-2 chart metrologists expect: mean deviation up and down against target with
++-2s bands, the reversal value per target, and the axis figures in a box."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from pipeline import schema  # noqa: E402
+from pipeline.fileio import atomic_path  # noqa: E402
+
+MAX_PANELS = 12
+UP, DOWN = "#1f77b4", "#d62728"
+
+
+def draw_test(ax, ax_reversal, targets: pd.DataFrame, figures: pd.Series) -> None:
+    """One test: means with +-2s bands on ``ax``, B_i bars on ``ax_reversal``, figures box."""
+    t = targets.sort_values("target")
+    unit = figures["unit"]
+    for side, colour, label in (("up", UP, "+ (up)"), ("down", DOWN, "- (down)")):
+        mean, s = t[f"mean_{side}"], t[f"s_{side}"]
+        ax.plot(t["target"], mean, "o-", color=colour, label=f"mean {label}")
+        ax.fill_between(t["target"], mean - 2 * s, mean + 2 * s, color=colour, alpha=0.15,
+                        label=f"±2s {label}")
+    ax.plot(t["target"], t["mean_bi"], "k--", lw=1, label="bidirectional mean")
+    ax.axhline(0, color="grey", lw=0.5)
+    ax.set_ylabel(f"deviation [{unit}]")
+    ax.set_title(f"{figures['machine_id']} {figures['axis']} visit {figures['visit']} — "
+                 f"{figures['test_id']}", fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+    span = t["target"].max() - t["target"].min() or 1.0
+    ax_reversal.bar(t["target"], t["B_i"], width=0.03 * span, color="grey")
+    ax_reversal.axhline(0, color="black", lw=0.5)
+    ax_reversal.set_ylabel(f"B_i [{unit}]")
+    ax_reversal.set_xlabel(f"target [{schema.position_unit(figures['axis'])}]")
+    box = "\n".join(f"{k:<6} {figures[k]:9.3f}" for k in ("A", "A_up", "A_down", "E", "E_up",
+                                                            "E_down", "M", "R", "R_up", "R_down",
+                                                            "B", "B_mean"))
+    ax.text(1.02, 1.0, f"ISO 230-2 [{unit}]\n{box}", transform=ax.transAxes, va="top",
+            family="monospace", fontsize=8,
+            bbox={"boxstyle": "round", "facecolor": "white", "alpha": 0.9})
+
+
+def plot_tests(targets: pd.DataFrame, figures: pd.DataFrame, path) -> None:
+    """Write one PNG with a panel per test (at most ``MAX_PANELS``)."""
+    keys = list(schema.TEST_KEYS)
+    n = len(figures)
+    fig, axes = plt.subplots(2 * n, 1, figsize=(10, 5 * n), squeeze=False,
+                             gridspec_kw={"height_ratios": [3, 1] * n, "right": 0.8, "left": 0.08,
+                                          "hspace": 0.35})
+    for i, (_, row) in enumerate(figures.iterrows()):
+        mine = (targets[keys] == row[keys].to_numpy()).all(axis=1)
+        ax, ax_reversal = axes[2 * i, 0], axes[2 * i + 1, 0]
+        ax_reversal.sharex(ax)
+        draw_test(ax, ax_reversal, targets.loc[mine], row)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
