@@ -12,7 +12,8 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 REPO = Path(__file__).resolve().parents[1]
 REAL_DATA = REPO.parent / "shared" / "data" / "real"
-ECMC = REAL_DATA / "ecmc"
+# The demo ships byte-identical copies of the real ecmc tests; use them in a lone checkout.
+ECMC = REAL_DATA / "ecmc" if (REAL_DATA / "ecmc").is_dir() else REPO / "experiments/data/ecmc"
 
 
 @pytest.fixture
