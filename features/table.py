@@ -1,0 +1,168 @@
+"""Feature table: the backlash paper's Table 2 inputs per paired interior point, plus target.
+
+One row per backlash point (``features.targets.backlash_targets``): the pair of tests
+(``pipeline.schema.PAIR_KEYS``) and the target position. Inputs, as in the paper (seed 004,
+section 4, Table 2 and Fig. 9):
+
+==================  ====================================================================
+``target``          programmed position P_i [mm]
+``deviation_down_um``  mean deviation of the linear test approached in the - direction [um]
+``deviation_up_um``    mean deviation of the linear test approached in the + direction [um]
+``feed_mm_min``     feed rate of the run [mm/min]
+``machine_temp_c``  machine (ball screw) temperature, mean at that target [degC]
+``ambient_temp_c``  air temperature, mean at that target [degC]
+``pressure_hpa``    air pressure, mean at that target [hPa]
+``humidity_pct``    relative humidity, mean at that target [%RH]
+==================  ====================================================================
+
+plus ``dwell_s`` and ``operating_hours`` when the readings have them. The deviations come
+from the linear test only, so a model trained on this table predicts what the pendulum test
+would add from a linear test and its conditions.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pipeline import schema
+from pipeline.errors import InputError
+
+PAPER_FEATURES = ("target", "deviation_down_um", "deviation_up_um", "feed_mm_min",
+                  "machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct")
+EXTRA_FEATURES = ("dwell_s", "operating_hours")
+ENVIRONMENT = ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct",
+               "operating_hours")
+POINT_KEYS = (*schema.PAIR_KEYS, "target")
+
+
+@dataclass
+class FeatureTable:
+    """Inputs ``X``, target ``y`` [um] and ``meta`` (point keys, date) aligned row by row."""
+
+    X: pd.DataFrame
+    y: pd.Series
+    meta: pd.DataFrame
+    target_kind: str
+    reason: str = ""
+
+
+def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:
+    """The paper's eight inputs that the data can supply, plus dwell and operating hours.
+
+    With the ``iso`` target the two deviation inputs are left out: the reversal value is their
+    difference, so they would hand the answer to the model.
+    """
+    available = {"target", *readings.columns}
+    if kind != "iso":
+        available |= {"deviation_down_um", "deviation_up_um"}
+    names = [f for f in (*PAPER_FEATURES, *EXTRA_FEATURES) if f in available]
+    missing = [f for f in PAPER_FEATURES if f not in names]
+    if missing:
+        why = " (ISO target: the reversal value is their difference)" if kind == "iso" else ""
+        print(f"note: inputs without {', '.join(missing)}{why}", file=sys.stderr)
+    return names
+
+
+def feature_table(readings: pd.DataFrame, target: str = "auto",
+                  features: list[str] | None = None) -> FeatureTable:
+    """Build the model table from a validated readings frame.
+
+    Parameters
+    ----------
+    readings : DataFrame
+        Validated readings (``pipeline.readings.read_readings``).
+    target : {'paper', 'iso', 'auto'}
+        Backlash definition, see ``features.targets.backlash_targets``.
+    features : list of str, optional
+        Input columns; default ``default_features(readings)``. Unknown names are an error.
+    """
+    from features.targets import backlash_targets
+
+    source = readings.attrs.get("source", "readings")
+    readings = with_pair_keys(readings)
+    points = backlash_targets(readings, kind=target)
+    kind = points.attrs["target_kind"]
+    names = list(features) if features else default_features(readings, kind)
+    table = points.merge(point_inputs(readings), on=list(POINT_KEYS), how="left",
+                         validate="many_to_one")
+    unknown = [f for f in names if f not in table.columns]
+    if unknown:
+        raise InputError(f"unknown feature {unknown[0]!r}; available: "
+                         f"{', '.join(c for c in table.columns if c in _candidates(table))}",
+                         file=source)
+    table = table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
+    meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction") if c in table]
+    return FeatureTable(table[names].astype(float), table["backlash_um"].astype(float),
+                        table[meta_cols], kind, points.attrs.get("target_reason", ""))
+
+
+def prediction_inputs(readings: pd.DataFrame, features: list[str]) -> pd.DataFrame:
+    """Model inputs at every interior target of the readings' tests, no backlash needed.
+
+    Returns ``POINT_KEYS`` plus ``features``, one row per point; linear tests supply the
+    deviation inputs, so a model can predict backlash from a linear test and its conditions.
+    """
+    source = readings.attrs.get("source", "readings")
+    readings = with_pair_keys(readings)
+    extent = readings.groupby(list(schema.TEST_KEYS))["target"].agg(["min", "max"])
+    bounds = extent.loc[pd.MultiIndex.from_frame(readings[list(schema.TEST_KEYS)])].to_numpy()
+    interior = readings[(readings["target"] > bounds[:, 0]) & (readings["target"] < bounds[:, 1])]
+    inputs = point_inputs(interior)
+    missing = [f for f in features if f not in inputs]
+    if missing:
+        raise InputError(f"the model needs input {missing[0]!r}, which the readings lack",
+                         file=source, column=missing[0])
+    table = inputs[list(dict.fromkeys([*POINT_KEYS, *features]))]
+    check_features(table[features], source, allow_constant=True)
+    return table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
+
+
+def with_pair_keys(readings: pd.DataFrame) -> pd.DataFrame:
+    """Pairing keys that the readings lack are treated as equal for every test (NaN)."""
+    missing = {k: np.nan for k in schema.PAIR_KEYS if k not in readings}
+    return readings.assign(**missing) if missing else readings
+
+
+def point_inputs(readings: pd.DataFrame) -> pd.DataFrame:
+    """Per point: linear-test mean deviation per direction, and mean conditions over both
+    tests of the pair at that target."""
+    keys = list(POINT_KEYS)
+    linear = readings[readings["method"] == "linear"]
+    deviation = (linear.groupby([*keys, "direction"], dropna=False)["deviation_um"].mean()
+                 .unstack("direction")
+                 .rename(columns={"+": "deviation_up_um", "-": "deviation_down_um"}))
+    env = [c for c in ENVIRONMENT if c in readings]
+    inputs = deviation
+    if env:
+        inputs = inputs.join(readings.groupby(keys, dropna=False)[env].mean(), how="left")
+    if "started_at" in readings:
+        inputs = inputs.join(readings.groupby(keys, dropna=False)["started_at"].min(), how="left")
+    return inputs.reset_index()
+
+
+def check_features(X: pd.DataFrame, source: str = "features",
+                   allow_constant: bool = False) -> None:
+    """Refuse inputs a network cannot learn from: NaN values and (for training) constant
+    columns."""
+    if X.empty:
+        raise InputError("no backlash points: nothing to train on", file=source)
+    nan = X.isna()
+    if nan.any().any():
+        col = nan.any().idxmax()
+        row = int(np.flatnonzero(nan[col].to_numpy())[0])
+        raise InputError(f"NaN in feature at point {row + 1} of the feature table; every input "
+                         "needs a value (drop the feature with --features)", file=source,
+                         column=col)
+    constant = [] if allow_constant else [c for c in X.columns if X[c].nunique() < 2]
+    if constant:
+        raise InputError(f"feature is constant ({X[constant[0]].iloc[0]:g}) over all points; "
+                         "it carries no information (drop it with --features)", file=source,
+                         column=constant[0])
+
+
+def _candidates(table: pd.DataFrame) -> list[str]:
+    return [*PAPER_FEATURES, *EXTRA_FEATURES, *[c for c in table.columns if c.endswith("_c")]]

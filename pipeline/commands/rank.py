@@ -1,0 +1,180 @@
+"""``backlash rank``: which conditions drive backlash, as an HTML report logged to MLflow."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from pipeline.errors import InputError
+
+HELP = ("Rank the inputs by how much they drive backlash (weighted k-NN, ANOVA -ln(p), "
+        "permutation importance, mutual information) and write an HTML report.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
+    parser.add_argument("--out", required=True, help="output folder for the report")
+    parser.add_argument("--model", metavar="DIR",
+                        help="trained model directory; its predictor gives the permutation "
+                             "importance (default: a gradient boosting regressor fitted per "
+                             "cross-validation fold)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the ranking as JSON on stdout")
+    parser.add_argument("--bins", default="4",
+                        help="backlash classes: N quantile classes, or comma-separated class "
+                             "boundaries in um such as 2,4,6 (default 4)")
+    parser.add_argument("--features", help="comma-separated feature-table columns "
+                                           "(default: every input the data supply)")
+    parser.add_argument("--target", choices=("auto", "paper", "iso"),
+                        help="backlash definition (default: the model's, else auto)")
+    parser.add_argument("--k", type=int, default=5, help="k-NN neighbours (default 5)")
+    parser.add_argument("--rank-by", choices=("consensus", "anova"), default="consensus",
+                        help="final rank: mean rank of ANOVA, permutation and mutual "
+                             "information (default), or the ANOVA score as in the paper")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--format", default="auto",
+                        choices=("auto", "canonical", "paper", "ecmc"),
+                        help="input layout (default: detect)")
+
+
+def parse_bins(text: str):
+    """``"4"`` -> 4 quantile classes; ``"2,4.5"`` -> class boundaries [um]."""
+    parts = [p.strip() for p in str(text).split(",") if p.strip()]
+    try:
+        if len(parts) == 1 and parts[0].lstrip("+").isdigit():
+            bins = int(parts[0])
+            if bins < 2:
+                raise InputError(f"--bins must be at least 2, got {bins}")
+            return bins
+        return [float(p) for p in parts] or _bad_bins(text)
+    except ValueError:
+        return _bad_bins(text)
+
+
+def _bad_bins(text):
+    raise InputError(f"--bins expects a class count such as 4 or boundaries in um such as "
+                     f"2,4,6; got {text!r}")
+
+
+def parse_features(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    if not names:
+        raise InputError("--features is empty; give comma-separated column names")
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise InputError(f"--features names {duplicated[0]!r} twice")
+    return names
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.ranking import rank_features
+    from features.table import feature_table
+    from pipeline.fileio import clean_nan, dumps
+    from pipeline.rank_report import write_rank_report
+    from pipeline.readings import read_readings
+
+    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
+    if args.k < 1:
+        raise InputError(f"--k must be at least 1, got {args.k}")
+    bins = parse_bins(args.bins)
+    features = parse_features(args.features)
+    model, notes = load_predictor(args.model)
+    if model is not None and features is None:
+        features = list(model.feature_names_)
+    target = args.target or (model.target_kind if model is not None else "auto")
+
+    readings = read_readings(args.data, args.format)
+    table = feature_table(readings, target=target, features=features)
+    if model is not None:
+        missing = [f for f in model.feature_names_ if f not in table.X.columns]
+        if missing:
+            raise InputError(f"the model needs input {missing[0]!r}, which --features leaves "
+                             "out", file=args.model)
+        notes.append("permutation importance of the given trained model, scored on these "
+                     "data; if the model was trained on them, the scores are optimistic")
+    else:
+        notes.append("no --model given: a gradient boosting regressor was fitted per "
+                     "cross-validation fold for the permutation importance")
+    if table.reason:
+        notes.append(f"backlash target {table.target_kind}: {table.reason}")
+    groups = _visits(table.meta)
+    if groups is None:
+        notes.append("a single visit: the proxy-for-visit check needs two or more")
+
+    result = rank_features(table.X, table.y, groups=groups, bins=bins, n_neighbors=args.k,
+                           estimator=model, prefit=model is not None, rank_by=args.rank_by,
+                           random_state=args.seed, source=str(args.data))
+    result.notes.extend(notes)
+    paths = write_rank_report(result, args.out, source=str(args.data),
+                              target_kind=table.target_kind)
+    log_to_mlflow(result, paths, args, table, readings)
+
+    print_table(result, paths["html"], file=sys.stderr)
+    if args.json:
+        print(dumps(clean_nan(result.to_json())))
+    return 0
+
+
+def load_predictor(directory):
+    """The trained model of ``--model`` (``models.registry.load_model``), or None."""
+    if directory is None:
+        return None, []
+    from models.registry import load_model
+
+    return load_model(directory), []
+
+
+def _visits(meta):
+    if "visit" not in meta or meta["visit"].nunique(dropna=True) < 2:
+        return None
+    return meta["visit"].astype(str).to_numpy()
+
+
+def log_to_mlflow(result, paths, args, table, readings) -> None:
+    """One MLflow run in experiment ``rank``: parameters, every score as a metric, the files."""
+    import mlflow
+
+    from pipeline import tracking
+
+    t = result.table
+    with tracking.run("rank", f"rank {os.path.basename(str(args.data))}"):
+        mlflow.log_params({
+            "data": str(args.data), "data_sha256": tracking.data_hash(readings),
+            "n_points": result.n_points, "features": ",".join(t.index),
+            "bins": args.bins, "k": args.k, "rank_by": result.rank_by, "seed": args.seed,
+            "target_kind": table.target_kind, "model": args.model or "",
+            "permutation_model": result.permutation_model[:500],
+        })
+        metrics = {"knn_accuracy": result.knn.accuracy,
+                   "knn_accuracy_std": result.knn.accuracy_std}
+        for name, row in t.iterrows():
+            metrics.update({f"anova_score_{name}": row["anova_score"],
+                            f"anova_score_std_{name}": row["anova_score_std"],
+                            f"permutation_um_{name}": row["permutation_um"],
+                            f"mutual_info_{name}": row["mutual_info"],
+                            f"knn_drop_{name}": row["knn_drop"],
+                            f"rank_{name}": float(row["rank"])})
+        mlflow.log_metrics({k: float(v) for k, v in metrics.items()
+                            if v is not None and abs(float(v)) != float("inf")})
+        for path in paths.values():
+            mlflow.log_artifact(str(path), artifact_path="rank")
+
+
+def print_table(result, html_path, file) -> None:
+    t = result.table
+    knn = result.knn
+    print(f"weighted k-NN validation accuracy {100 * knn.accuracy:.1f} +- "
+          f"{100 * knn.accuracy_std:.1f} % ({knn.n_splits}-fold, k = {knn.n_neighbors}, "
+          f"{len(knn.class_counts)} classes)", file=file)
+    print(f"{'rank':>4}  {'input':<20} {'ANOVA -ln(p)':>14} {'perm [um]':>10} "
+          f"{'MI [nat]':>9}  influence", file=file)
+    for name, r in t.iterrows():
+        flag = "proxy for visit" if r["proxy_for_visit"] else ("yes" if r["influence"] else "no")
+        print(f"{int(r['rank']):>4}  {name:<20} {r['anova_score']:>14.3f} "
+              f"{r['permutation_um']:>10.3f} {r['mutual_info']:>9.3f}  {flag}", file=file)
+    print(f"report: {html_path}", file=file)
+
