@@ -1,0 +1,102 @@
+"""Evaluation of backlash predictors: hold-out splits, scores, error against truth.
+
+Two hold-out designs:
+
+- ``random``: a seeded random 15 % of the points is the test set, as the paper's
+  ``dividerand`` does for its test split;
+- ``forward``: train on earlier visits, test on the later ones (the last quarter of the
+  visits by date, at least one) — what a maintenance team meets when it predicts the next visit.
+
+Within the training part each trainer may divide again (the LM trainer's 70/15/15
+``dividerand`` validation split).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import InputError
+
+SPLITS = ("random", "forward")
+TEST_FRACTION = 0.15
+MIN_POINTS = 10
+
+
+def holdout(meta: pd.DataFrame, kind: str = "random", random_state: int = 0,
+            source: str = "data") -> tuple[np.ndarray, np.ndarray]:
+    """Indices (train, test) of the feature-table rows for a hold-out split."""
+    n = len(meta)
+    if n < MIN_POINTS:
+        raise InputError(f"{n} backlash points are too few to split into training and test "
+                         f"sets; expected at least {MIN_POINTS}", file=source)
+    if kind == "random":
+        order = np.random.default_rng(random_state).permutation(n)
+        n_test = max(1, int(round(TEST_FRACTION * n)))
+        return np.sort(order[n_test:]), np.sort(order[:n_test])
+    if kind == "forward":
+        rank = visit_order(meta)
+        visits = np.unique(rank)
+        if len(visits) < 2:
+            raise InputError("the forward split needs readings from at least 2 visits; "
+                             "use --split random", file=source)
+        n_test_visits = max(1, int(round(0.25 * len(visits))))
+        test = rank >= visits[-n_test_visits]
+        return np.flatnonzero(~test), np.flatnonzero(test)
+    raise InputError(f"unknown split {kind!r}; expected one of {', '.join(SPLITS)}")
+
+
+def visit_order(meta: pd.DataFrame) -> np.ndarray:
+    """Chronological rank of each row's visit: by first date when dates exist, else by the
+    visit label in natural order (numbers as numbers)."""
+    if "started_at" in meta and meta["started_at"].notna().all():
+        first = meta.groupby("visit")["started_at"].transform("min")
+        return first.rank(method="dense").to_numpy().astype(int)
+    labels = meta["visit"].astype(str)
+    numeric = pd.to_numeric(labels, errors="coerce")
+    keys = sorted(labels.unique(), key=lambda v: (np.isnan(numeric[labels == v].iloc[0]),
+                                                  numeric[labels == v].iloc[0], v))
+    return labels.map({v: i for i, v in enumerate(keys)}).to_numpy()
+
+
+def target_noise_floor(readings: pd.DataFrame, kind: str) -> float:
+    """Standard uncertainty [um] of one measured backlash point from the repeatability.
+
+    With pooled reading repeatability ``s`` and ``n`` cycles, a direction mean has
+    variance s^2/n. The paper target z_down - z_up combines four such means
+    (pendulum and linear, both directions): u = 2 s / sqrt(n). The ISO reversal value
+    combines two: u = sqrt(2) s / sqrt(n).
+    """
+    from pipeline.schema import TEST_KEYS
+
+    groups = readings.groupby([*TEST_KEYS, "target", "direction"], sort=False)["deviation_um"]
+    var, n = groups.var(ddof=1), groups.size()
+    s_pooled = float(np.sqrt(np.average(var, weights=n - 1)))
+    n_typical = float(np.median(n))
+    return (2.0 if kind == "paper" else np.sqrt(2.0)) * s_pooled / np.sqrt(n_typical)
+
+
+def scores(y_true, y_pred) -> dict[str, float]:
+    """Seed 000's four indices: RMSE and MAE [um], R^2, MAPE [%]."""
+    y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
+    error = y_pred - y_true
+    total = np.sum((y_true - y_true.mean()) ** 2)
+    nonzero = np.abs(y_true) > 1e-9
+    return {
+        "rmse_um": float(np.sqrt(np.mean(error ** 2))),
+        "mae_um": float(np.mean(np.abs(error))),
+        "r2": float(1 - np.sum(error ** 2) / total) if total > 0 else float("nan"),
+        "mape_pct": float(100 * np.mean(np.abs(error[nonzero] / y_true[nonzero])))
+        if nonzero.any() else float("nan"),
+    }
+
+
+def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame) -> np.ndarray:
+    """The twin's true backlash at each feature-table point (mean over the point's tests).
+
+    ``truth`` needs the point keys present in ``meta`` and ``true_backlash_um``.
+    """
+    keys = [k for k in meta.columns if k in truth.columns and k not in ("started_at",)]
+    per_point = truth.groupby(keys, dropna=False)["true_backlash_um"].mean()
+    found = meta[keys].merge(per_point.reset_index(), on=keys, how="left")
+    return found["true_backlash_um"].to_numpy(float)

@@ -1,0 +1,21 @@
+"""MLflow "model from code": loads a trained model directory with ``models.registry.load_model``
+(torch state dicts with ``weights_only=True``, skops with trusted types only), so nothing is
+unpickled when MLflow serves or loads the model."""
+
+from __future__ import annotations
+
+import mlflow.pyfunc
+from mlflow.models import set_model
+
+
+class BacklashPredictor(mlflow.pyfunc.PythonModel):
+    def load_context(self, context):
+        from models.registry import load_model
+
+        self.model = load_model(context.artifacts["model_dir"])
+
+    def predict(self, context, model_input, params=None):
+        return self.model.predict(model_input)
+
+
+set_model(BacklashPredictor())

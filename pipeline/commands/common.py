@@ -1,0 +1,67 @@
+"""Arguments and loading steps shared by the model commands (train, compare, tune)."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.errors import InputError
+
+FORMATS = ("auto", "canonical", "paper", "ecmc")
+
+
+def add_data_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
+    parser.add_argument("--format", default="auto", choices=FORMATS,
+                        help="input layout (default: detect)")
+    parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
+                        help="backlash definition: pendulum minus linear (paper), ISO reversal "
+                             "value (iso) or chosen from the measuring-system evidence (auto)")
+    parser.add_argument("--features", help="comma-separated feature-table columns (default: the "
+                                           "paper's inputs the data supply, plus dwell_s and "
+                                           "operating_hours)")
+    parser.add_argument("--split", default="random", choices=("random", "forward"),
+                        help="hold-out: random 15 %% (paper) or the later visits (forward)")
+    parser.add_argument("--truth", metavar="FILE",
+                        help="twin truth table (backlash simulate): also score against the "
+                             "true backlash")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def parse_features(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    if not names:
+        raise InputError("--features is empty; give comma-separated column names")
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise InputError(f"--features names {duplicated[0]!r} twice")
+    return names
+
+
+def load_table(args):
+    """Readings -> feature table (validated), noise floor of one target, and the truth table."""
+    from features.table import check_features, feature_table
+    from models.evaluation import target_noise_floor
+    from pipeline.readings import read_readings
+
+    readings = read_readings(args.data, args.format)
+    table = feature_table(readings, target=args.target, features=parse_features(args.features))
+    check_features(table.X, str(args.data))
+    truth = read_truth(args.truth) if args.truth else None
+    return readings, table, target_noise_floor(readings, table.target_kind), truth
+
+
+def read_truth(path):
+    import pandas as pd
+
+    try:
+        truth = pd.read_csv(path, dtype={"visit": str, "machine_id": str, "axis": str})
+    except FileNotFoundError:
+        raise InputError("cannot read truth table: no such file", file=path) from None
+    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as err:
+        raise InputError(f"cannot read truth table: {err}", file=path) from None
+    if "true_backlash_um" not in truth:
+        raise InputError("missing column true_backlash_um: expected the truth table written "
+                         "by backlash simulate", file=path, column="true_backlash_um")
+    return truth

@@ -1,0 +1,59 @@
+"""``backlash train``: fit one predictor, score it, save it, log it to MLflow."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from pipeline.commands.common import add_data_arguments
+
+HELP = "Train a backlash predictor on paired tests and save it (default: the recommended model)."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_data_arguments(parser)
+    parser.add_argument("--out", required=True, help="model directory to write")
+    parser.add_argument("--model", help="predictor name (default: hybrid); see backlash "
+                                        "compare for the list")
+
+
+def run(args: argparse.Namespace) -> int:
+    from models import registry
+    from models.training import fit_model
+    from pipeline import model_tracking, tracking
+    from pipeline.commands.common import load_table
+    from pipeline.model_report import write_figures
+
+    name = args.model or registry.RECOMMENDED
+    registry.check_name(name)
+    readings, table, floor, truth = load_table(args)
+    print(f"{len(table.y)} backlash points, target {table.target_kind}: {table.reason}",
+          file=sys.stderr)
+    fit = fit_model(table, name, args.split, args.seed, truth, floor, str(args.data))
+    digest = tracking.data_hash(readings)
+    meta = {"split": args.split, "data_sha256": digest, "data": str(args.data),
+            "noise_floor_um": floor, "target_reason": table.reason, "seed": args.seed}
+    model_dir = registry.save_model(fit.trained_model(meta), args.out)
+    figures = write_figures(fit, model_dir / "figures")
+    with tracking.run("train", f"train {name}") as active:
+        version = model_tracking.log_fit(fit, model_dir, figures, {
+            "model": name, "split": args.split, "target_kind": table.target_kind,
+            "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
+            "n_test": len(fit.test_index), "data": str(args.data), "data_sha256": digest,
+            "seed": args.seed})
+        champion = model_tracking.promote_if_best(version, digest, fit.metrics["test_rmse_um"])
+    print_metrics(name, fit.metrics, file=sys.stderr)
+    print(f"model -> {model_dir}/; MLflow run {active.info.run_id}, "
+          f"{model_tracking.REGISTERED_NAME} v{version}{' (champion)' if champion else ''}",
+          file=sys.stderr)
+    return 0
+
+
+def print_metrics(name: str, metrics: dict, file) -> None:
+    line = (f"{name}: test RMSE {metrics['test_rmse_um']:.3f} um, MAE {metrics['test_mae_um']:.3f}"
+            f" um, R^2 {metrics['test_r2']:.3f}, MAPE {metrics['test_mape_pct']:.1f} %")
+    if "truth_rmse_um" in metrics:
+        line += f"; RMSE vs true backlash {metrics['truth_rmse_um']:.3f} um"
+    if "noise_floor_um" in metrics:
+        line += f" (noise floor of one target {metrics['noise_floor_um']:.3f} um)"
+    print(line, file=file)
