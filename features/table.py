@@ -95,6 +95,12 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
                          f"{', '.join(c for c in table.columns if c in _candidates(table))}",
                          file=source)
     table = table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
+    if not features:
+        constant = [n for n in names if table[n].nunique(dropna=False) < 2]
+        if constant:
+            print(f"note: {', '.join(constant)} constant over all points; left out",
+                  file=sys.stderr)
+            names = [n for n in names if n not in constant]
     meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction") if c in table]
     return FeatureTable(table[names].astype(float), table["backlash_um"].astype(float),
                         table[meta_cols], kind, points.attrs.get("target_reason", ""))

@@ -5,6 +5,7 @@ unpickled when MLflow serves or loads the model."""
 from __future__ import annotations
 
 import mlflow.pyfunc
+import pandas as pd
 from mlflow.models import set_model
 
 
@@ -14,8 +15,8 @@ class BacklashPredictor(mlflow.pyfunc.PythonModel):
 
         self.model = load_model(context.artifacts["model_dir"])
 
-    def predict(self, context, model_input, params=None):
-        return self.model.predict(model_input)
+    def predict(self, context, model_input: pd.DataFrame, params=None) -> list[float]:
+        return [float(v) for v in self.model.predict(model_input)]
 
 
 set_model(BacklashPredictor())

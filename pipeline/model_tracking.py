@@ -16,7 +16,6 @@ REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "sci
 def log_fit(fit, model_dir: Path, figures: list[Path], params: dict) -> str:
     """Log one fitted model into the active run; returns the registered version."""
     import mlflow
-    from mlflow.models import infer_signature
 
     from pipeline.model_report import training_history
 
@@ -34,13 +33,20 @@ def log_fit(fit, model_dir: Path, figures: list[Path], params: dict) -> str:
         mlflow.log_artifact(str(path), artifact_path="figures")
     mlflow.log_artifacts(str(model_dir), artifact_path="model_dir")
     example = fit.table.X.iloc[:5]
-    logged = mlflow.pyfunc.log_model(
+    logged = _log_pyfunc(fit, model_dir, example)
+    return str(logged.registered_model_version)
+
+
+def _log_pyfunc(fit, model_dir: Path, example):
+    import mlflow
+    from mlflow.models import infer_signature
+
+    return mlflow.pyfunc.log_model(
         name="model", python_model=str(Path(__file__).parents[1] / "models" / "pyfunc_model.py"),
         artifacts={"model_dir": str(model_dir)},
         signature=infer_signature(example, fit.estimator.predict(example)),
         input_example=example, registered_model_name=REGISTERED_NAME,
         pip_requirements=REQUIREMENTS)  # explicit: inferring them costs seconds per model
-    return str(logged.registered_model_version)
 
 
 def promote_if_best(version: str, data_hash: str, rmse_um: float) -> bool:

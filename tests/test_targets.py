@@ -70,7 +70,7 @@ def test_common_mode_drift_leaks_into_z_and_cancels_in_backlash():
 def test_feature_table_layout_and_iso_leaves_out_deviations():
     paper = feature_table(ideal_tests(direct=True))
     assert list(paper.X.columns) == ["target", "deviation_down_um", "deviation_up_um",
-                                     "feed_mm_min", "machine_temp_c", "dwell_s"]
+                                     "feed_mm_min", "machine_temp_c"]  # dwell_s constant: left out
     assert len(paper.X) == len(paper.y) == len(paper.meta) == 3 * 6
     iso = feature_table(ideal_tests(direct=False))
     assert iso.target_kind == "iso" and "deviation_up_um" not in iso.X

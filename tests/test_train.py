@@ -1,0 +1,89 @@
+"""train / predict / compare on hand-built paired tests: outputs, tracking, bad inputs."""
+
+from __future__ import annotations
+
+import json
+
+import mlflow
+import pandas as pd
+import pytest
+from test_targets import ideal_tests
+
+from pipeline.cli import main
+
+
+@pytest.fixture
+def readings_csv(tmp_path):
+    path = tmp_path / "readings.csv"
+    ideal_tests(direct=True).to_csv(path, index=False)
+    return path
+
+
+def one_error_line(capsys) -> str:
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if line.startswith("backlash ")]
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_train_saves_model_figures_and_registers_champion(readings_csv, tmp_path, capsys):
+    out = tmp_path / "model"
+    assert main(["train", str(readings_csv), "--out", str(out), "--model", "bspline"]) == 0
+    meta = json.loads((out / "model.json").read_text())
+    assert meta["name"] == "bspline" and meta["target_kind"] == "paper"
+    assert meta["features"][:3] == ["target", "deviation_down_um", "deviation_up_um"]
+    assert {p.name for p in (out / "figures").iterdir()} >= {
+        "error_histogram.png", "predictions.png", "regression.png"}
+    client = mlflow.MlflowClient()
+    champion = client.get_model_version_by_alias("backlash-predictor", "champion")
+    run = client.get_run(champion.run_id)
+    assert run.data.params["model"] == "bspline" and len(run.data.params["data_sha256"]) == 64
+    assert {"test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct"} <= set(run.data.metrics)
+    # the registered model serves through MLflow without unpickling anything
+    served = mlflow.pyfunc.load_model("models:/backlash-predictor@champion")
+    inputs = pd.read_csv(out / "training_inputs.csv").iloc[:4]
+    from models.registry import load_model
+
+    assert served.predict(inputs) == pytest.approx(list(load_model(out).predict(inputs)))
+
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(out), str(readings_csv), "--out", str(pred)]) == 0
+    table = pd.read_csv(pred)
+    assert list(table.columns) == ["machine_id", "axis", "visit", "feed_mm_min", "dwell_s",
+                                   "repeat", "target", "backlash_um"]
+    assert len(table) == 3 * 6 and (table["backlash_um"] >= 0).all()
+
+
+def test_compare_prints_every_model_and_picks_the_best(readings_csv, tmp_path, capsys):
+    code = main(["compare", str(readings_csv), "--models", "constant,bspline,ridge",
+                 "--out", str(tmp_path / "cmp"), "--json"])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    rmse = {m["model"]: m["test_rmse_um"] for m in result["models"]}
+    # backlash is set by feed here (1.4 / 2.0 / 3.4 um): ridge on the feed beats a constant
+    assert rmse["ridge"] < 0.2 < rmse["constant"]
+    assert (tmp_path / "cmp" / "comparison.csv").is_file()
+
+
+@pytest.mark.parametrize("change, args, words", [
+    ("none", ["--model", "transformer"], "unknown model 'transformer'"),
+    ("unpaired", ["--target", "paper"], "unpaired linear test"),
+    ("one_feed", [], "too few to split"),
+    ("none", ["--features", "target,dwell_s"], "feature is constant"),
+    ("nan_temp", ["--features", "target,machine_temp_c"], "NaN in feature"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, change, args, words):
+    readings = ideal_tests(direct=True)
+    if change == "unpaired":
+        readings = readings[readings["test_id"] != "pendulum-500"]
+    if change == "one_feed":
+        readings = readings[readings["feed_mm_min"] == 200.0]
+    if change == "nan_temp":
+        readings.loc[readings["feed_mm_min"] == 500.0, "machine_temp_c"] = float("nan")
+    path = tmp_path / "r.csv"
+    readings.to_csv(path, index=False)
+    out = tmp_path / "model"
+    assert main(["train", str(path), "--out", str(out), *args]) == 2
+    line = one_error_line(capsys)
+    assert words in line, line
+    assert not out.exists()
