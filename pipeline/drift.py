@@ -1,0 +1,550 @@
+"""Backlash drift across maintenance visits: series, robust trend, change points, forecast.
+
+One series per machine and axis, one value per visit:
+
+- ``backlash_um = |mean_tests(B_mean)|`` with ``B_mean`` the mean signed reversal value of a
+  test (ISO 230-2, ``features.iso230.axis_figures``); ``B_um`` (mean of the tests' B = max|B_i|)
+  is carried alongside.
+- ``u_um``: repeatability uncertainty of a reversal value, ``s_B = sqrt(s_up²/n_up +
+  s_down²/n_down)`` per target, averaged over the targets and tests of the visit.
+
+Statistics (all on the time axis in months of 30.4375 days since the first visit):
+
+- change points: exact optimal partitioning (dynamic programming) into piecewise linear
+  segments, cost = chi-square of a weighted straight-line fit per segment, penalty
+  ``6 ln(n)`` per extra segment (twice the BIC of 3 parameters: place, level, slope; doubled
+  because sigma is itself estimated from the same short series). A change is kept only when
+  its jump exceeds ``min_jump_sigma`` (3) standard errors of the two segment lines there. The sigma
+  is the larger of ``u_um`` and a robust (MAD) estimate of the scatter between visits (from 7
+  visits on), because conditions that change from visit to visit usually scatter more than the
+  laser repeats.
+- trend since the last change point: Theil-Sen slope with its confidence interval
+  (``scipy.stats.theilslopes``) and the Mann-Kendall test (Kendall's tau of value against time,
+  ``scipy.stats.kendalltau``; the same statistic, with the tie correction).
+- threshold crossing: the Theil-Sen line of the last segment crosses the threshold at the
+  reported date; the interval is where the OLS prediction band of a future visit (Student t,
+  ``1 - alpha``) crosses it: early end = upper band, late end = lower band (null when the lower
+  band never reaches the threshold within ``horizon_months``). The crossing is null when the
+  last visit is already at or above the threshold (an ``above_threshold`` alert fires instead)
+  or when the Theil-Sen slope is not positive.
+
+Alerts (each a dict with ``kind`` and ``message``): ``above_threshold``, ``crossing_soon``
+(early end of the crossing interval within ``warn_months`` of the last visit),
+``increasing_trend`` (no threshold given: Mann-Kendall p < alpha and the Theil-Sen interval
+above zero), ``level_jump`` (the latest change point raised the level: failure suspected),
+``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`` sigma above the
+prediction of the segment before it; one visit cannot confirm a change point).
+
+References: Sen (1968), Theil (1950); Mann (1945), Kendall (1975); Jackson et al. (2005),
+"An algorithm for optimal partitioning of data on an interval", IEEE SPL 12(2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from pipeline.errors import InputError
+
+DAYS_PER_MONTH = 30.4375
+# Tests of one visit may span a few days (several shifts); more means two visits share an id.
+MAX_VISIT_SPAN_DAYS = 14.0
+SERIES_KEYS = ("machine_id", "axis")
+MIN_VISITS_FOR_SCATTER = 7
+
+
+# --------------------------------------------------------------------------- visit series
+def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
+    """Backlash per machine, axis and visit with its repeatability uncertainty.
+
+    Parameters
+    ----------
+    readings : validated readings table with ``visit`` and ``started_at``
+
+    Returns
+    -------
+    DataFrame, one row per (machine_id, axis, visit) sorted by date: ``date`` (earliest
+    ``started_at``, UTC), ``n_tests``, ``B_um`` (mean of B = max|B_i|) [um],
+    ``B_mean_um`` (mean signed B_i) [um], ``backlash_um = |B_mean_um|`` [um] and
+    ``u_um`` (mean of sqrt(s_up²/n_up + s_down²/n_down)) [um].
+    """
+    from features import iso230
+
+    source = readings.attrs.get("source", "readings")
+    check_dates(readings, source)
+    targets = iso230.per_target(readings)
+    figures = iso230.axis_figures(readings, targets)
+    keys = [*SERIES_KEYS, "visit"]
+    s_b = np.sqrt(targets["s_up"] ** 2 / targets["n_up"]
+                  + targets["s_down"] ** 2 / targets["n_down"])
+    u = targets.assign(u_um=s_b).groupby(keys, sort=False)["u_um"].mean()
+    dates = readings.groupby(keys, sort=False, observed=True)["started_at"].min()
+    per_visit = figures.groupby(keys, sort=False).agg(
+        n_tests=("test_id", "size"), B_um=("B", "mean"), B_mean_um=("B_mean", "mean"))
+    table = per_visit.join(u).join(dates.rename("date")).reset_index()
+    table["backlash_um"] = table["B_mean_um"].abs()
+    table = table.sort_values([*SERIES_KEYS, "date"], kind="stable").reset_index(drop=True)
+    check_visits(table, source)
+    return table[[*keys, "date", "n_tests", "B_um", "B_mean_um", "backlash_um", "u_um"]]
+
+
+def check_dates(readings: pd.DataFrame, source: str = "readings") -> None:
+    """Every test needs a ``started_at`` date, and one visit may not span weeks."""
+    if "started_at" not in readings.columns:
+        raise InputError("drift needs visit dates: no column 'started_at'", file=source,
+                         column="started_at")
+    missing = readings["started_at"].isna().to_numpy()
+    if missing.any():
+        i = int(np.argmax(missing))
+        raise InputError("drift needs a date on every test: 'started_at' is empty "
+                         f"(visit {readings['visit'].iloc[i]!r}, test "
+                         f"{readings['test_id'].iloc[i]!r})", file=source, column="started_at")
+    span = readings.groupby([*SERIES_KEYS, "visit"], observed=True)["started_at"].agg(
+        ["min", "max"])
+    days = (span["max"] - span["min"]).dt.total_seconds() / 86400.0
+    if (days > MAX_VISIT_SPAN_DAYS).any():
+        (machine, axis, visit), d = next(iter(days[days > MAX_VISIT_SPAN_DAYS].items()))
+        raise InputError(f"visit {visit!r} of {machine} axis {axis} has tests {d:.0f} days "
+                         f"apart (at most {MAX_VISIT_SPAN_DAYS:.0f}): one visit id used for "
+                         "two visits? give each visit its own id", file=source, column="visit")
+
+
+def check_visits(table: pd.DataFrame, source: str = "readings") -> None:
+    """Two visit ids starting at the same instant are one visit entered twice."""
+    dup = table.duplicated([*SERIES_KEYS, "date"], keep=False)
+    if dup.any():
+        rows = table[dup]
+        machine, axis, date = rows.iloc[0][["machine_id", "axis", "date"]]
+        same = rows[(rows["machine_id"] == machine) & (rows["axis"] == axis)
+                    & (rows["date"] == date)]["visit"].tolist()
+        raise InputError(f"visits {', '.join(map(repr, same))} of {machine} axis {axis} both "
+                         f"start at {date.isoformat()}: the same visit entered twice?",
+                         file=source, column="visit")
+    counts = table.groupby(list(SERIES_KEYS)).size()
+    if (counts < 2).all():
+        machine, axis = counts.index[0]
+        raise InputError(f"drift needs at least two visits per machine and axis; {machine} "
+                         f"axis {axis} has {int(counts.iloc[0])}", file=source, column="visit")
+
+
+def months_between(dates: pd.Series, origin) -> np.ndarray:
+    """Elapsed time [month of 30.4375 d] from ``origin`` to each date."""
+    return ((pd.to_datetime(dates) - origin).dt.total_seconds() / 86400.0
+            / DAYS_PER_MONTH).to_numpy(float)
+
+
+# --------------------------------------------------------------------------- statistics
+def scatter_sigma_um(t_month, y_um) -> float:
+    """Robust scatter of a piecewise linear series from its second differences [um].
+
+    Each inner point is compared with the straight line through its neighbours,
+    r_i = y_i - (w y_{i-1} + (1-w) y_{i+1}), var(r_i) = sigma²(1 + w² + (1-w)²);
+    sigma = 1.4826 MAD(r_i / sqrt(1 + w² + (1-w)²)). Steps spoil only the two residuals
+    beside them, which the median ignores. NaN for fewer than 3 points.
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    if len(y) < 3:
+        return float("nan")
+    w = (t[2:] - t[1:-1]) / (t[2:] - t[:-2])
+    r = (y[1:-1] - (w * y[:-2] + (1 - w) * y[2:])) / np.sqrt(1 + w ** 2 + (1 - w) ** 2)
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def _segment_costs(t, y, w):
+    """Chi-square of the weighted straight-line fit of every segment y[i:j] (n+1 x n+1)."""
+    c = [np.concatenate([[0.0], np.cumsum(v)])
+         for v in (w, w * t, w * t * t, w * y, w * t * y, w * y * y)]
+    i, j = np.triu_indices(len(t) + 1, k=1)
+    s, st, stt, sy, sty, syy = (v[j] - v[i] for v in c)
+    det = s * stt - st ** 2
+    ok = det > 1e-12 * np.maximum(s * stt, 1e-300)
+    slope = np.where(ok, (s * sty - st * sy) / np.where(ok, det, 1), 0.0)
+    level = (sy - slope * st) / s
+    chi2 = syy - 2 * level * sy - 2 * slope * sty + level ** 2 * s + 2 * level * slope * st \
+        + slope ** 2 * stt
+    cost = np.full((len(t) + 1, len(t) + 1), np.inf)
+    cost[i, j] = np.maximum(chi2, 0.0)
+    return cost
+
+
+def optimal_partition(t_month, y_um, sigma_um, *, penalty: float, min_size: int = 2):
+    """Exact optimal partitioning into straight-line segments (Jackson et al. 2005).
+
+    Minimises sum over segments of chi²(segment) + penalty x (number of segments) by dynamic
+    programming over all O(n²) segments. Returns the start indices of segments 2..k.
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    n = len(y)
+    cost = _segment_costs(t, y, 1.0 / np.asarray(sigma_um, float) ** 2)
+    best = np.full(n + 1, np.inf)
+    best[0] = -penalty
+    last = np.zeros(n + 1, int)
+    for j in range(min_size, n + 1):  # O(n) loop over series ends, n <= a few hundred visits
+        starts = np.arange(0, j - min_size + 1)
+        total = best[starts] + cost[starts, j] + penalty
+        k = int(np.argmin(total))
+        best[j], last[j] = total[k], starts[k]
+    cuts, j = [], n
+    while j > 0:
+        j = last[j]
+        if j > 0:
+            cuts.append(j)
+    return sorted(cuts)
+
+
+def _line(t, y):
+    """OLS line: level at t=0, slope, residual s (NaN below 3 points)."""
+    if len(t) < 2 or np.ptp(t) == 0:
+        return float(np.mean(y)), 0.0, float("nan")
+    slope, level = np.polyfit(t, y, 1)
+    s = float(np.sqrt(np.sum((y - level - slope * t) ** 2) / (len(t) - 2))) if len(t) > 2 \
+        else float("nan")
+    return float(level), float(slope), s
+
+
+def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
+                  min_jump_sigma: float = 3.0, min_size: int = 2) -> list[dict]:
+    """Change points of a piecewise linear series, each with the jump it made.
+
+    Parameters
+    ----------
+    t_month : times [month]; y_um : values [um]; sigma_um : per-visit sigma [um]
+    penalty : chi² penalty per extra segment; default 6 ln(n) (twice BIC, 3 parameters)
+    min_jump_sigma : a kept change jumps by more than this many standard errors: the left
+        segment's line extrapolated to the first visit after the change against the right
+        segment's line there, se² = sum over both lines of sigma²(1/m + (t_k - t̄)²/Sxx).
+
+    Returns
+    -------
+    list of {"index", "jump_um", "jump_sigma"} in time order; ``index`` is the first visit
+    after the change.
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    sigma = np.broadcast_to(np.asarray(sigma_um, float), y.shape)
+    n = len(y)
+    if n < 2 * min_size:
+        return []
+    penalty = 6.0 * np.log(n) if penalty is None else penalty
+    cuts = optimal_partition(t, y, sigma, penalty=penalty, min_size=min_size)
+    while True:
+        found = _jumps(t, y, sigma, cuts)
+        weak = [c for c in found if abs(c["jump_sigma"]) <= min_jump_sigma]
+        if not weak:
+            return found
+        cuts.remove(min(weak, key=lambda c: abs(c["jump_sigma"]))["index"])
+
+
+def _jumps(t, y, sigma, cuts):
+    bounds = [0, *cuts, len(y)]
+    out = []
+    for a, k, b in zip(bounds[:-2], bounds[1:-1], bounds[2:]):
+        left, right = _line(t[a:k], y[a:k]), _line(t[k:b], y[k:b])
+        jump = (right[0] + right[1] * t[k]) - (left[0] + left[1] * t[k])
+        se = np.sqrt(_fit_var(t[a:k], sigma[a:k], t[k]) + _fit_var(t[k:b], sigma[k:b], t[k]))
+        out.append({"index": int(k), "jump_um": float(jump), "jump_sigma": float(jump / se)})
+    return out
+
+
+def _fit_var(t, sigma, at):
+    """Variance [um²] of a straight-line fit evaluated at ``at``: s²(1/m + (at - t̄)²/Sxx)."""
+    s2 = float(np.mean(np.asarray(sigma) ** 2))
+    sxx = float(np.sum((t - t.mean()) ** 2))
+    return s2 * (1 / len(t) + ((at - t.mean()) ** 2 / sxx if sxx > 0 else 0.0))
+
+
+def trend(t_month, y_um, alpha: float = 0.05) -> dict:
+    """Theil-Sen slope [um/month] with its 1-alpha interval, and the Mann-Kendall test.
+
+    Mann-Kendall S = sum_{i<j} sign(y_j - y_i) is Kendall's tau between time and value, so
+    its p-value (two-sided) comes from ``scipy.stats.kendalltau``.
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    if len(y) < 2:
+        nan = float("nan")
+        return {"slope": nan, "intercept": nan, "low": nan, "high": nan, "tau": nan,
+                "p_value": nan}
+    res = stats.theilslopes(y, t, alpha=1 - alpha)
+    tau, p = stats.kendalltau(t, y) if len(y) >= 3 else (float("nan"), float("nan"))
+    return {"slope": float(res[0]), "intercept": float(res[1]), "low": float(res[2]),
+            "high": float(res[3]), "tau": float(tau), "p_value": float(p)}
+
+
+def crossing_forecast(t_month, y_um, sigma_um, threshold_um: float, *, slope: float,
+                      intercept: float, alpha: float = 0.05, horizon_months: float = 120.0):
+    """Time [month] the backlash crosses ``threshold_um``, with an interval, or Nones.
+
+    Point: the Theil-Sen line ``intercept + slope t`` reaches the threshold. Interval: the
+    first times the upper and the lower OLS prediction bounds of one future visit,
+    yhat(t) ± q s sqrt(1 + 1/m + (t - t̄)²/Sxx), reach it (q Student t with m-2 degrees of
+    freedom and s the residual scatter; with fewer than 4 visits q is normal and s the mean
+    per-visit sigma). Searched up to ``horizon_months`` after the last visit on a daily grid.
+    Returns (t_cross, t_early, t_late); None where undefined (see module docstring).
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    if y[-1] >= threshold_um or not slope > 0:
+        return None, None, None
+    t_cross = (threshold_um - intercept) / slope
+    grid = t[-1] + np.arange(0.0, horizon_months * DAYS_PER_MONTH + 1.0) / DAYS_PER_MONTH
+    _, lo, hi = prediction_band(t, y, sigma_um, grid, alpha)
+
+    def first(mask):
+        return float(grid[np.argmax(mask)]) if mask.any() else None
+
+    t_early, t_late = first(hi >= threshold_um), first(lo >= threshold_um)
+    return float(max(t_cross, t[-1])), t_early, t_late
+
+
+def prediction_band(t_month, y_um, sigma_um, at_month, alpha: float = 0.05):
+    """OLS line and its 1-alpha prediction band for one future visit at ``at_month`` [um].
+
+    yhat(t) ± q s sqrt(1 + 1/m + (t - t̄)²/Sxx); q Student t with m-2 degrees of freedom and s
+    the residual scatter, or, below 4 visits, q normal and s the mean per-visit sigma.
+    Returns (fit, low, high).
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    at = np.asarray(at_month, float)
+    m = len(t)
+    level, slope, s = _line(t, y)
+    if m >= 4 and np.isfinite(s):
+        q = stats.t.ppf(1 - alpha / 2, m - 2)
+    else:
+        q, s = stats.norm.ppf(1 - alpha / 2), float(np.mean(sigma_um))
+    sxx = float(np.sum((t - t.mean()) ** 2)) or np.inf
+    half = q * s * np.sqrt(1 + 1 / m + (at - t.mean()) ** 2 / sxx)
+    fit = level + slope * at
+    return fit, fit - half, fit + half
+
+
+# --------------------------------------------------------------------------- one series
+@dataclass
+class DriftSeries:
+    """Everything drift knows about one machine axis."""
+
+    machine_id: str
+    axis: str
+    visits: pd.DataFrame  # visit_backlash rows of this series plus t_month, sigma_um
+    change_points: list = field(default_factory=list)
+    trend: dict = field(default_factory=dict)
+    segment_start: int = 0
+    threshold_um: float | None = None
+    crossing: tuple = (None, None, None)  # months since the first visit
+    alerts: list = field(default_factory=list)
+    model: dict | None = None
+    alpha: float = 0.05
+
+    @property
+    def origin(self):
+        return self.visits["date"].iloc[0]
+
+    def date_at(self, t_month):
+        if t_month is None:
+            return None
+        return (self.origin + pd.Timedelta(days=t_month * DAYS_PER_MONTH)).date().isoformat()
+
+    def to_json(self) -> dict:
+        v = self.visits
+        return {
+            "machine_id": self.machine_id, "axis": self.axis,
+            "visits": v["visit"].astype(str).tolist(),
+            "dates": [d.isoformat() for d in v["date"]],
+            "backlash_um": v["backlash_um"].round(4).tolist(),
+            "u_um": v["u_um"].round(4).tolist(),
+            "sigma_um": v["sigma_um"].round(4).tolist(),
+            "B_um": v["B_um"].round(4).tolist(),
+            "slope_um_per_month": self.trend.get("slope"),
+            "slope_interval": [self.trend.get("low"), self.trend.get("high")],
+            "mann_kendall_p": self.trend.get("p_value"),
+            "change_points": [str(v["visit"].iloc[c["index"]]) for c in self.change_points],
+            "change_jumps_um": [round(c["jump_um"], 4) for c in self.change_points],
+            "threshold_um": self.threshold_um,
+            "threshold_crossing": self.date_at(self.crossing[0]),
+            "crossing_interval": [self.date_at(self.crossing[1]), self.date_at(self.crossing[2])],
+            "alerts": self.alerts,
+            **({"model": self.model} if self.model is not None else {}),
+        }
+
+
+def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
+                   alpha: float = 0.05, min_jump_sigma: float = 3.0,
+                   penalty: float | None = None, warn_months: float = 6.0,
+                   horizon_months: float = 120.0) -> DriftSeries:
+    """Change points, trend since the last one, threshold forecast and alerts of one series.
+
+    ``visits`` holds one machine axis: ``visit``, ``date``, ``backlash_um``, ``u_um``.
+    """
+    v = visits.sort_values("date", kind="stable").reset_index(drop=True).copy()
+    v["t_month"] = months_between(v["date"], v["date"].iloc[0])
+    t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
+    # Below 5 second differences the MAD is dominated by a single step; trust u alone there.
+    scatter = scatter_sigma_um(t, y) if len(y) >= MIN_VISITS_FOR_SCATTER else float("nan")
+    u = v["u_um"].fillna(0.0).to_numpy(float)
+    floor = np.nanmax([scatter, np.nanmedian(u) if np.isfinite(u).any() else 0.0, 1e-3])
+    v["sigma_um"] = np.fmax(u, floor)
+    sigma = v["sigma_um"].to_numpy()
+
+    cps = change_points(t, y, sigma, penalty=penalty, min_jump_sigma=min_jump_sigma)
+    start = cps[-1]["index"] if cps else 0
+    result = DriftSeries(str(v["machine_id"].iloc[0]), str(v["axis"].iloc[0]), v, cps,
+                         trend(t[start:], y[start:], alpha), start, threshold_um, alpha=alpha)
+    if threshold_um is not None:
+        result.crossing = crossing_forecast(
+            t[start:], y[start:], sigma[start:], threshold_um, slope=result.trend["slope"],
+            intercept=result.trend["intercept"], alpha=alpha, horizon_months=horizon_months)
+    result.alerts = series_alerts(result, alpha=alpha, min_jump_sigma=min_jump_sigma,
+                                  warn_months=warn_months)
+    return result
+
+
+def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
+                  warn_months: float) -> list[dict]:
+    """The alerts of one analysed series (kinds listed in the module docstring)."""
+    v, tr, alerts = s.visits, s.trend, []
+    last_y, last_t = float(v["backlash_um"].iloc[-1]), float(v["t_month"].iloc[-1])
+    last_visit = str(v["visit"].iloc[-1])
+    if s.threshold_um is not None:
+        if last_y >= s.threshold_um:
+            alerts.append(_alert("above_threshold", f"backlash {last_y:.2f} um at visit "
+                                 f"{last_visit} is at or above the threshold "
+                                 f"{s.threshold_um:g} um"))
+        elif s.crossing[1] is not None and s.crossing[1] - last_t <= warn_months:
+            alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} um "
+                                 f"from {s.date_at(s.crossing[1])} (within {warn_months:g} "
+                                 "months of the last visit)"))
+    elif tr["p_value"] < alpha and tr["low"] > 0:
+        alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} um/month "
+                             f"[{tr['low']:.3f}, {tr['high']:.3f}] since visit "
+                             f"{v['visit'].iloc[s.segment_start]} (Mann-Kendall p = "
+                             f"{tr['p_value']:.2g})"))
+    if s.change_points and s.change_points[-1]["jump_um"] > 0:
+        c = s.change_points[-1]
+        alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} um "
+                             f"({c['jump_sigma']:.1f} sigma) at visit {v['visit'].iloc[c['index']]}"
+                             ": failure or loosened preload suspected"))
+    jump = _last_visit_jump(s)
+    if jump is not None and jump > min_jump_sigma:
+        alerts.append(_alert("last_visit_jump", f"visit {last_visit} lies {jump:.1f} sigma above "
+                             "the trend of the visits before it (unconfirmed change)"))
+    return alerts
+
+
+def _last_visit_jump(s: DriftSeries) -> float | None:
+    """How many sigma the last visit lies above the line through its segment's earlier visits."""
+    v = s.visits.iloc[s.segment_start:]
+    if len(v) < 3:
+        return None
+    t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
+    level, slope, _ = _line(t[:-1], y[:-1])
+    return float((y[-1] - level - slope * t[-1]) / v["sigma_um"].iloc[-1])
+
+
+def _alert(kind: str, message: str) -> dict:
+    return {"kind": kind, "message": message}
+
+
+def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
+            **options) -> list[DriftSeries]:
+    """Drift of every machine axis with two or more visits (see ``analyse_series``)."""
+    table = visit_backlash(readings)
+    return [analyse_series(group, threshold_um=threshold_um, **options)
+            for _, group in table.groupby(list(SERIES_KEYS), sort=True)
+            if len(group) >= 2]
+
+
+# --------------------------------------------------------------------------- model monitoring
+def residual_band_um(validation_rmse_um: float, n_points, quantile: float = 0.99):
+    """Upper bound [um] of a visit's RMSE when the model still performs as validated.
+
+    With n independent residuals of scale rmse_val, n RMSE²/rmse_val² ~ chi²_n, so
+    bound = rmse_val sqrt(chi²_{n, quantile} / n).
+    """
+    n = np.asarray(n_points, float)
+    return validation_rmse_um * np.sqrt(stats.chi2.ppf(quantile, n) / n)
+
+
+def monitor_model(model, readings: pd.DataFrame, *, alpha: float = 0.01) -> pd.DataFrame:
+    """Residuals and input drift of a trained predictor on every visit.
+
+    Parameters
+    ----------
+    model : object with ``predict(X)``, ``feature_names_``, ``validation_rmse_`` [um],
+        ``input_ranges_`` {feature: (lo, hi)}, ``training_inputs_`` (DataFrame or None) and
+        optionally ``target_kind``
+    readings : validated readings table
+    alpha : level of the residual band (quantile 1 - alpha) and of the KS tests
+        (Bonferroni over the inputs)
+
+    Returns
+    -------
+    DataFrame, one row per (machine_id, axis, visit): ``n_points``, ``rmse_um``, ``bias_um``,
+    ``band_um``, ``retrain`` (rmse above the band), ``out_of_range`` (inputs with values outside
+    the training range), ``ks_p`` {input: p}, ``drifted`` (inputs whose KS p < alpha/k).
+    """
+    from features.table import feature_table
+
+    features = list(model.feature_names_)
+    table = feature_table(readings, target=getattr(model, "target_kind", "auto"),
+                          features=features)
+    residual = table.y.to_numpy(float) - np.asarray(model.predict(table.X), float)
+    keys = [*SERIES_KEYS, "visit"]
+    meta = table.meta[keys].reset_index(drop=True)
+    frame = meta.assign(r=residual, r2=residual ** 2)
+    g = frame.groupby(keys, sort=True)
+    out = pd.DataFrame({"n_points": g.size(), "rmse_um": np.sqrt(g["r2"].mean()),
+                        "bias_um": g["r"].mean()})
+    out["band_um"] = residual_band_um(float(model.validation_rmse_), out["n_points"],
+                                      1 - alpha)
+    out["retrain"] = out["rmse_um"] > out["band_um"]
+    X = table.X.reset_index(drop=True)
+    ranges = getattr(model, "input_ranges_", {}) or {}
+    training = getattr(model, "training_inputs_", None)
+    ranged = [f for f in features if f in ranges]
+    tested = [f for f in features if training is not None and f in training.columns]
+    outside, ks_p, drifted = [], [], []
+    for key in out.index:  # one entry per visit, not per reading
+        rows = X.iloc[g.indices[key]]
+        outside.append([f for f in ranged
+                        if ((rows[f] < ranges[f][0]) | (rows[f] > ranges[f][1])).any()])
+        p = {f: float(stats.ks_2samp(training[f].dropna(), rows[f].dropna()).pvalue)
+             for f in tested if rows[f].nunique() > 0}
+        ks_p.append(p)
+        drifted.append([f for f, pv in p.items() if pv < alpha / max(len(p), 1)])
+    out["out_of_range"], out["ks_p"], out["drifted"] = outside, ks_p, drifted
+    return out.reset_index()
+
+
+def attach_model(series: list[DriftSeries], monitoring: pd.DataFrame) -> None:
+    """Add per-visit model figures to each series and alert on its latest visit."""
+    for s in series:
+        mine = monitoring[(monitoring["machine_id"].astype(str) == s.machine_id)
+                          & (monitoring["axis"].astype(str) == s.axis)]
+        order = {v: i for i, v in enumerate(s.visits["visit"].astype(str))}
+        mine = mine.assign(_o=mine["visit"].astype(str).map(order)).sort_values("_o")
+        if mine.empty:
+            continue
+        last = mine.iloc[-1]
+        s.model = {
+            "visits": mine["visit"].astype(str).tolist(),
+            "rmse_um": mine["rmse_um"].round(4).tolist(),
+            "band_um": mine["band_um"].round(4).tolist(),
+            "bias_um": mine["bias_um"].round(4).tolist(),
+            "retrain": bool(last["retrain"]),
+            "out_of_range": list(last["out_of_range"]),
+            "ks_p": {k: round(v, 6) for k, v in last["ks_p"].items()},
+            "drifted_inputs": list(last["drifted"]),
+        }
+        visit = last["visit"]
+        if last["retrain"]:
+            s.alerts.append(_alert("retrain", f"model RMSE {last['rmse_um']:.2f} um at visit "
+                                   f"{visit} leaves the validation band "
+                                   f"{last['band_um']:.2f} um: retrain"))
+        if last["out_of_range"]:
+            s.alerts.append(_alert("input_out_of_range", f"visit {visit}: "
+                                   f"{', '.join(last['out_of_range'])} outside the training "
+                                   "range"))
+        if last["drifted"]:
+            s.alerts.append(_alert("input_drift", f"visit {visit}: "
+                                   f"{', '.join(last['drifted'])} distributed unlike the "
+                                   "training inputs (Kolmogorov-Smirnov)"))

@@ -1,0 +1,152 @@
+"""Drift report: one PNG panel per machine axis and an HTML page beside it.
+
+Files written to the output folder (the page refers to the image by relative name, so the
+folder can be moved or logged to MLflow as is): ``drift.png``, ``drift.html``, ``drift.json``.
+Each panel shows the visits with their ±2 sigma bars, the Theil-Sen trend since the last change
+point, the change points (dashed), the threshold and the forecast band of the crossing.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline import fileio
+from pipeline.drift import prediction_band
+
+FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
+
+
+def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
+    """Write PNG, HTML and JSON for analysed series (``pipeline.drift.DriftSeries``)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {k: out / name for k, name in FILES.items()}
+    plot_series(series, paths["png"])
+    fileio.write_text(paths["html"], render_html(series, source=source, notes=notes))
+    fileio.write_json(paths["json"], fileio.clean_nan(
+        {"source": source, "series": [s.to_json() for s in series]}))
+    return paths
+
+
+def plot_series(series, path) -> None:
+    """One panel per series: visits, trend, change points, threshold and forecast band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(series), 1, figsize=(8, 3.2 * len(series)), squeeze=False,
+                             layout="constrained")
+    for ax, s in zip(axes[:, 0], series):
+        _panel(ax, s)
+    with fileio.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _panel(ax, s) -> None:
+    v = s.visits
+    to_date = s.origin.tz_localize(None) if s.origin.tzinfo else s.origin
+
+    def dates(t_month):
+        return to_date + pd.to_timedelta(np.asarray(t_month) * 30.4375, unit="D")
+
+    ax.errorbar(dates(v["t_month"]), v["backlash_um"], yerr=2 * v["sigma_um"], fmt="o",
+                ms=4, capsize=2, color="C0", label="|B_mean| per visit (±2σ)")
+    seg = v.iloc[s.segment_start:]
+    tr = s.trend
+    t_end = float(v["t_month"].iloc[-1])
+    if s.crossing[0] is not None:
+        t_end = max(t_end, s.crossing[2] or s.crossing[0])
+    if np.isfinite(tr.get("slope", np.nan)):
+        tt = np.linspace(seg["t_month"].iloc[0], t_end, 50)
+        ax.plot(dates(tt), tr["intercept"] + tr["slope"] * tt, color="C1",
+                label=f"Theil-Sen {tr['slope']:+.3f} µm/month")
+        ahead = np.linspace(seg["t_month"].iloc[-1], t_end, 50)
+        if len(seg) >= 2 and ahead[-1] > ahead[0]:
+            _, lo, hi = prediction_band(seg["t_month"], seg["backlash_um"], seg["sigma_um"],
+                                        ahead, s.alpha)
+            ax.fill_between(dates(ahead), lo, hi, color="C1", alpha=0.2, lw=0,
+                            label=f"{100 * (1 - s.alpha):g} % prediction band")
+    for c in s.change_points:
+        ax.axvline(dates(v["t_month"].iloc[c["index"]]), ls="--", color="0.4", lw=1)
+    if s.threshold_um is not None:
+        ax.axhline(s.threshold_um, color="C3", lw=1, label=f"threshold {s.threshold_um:g} µm")
+        if s.crossing[1] is not None:
+            hi = s.crossing[2] if s.crossing[2] is not None else t_end
+            ax.axvspan(dates(s.crossing[1]), dates(max(hi, s.crossing[1])), color="C3",
+                       alpha=0.15, label="crossing interval")
+    ax.set_title(f"{s.machine_id} axis {s.axis}" + (" — ALERT" if s.alerts else ""))
+    ax.set_ylabel("backlash [µm]")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.tick_params(axis="x", labelrotation=20, labelsize=8)
+
+
+CSS = """body{font-family:sans-serif;max-width:60em;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;
+text-align:right}th{background:#eee}.alert{color:#b00;font-weight:bold}"""
+
+
+def _fmt(value, fmt=".3g") -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "–"
+    return format(value, fmt) if isinstance(value, (int, float)) else html.escape(str(value))
+
+
+def render_html(series, *, source: str = "", notes=()) -> str:
+    """The report page: a summary table, the figure, and per-series visit tables."""
+    rows = []
+    for s in series:
+        j = s.to_json()
+        rows.append(
+            f"<tr><td>{html.escape(s.machine_id)}</td><td>{html.escape(s.axis)}</td>"
+            f"<td>{len(j['visits'])}</td><td>{_fmt(j['backlash_um'][-1])}</td>"
+            f"<td>{_fmt(j['slope_um_per_month'])} [{_fmt(j['slope_interval'][0])}, "
+            f"{_fmt(j['slope_interval'][1])}]</td>"
+            f"<td>{html.escape(', '.join(j['change_points']) or '–')}</td>"
+            f"<td>{_fmt(j['threshold_crossing'])} [{_fmt(j['crossing_interval'][0])}, "
+            f"{_fmt(j['crossing_interval'][1])}]</td>"
+            f"<td class='alert'>{html.escape('; '.join(a['kind'] for a in s.alerts))}</td></tr>")
+    details = []
+    for s in series:
+        v = s.visits
+        body = "".join(
+            f"<tr><td>{html.escape(str(r.visit))}</td><td>{r.date.date().isoformat()}</td>"
+            f"<td>{r.n_tests}</td><td>{r.B_um:.3f}</td><td>{r.B_mean_um:.3f}</td>"
+            f"<td>{r.backlash_um:.3f}</td><td>{r.u_um:.3f}</td><td>{r.sigma_um:.3f}</td></tr>"
+            for r in v.itertuples())
+        alerts = "".join(f"<li class='alert'>{html.escape(a['kind'])}: "
+                         f"{html.escape(a['message'])}</li>" for a in s.alerts) or "<li>none</li>"
+        model = ""
+        if s.model:
+            m = s.model
+            model = (f"<p>Model residual RMSE per visit [µm]: "
+                     f"{html.escape(', '.join(f'{a}: {b:.3g} (band {c:.3g})' for a, b, c in zip(m['visits'], m['rmse_um'], m['band_um'])))}"
+                     f"; inputs outside the training range: "
+                     f"{html.escape(', '.join(m['out_of_range']) or 'none')}; drifted inputs "
+                     f"(KS): {html.escape(', '.join(m['drifted_inputs']) or 'none')}.</p>")
+        details.append(
+            f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2><ul>{alerts}</ul>"
+            f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>B [µm]</th>"
+            f"<th>B_mean [µm]</th><th>|B_mean| [µm]</th><th>u [µm]</th><th>σ [µm]</th></tr>"
+            f"{body}</table>")
+    note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>Backlash drift</title>
+<style>{CSS}</style></head><body><h1>Backlash drift across visits</h1>
+<p>Data: {html.escape(source)}</p>
+<p>Series value: |B_mean| (mean signed ISO 230-2 reversal value of the visit's tests); σ is the
+larger of the repeatability uncertainty u = mean sqrt(s↑²/n↑ + s↓²/n↓) and the robust scatter
+between visits. Slope: Theil-Sen since the last change point (95 % interval); change points by
+optimal partitioning into straight-line segments; crossing: Theil-Sen line, interval from the
+OLS prediction band of a future visit.</p>
+{f'<ul>{note_html}</ul>' if note_html else ''}
+<table><tr><th>machine</th><th>axis</th><th>visits</th><th>last [µm]</th>
+<th>slope [µm/month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
+{''.join(rows)}</table>
+<p><img src="{FILES['png']}" alt="backlash series" style="max-width:100%"></p>
+{''.join(details)}</body></html>
+"""
