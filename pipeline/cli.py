@@ -11,7 +11,7 @@ import sys
 from pipeline.errors import InputError
 
 # Order is the order shown in --help.
-COMMANDS = ("convert", "iso", "train", "predict", "compare", "tune", "rank", "drift", "run")
+COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "drift", "run")
 
 
 def build_parser() -> argparse.ArgumentParser:

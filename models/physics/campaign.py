@@ -1,0 +1,304 @@
+"""Test campaigns of the twin: machines x axes x maintenance visits x test conditions.
+
+A configuration (a preset name, a dict, or a TOML file of the same shape) says
+
+```toml
+system = "direct"                      # or "indirect"
+[plan]                                  # the ISO 230-2 tests of one visit
+targets_mm = [0, 50, 100, 150, 200, 250, 300, 350]   # or start_mm, stop_mm, n_targets
+irregular = false                       # ISO irregular target spacing
+feeds_mm_min = [200, 500, 1200]
+dwells_s = [3, 5, 7]
+repeats = 3
+cycles = 5
+methods = ["linear", "pendulum"]
+overrun_mm = 5.0
+[fleet]
+machines = 1
+axes = ["X"]
+visits = 6
+interval_days = 30
+hours_per_day = 8.0                     # axis operating hours accumulate between visits
+wear_um_per_1000h = 0.6                 # lost-motion growth with operating hours
+adjust_at = [4]                         # visits (1-based) at which a mechanic re-adjusted the nut
+adjusted_b0_um = 1.2                    # b0 right after an adjustment
+failure_at = 0                          # visit of a sudden failure (0: none)
+failure_jump_um = 3.0
+start = "2026-01-05"
+[environment]
+machine_temp_c = 21.0                   # start-of-run screw temperature (spread 0.5 K)
+warmup_k = 1.5                          # warm-up of the screw during a run at 1000 mm/min
+ambient_temp_c = 20.5
+pressure_hpa = 1013.0
+humidity_pct = 45.0
+[noise]
+noise_um = 0.3
+resolution_um = 0.1
+[effects.backlash]                      # enabled effects and their parameters
+b0_um = 2.0
+[effects.backlash_feed]
+```
+
+Wear: ``backlash``'s b0 grows with operating hours since the last adjustment; an adjustment
+resets the hours and sets b0 to ``adjusted_b0_um``; a failure adds ``failure_jump_um``.
+The paper plan (``paper`` preset): 8 targets over 0-350 mm, feeds 200/500/1200 mm/min, dwells
+3/5/7 s, 3 repeats, linear and pendulum, 5 cycles: 3 x 3 x 3 x 8 targets x 2 directions = 432
+paired linear/pendulum points per axis (324 at interior targets, i.e. 162 backlash points).
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from models.physics import effects
+from models.physics.axis import SYSTEMS, simulate_tests
+from models.physics.cycles import path, target_positions
+from pipeline.errors import InputError
+
+BASE = {
+    "system": "direct",
+    "plan": {"targets_mm": None, "start_mm": 0.0, "stop_mm": 350.0, "n_targets": 8, "irregular": False,
+             "feeds_mm_min": [200.0, 500.0, 1200.0], "dwells_s": [3.0, 5.0, 7.0], "repeats": 3,
+             "cycles": 5, "methods": ["linear", "pendulum"], "overrun_mm": 5.0},
+    "fleet": {"machines": 1, "axes": ["X"], "visits": 1, "interval_days": 30,
+              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "adjust_at": [],
+              "adjusted_b0_um": 1.2, "failure_at": 0, "failure_jump_um": 3.0,
+              "start": "2026-01-05"},
+    "environment": {"machine_temp_c": 21.0, "warmup_k": 1.5, "warmup_tau_s": 1200.0,
+                    "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0},
+    "noise": {"noise_um": 0.3, "resolution_um": 0.1},
+    "effects": {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
+                "backlash_feed": {"k_um_per_m_min": 1.2},
+                "backlash_temperature": {"k_um_per_k": -0.3},
+                "lead_error_linear": {}, "thermal_expansion": {}},
+}
+PRESETS = {
+    "paper": {},
+    "fleet": {"fleet": {"machines": 4, "axes": ["X", "Y", "Z"], "visits": 8,
+                        "adjust_at": [5]}},
+    "drift": {"plan": {"feeds_mm_min": [500.0], "dwells_s": [5.0], "repeats": 1},
+              "fleet": {"machines": 3, "visits": 20, "interval_days": 28, "hours_per_day": 14.0,
+                        "adjust_at": [9], "failure_at": 15, "failure_jump_um": 2.5}},
+    "demo": {"plan": {"repeats": 1},
+             "fleet": {"visits": 6, "interval_days": 45, "hours_per_day": 12.0}},
+    "indirect": {"system": "indirect"},
+}
+
+
+@dataclass
+class Simulation:
+    readings: pd.DataFrame
+    truth: pd.DataFrame
+    visits: pd.DataFrame
+    parameters: dict = field(default_factory=dict)
+
+
+def load_config(source, preset: str | None = None) -> dict:
+    """A full, validated configuration: a preset name, a dict of overrides or a TOML file,
+    applied on top of ``preset`` (a file or dict) or of the base plan."""
+    where = "config"
+    if isinstance(source, (str, Path)) and str(source) in PRESETS:
+        overrides, where = PRESETS[str(source)], f"preset {source}"
+    elif isinstance(source, dict):
+        overrides = source
+    else:
+        where = str(source)
+        try:
+            overrides = tomllib.loads(Path(source).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError("cannot read config: no such file", file=source) from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+            raise InputError(f"invalid TOML: {err}", file=source) from None
+    base = _merge(BASE, PRESETS[preset], f"preset {preset}") if preset else BASE
+    config = _merge(base, overrides, where)
+    _validate(config, where)
+    return config
+
+
+def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
+    out = copy.deepcopy(base)
+    for key, value in overrides.items():
+        if prefix == "effects.":
+            if key not in effects.EFFECTS:
+                raise InputError(f"unknown effect {key!r}; expected one of "
+                                 f"{', '.join(effects.EFFECTS)}", file=where,
+                                 column=f"effects.{key}")
+            unknown = set(value) - set(effects.DEFAULTS[key])
+            if unknown:
+                raise InputError(f"unknown parameter {sorted(unknown)[0]!r} of {key}; expected "
+                                 f"{', '.join(effects.DEFAULTS[key]) or 'none'}", file=where,
+                                 column=f"effects.{key}")
+            out[key] = dict(value)
+        elif key == "effects":
+            out[key] = _merge({}, value, where, "effects.")
+        elif key not in base:
+            raise InputError(f"unknown key {prefix + key!r}", file=where, column=prefix + key)
+        elif isinstance(base[key], dict):
+            out[key] = _merge(base[key], value, where, f"{prefix}{key}.")
+        else:
+            out[key] = value
+    return out
+
+
+def _validate(config: dict, where: str) -> None:
+    def bad(column, message):
+        raise InputError(message, file=where, column=column)
+
+    plan, fleet = config["plan"], config["fleet"]
+    if config["system"] not in SYSTEMS:
+        bad("system", f"expected one of {', '.join(SYSTEMS)}, got {config['system']!r}")
+    if plan["targets_mm"] is not None and len(plan["targets_mm"]) == 0:
+        bad("plan.targets_mm", "empty target list: a test needs at least 2 targets")
+    if len(_targets(plan)) < 2:
+        bad("plan", "a test needs at least 2 targets")
+    if not plan["feeds_mm_min"] or min(plan["feeds_mm_min"]) <= 0:
+        bad("plan.feeds_mm_min", "every feed must be > 0 mm/min")
+    if not plan["dwells_s"] or min(plan["dwells_s"]) < 0:
+        bad("plan.dwells_s", "every dwell must be >= 0 s")
+    if int(plan["cycles"]) < 2:
+        bad("plan.cycles", "ISO 230-2 needs at least 2 cycles")
+    if set(plan["methods"]) - {"linear", "pendulum"} or not plan["methods"]:
+        bad("plan.methods", "expected a list of 'linear' and/or 'pendulum'")
+    for name in ("machines", "visits", "repeats"):
+        value = fleet.get(name, plan.get(name))
+        if int(value) < 1:
+            bad(name, f"must be at least 1, got {value}")
+    for column, value in (("effects.backlash.b0_um", config["effects"].get("backlash", {})
+                           .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet["adjusted_b0_um"]),
+                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"])):
+        if value < 0:
+            bad(column, f"negative backlash ({value}); lost motion is a clearance >= 0 um")
+    if config["noise"]["noise_um"] < 0 or config["noise"]["resolution_um"] < 0:
+        bad("noise", "noise and resolution must be >= 0")
+
+
+def _targets(plan: dict) -> np.ndarray:
+    if plan["targets_mm"] is not None:
+        return np.asarray(plan["targets_mm"], float)
+    return target_positions(plan["start_mm"], plan["stop_mm"], int(plan["n_targets"]),
+                            bool(plan["irregular"]))
+
+
+def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
+    """One row per machine, axis and visit: date, operating hours, b0 and the event."""
+    fleet = config["fleet"]
+    b0_nominal = config["effects"].get("backlash", {}).get("b0_um", 0.0)
+    rows = []
+    for m in range(int(fleet["machines"])):
+        for axis in fleet["axes"]:
+            scale = rng.uniform(0.8, 1.25)  # machines and axes differ
+            hours, b0, jump = 0.0, b0_nominal * scale, 0.0
+            for v in range(1, int(fleet["visits"]) + 1):
+                event = ""
+                if v > 1:
+                    hours += fleet["hours_per_day"] * fleet["interval_days"]
+                if v in fleet["adjust_at"]:
+                    hours, b0, jump, event = 0.0, fleet["adjusted_b0_um"] * scale, 0.0, "adjustment"
+                if v == fleet["failure_at"]:
+                    jump, event = fleet["failure_jump_um"], "failure"
+                rows.append({
+                    "machine_id": f"M{m + 1:02d}", "axis": axis, "visit": f"{v:02d}",
+                    "started_at": pd.Timestamp(fleet["start"])
+                    + pd.Timedelta(days=(v - 1) * fleet["interval_days"], hours=8),
+                    "operating_hours": hours,
+                    "b0_um": b0 + fleet["wear_um_per_1000h"] * hours / 1000 + jump,
+                    "event": event})
+    return pd.DataFrame(rows)
+
+
+def simulate(config, seed: int = 0) -> Simulation:
+    """Readings and truth of a whole campaign; same config and seed give the same numbers."""
+    config = load_config(config)
+    rng = np.random.default_rng(seed)
+    plan, env = config["plan"], config["environment"]
+    visits = visit_table(config, rng)
+    targets = _targets(plan)
+    grid = pd.MultiIndex.from_product(
+        [range(len(visits)), plan["methods"], plan["feeds_mm_min"], plan["dwells_s"],
+         range(1, int(plan["repeats"]) + 1)],
+        names=["v", "method", "feed_mm_min", "dwell_s", "repeat"]).to_frame(index=False)
+    tests = grid.join(visits, on="v")
+    tests["test_id"] = (tests["machine_id"] + "-" + tests["axis"] + "-v" + tests["visit"] + "-"
+                        + tests["method"].str[:3] + "-f" + tests["feed_mm_min"].map("{:g}".format)
+                        + "-d" + tests["dwell_s"].map("{:g}".format) + "-r"
+                        + tests["repeat"].astype(str))
+    order = np.arange(len(tests)) % (len(tests) // len(visits))
+    tests["started_at"] = tests["started_at"] + pd.to_timedelta(order * 20, unit="min")
+    n = len(tests)
+    tests["machine_temp_start_c"] = env["machine_temp_c"] + rng.normal(0, 0.5, n)
+    tests["warmup_k"] = env["warmup_k"] * tests["feed_mm_min"] / 1000.0
+    tests["ambient_temp_c"] = env["ambient_temp_c"] + rng.normal(0, 0.3, n)
+    tests["pressure_hpa"] = env["pressure_hpa"] + rng.normal(0, 4.0, n)
+    tests["humidity_pct"] = np.clip(env["humidity_pct"] + rng.normal(0, 5.0, n), 5, 95)
+    readings, truth = [], []
+    for method, part in tests.groupby("method", sort=False):
+        p = path(method, targets, int(plan["cycles"]), float(plan["overrun_mm"]))
+        arrays = {c: part[c].to_numpy(float) for c in
+                  ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
+                   "ambient_temp_c", "pressure_hpa", "humidity_pct")}
+        arrays["warmup_tau_s"] = env["warmup_tau_s"]
+        arrays["params"] = {name: dict(params) for name, params in config["effects"].items()}
+        if "backlash" in arrays["params"]:
+            arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
+        out = simulate_tests(p, targets, arrays, config["effects"], config["system"],
+                             config["noise"]["noise_um"], config["noise"]["resolution_um"], rng)
+        readings.append(_readings_frame(part, out))
+        truth.append(_truth_frame(part, out))
+    readings = pd.concat(readings, ignore_index=True)
+    truth = pd.concat(truth, ignore_index=True)
+    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist()}
+    return Simulation(readings, truth, visits.drop(columns=[]), parameters)
+
+
+KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
+
+
+def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
+    n_tests, n_reads = out["deviation_um"].shape
+    frame = tests.loc[tests.index.repeat(n_reads), [*KEYS, "started_at", "operating_hours"]]
+    frame = frame.reset_index(drop=True)
+    frame["target"] = np.tile(out["target"], n_tests)
+    frame["direction"] = np.tile(np.where(out["direction"] > 0, "+", "-"), n_tests)
+    frame["cycle"] = np.tile(out["cycle"], n_tests)
+    frame["deviation_um"] = out["deviation_um"].ravel()
+    frame["measured_at"] = frame["started_at"] + pd.to_timedelta(out["elapsed_s"].ravel(), "s")
+    for column in ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct"):
+        frame[column] = np.round(out[column].ravel(), 3)
+    return frame
+
+
+def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
+    """Mean over cycles per test, target and direction of the true lost motion and of every
+    effect's contribution [um]."""
+    n_tests, n_reads = out["deviation_um"].shape
+    frame = tests.loc[tests.index.repeat(n_reads), list(KEYS)].reset_index(drop=True)
+    frame["target"] = np.tile(out["target"], n_tests)
+    frame["direction"] = np.tile(np.where(out["direction"] > 0, "+", "-"), n_tests)
+    frame["true_backlash_um"] = out["true_backlash_um"].ravel()
+    frame["lost_motion_um"] = out["lost_motion_um"].ravel()
+    for key in out:
+        if key.startswith("effect:"):
+            frame[key.removeprefix("effect:") + "_um"] = out[key].ravel()
+    return frame.groupby([*KEYS, "target", "direction"], sort=False).mean().reset_index()
+
+
+def paper_table(readings: pd.DataFrame) -> pd.DataFrame:
+    """The backlash paper's Table 2 view: one row per target and condition with linear and
+    pendulum mean deviations forward and reverse [mm], speed and environment."""
+    keys = ["machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target"]
+    means = (readings.groupby([*keys, "method", "direction"])["deviation_um"].mean() / 1000.0)
+    wide = means.unstack(["method", "direction"])
+    wide.columns = [f"dev_{'lin' if m == 'linear' else 'pend'}_{'f' if d == '+' else 'r'}_mm"
+                    for m, d in wide.columns]
+    env = readings.groupby(keys)[["machine_temp_c", "ambient_temp_c", "pressure_hpa",
+                                  "humidity_pct"]].mean()
+    table = wide.join(env).reset_index().rename(columns={
+        "target": "position_mm", "feed_mm_min": "speed_mm_min", "machine_temp_c": "t_machine_c",
+        "ambient_temp_c": "t_ambient_c"})
+    return table
