@@ -135,3 +135,132 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
     def predict(self, X):
         check_is_fitted(self, "residual_")
         return self.physics_.predict(X) + self.residual_.predict(X)
+
+    def save(self, directory) -> None:
+        _hybrid_save(self, directory)
+
+    @classmethod
+    def load(cls, directory):
+        return _hybrid_load(cls, directory)
+
+
+class EffectModelBaseline(RegressorMixin, BaseEstimator):
+    """Least squares of the twin's lost-motion effects (``models.physics.effects``):
+
+    b = b0 + A * backlash_position(x; c, w) + k_f * backlash_feed + k_T * backlash_temperature
+        + k_h * operating_hours / 1000
+
+    each effect evaluated with unit amplitude, so the fit is linear; the wear location c is
+    searched over the training positions (w a quarter of the travel). Terms whose input the
+    table lacks, or that do not vary in training, are left out.
+    """
+
+    def __init__(self, n_centers: int = 9):
+        self.n_centers = n_centers
+
+    def _design(self, X, center_mm: float, width_mm: float) -> tuple[np.ndarray, list[str]]:
+        from models.physics import effects
+
+        n = len(X)
+        cols, names = [np.ones(n)], ["backlash"]
+        conditions = {c: X[c].to_numpy(float) for c in ("feed_mm_min", "machine_temp_c")
+                      if c in X}
+        if "target" in X:
+            cols.append(effects.contribution("backlash_position", X["target"].to_numpy(float), 0,
+                                             conditions, amplitude_um=1.0, center_mm=center_mm,
+                                             width_mm=width_mm))
+            names.append("backlash_position")
+        if "feed_mm_min" in X:
+            cols.append(effects.contribution("backlash_feed", np.zeros(n), 0, conditions,
+                                             k_um_per_m_min=1.0))
+            names.append("backlash_feed")
+        if "machine_temp_c" in X:
+            cols.append(effects.contribution("backlash_temperature", np.zeros(n), 0, conditions,
+                                             k_um_per_k=1.0))
+            names.append("backlash_temperature")
+        if "operating_hours" in X:
+            cols.append(X["operating_hours"].to_numpy(float) / 1000.0)
+            names.append("wear_um_per_1000h")
+        return np.column_stack(cols), names
+
+    def fit(self, X, y):
+        y = np.asarray(y, float)
+        x = X["target"].to_numpy(float) if "target" in X else np.zeros(len(X))
+        width = max(np.ptp(x) / 4, 1e-9)
+        best = None
+        for center in np.linspace(x.min(), x.max(), self.n_centers):
+            design, names = self._design(X, center, width)
+            keep = np.r_[True, np.ptp(design[:, 1:], axis=0) > 1e-12]
+            coef = np.zeros(design.shape[1])
+            coef[keep] = _lstsq(design[:, keep], y)
+            sse = float(np.sum((design @ coef - y) ** 2))
+            if best is None or sse < best[0]:
+                best = (sse, center, coef, names)
+        _, self.center_mm_, self.coef_, self.terms_ = best
+        self.width_mm_ = width
+        self.n_features_in_ = np.shape(X)[1]
+        return self
+
+    def predict(self, X):
+        check_is_fitted(self, "coef_")
+        return self._design(X, self.center_mm_, self.width_mm_)[0] @ self.coef_
+
+
+def _save_part(estimator, directory, name: str) -> dict:
+    """A fitted part by its own ``save`` (torch state dict) or skops; returns how."""
+    from pathlib import Path
+
+    directory = Path(directory)
+    cls = f"{type(estimator).__module__}.{type(estimator).__qualname__}"
+    if hasattr(estimator, "save"):
+        estimator.save(directory / name)
+        return {"format": "self", "class": cls, "path": name}
+    import skops.io
+
+    from pipeline.fileio import atomic_path
+
+    with atomic_path(directory / f"{name}.skops") as tmp:
+        skops.io.dump(estimator, tmp)
+    return {"format": "skops", "class": cls, "path": f"{name}.skops"}
+
+
+def _load_part(directory, spec: dict):
+    import importlib
+    from pathlib import Path
+
+    from models.registry import load_skops
+    from pipeline.errors import InputError
+
+    path = Path(directory) / spec["path"]
+    if spec["format"] == "skops":
+        return load_skops(path)
+    module, _, cls = spec["class"].rpartition(".")
+    if not module.startswith("models."):
+        raise InputError(f"refusing estimator class {spec['class']!r}", file=path)
+    return getattr(importlib.import_module(module), cls).load(path)
+
+
+def _hybrid_save(self, directory) -> None:
+    """Physics part (skops) and residual part (its own format) side by side."""
+    import json
+    from pathlib import Path
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    parts = {"physics": _save_part(self.physics_, directory, "physics"),
+             "residual": _save_part(self.residual_, directory, "residual")}
+    (directory / "hybrid.json").write_text(json.dumps(parts, indent=2))
+
+
+def _hybrid_load(cls, directory):
+    import json
+    from pathlib import Path
+
+    directory = Path(directory)
+    parts = json.loads((directory / "hybrid.json").read_text())
+    physics, residual = (_load_part(directory, parts[k]) for k in ("physics", "residual"))
+    model = cls(physics=clone(physics), residual=clone(residual))
+    model.physics_, model.residual_ = physics, residual
+    model.n_features_in_ = getattr(physics, "n_features_in_", None)
+    return model
+

@@ -20,12 +20,12 @@ from pathlib import Path
 from pipeline.errors import InputError
 
 # name: (one-line description, factory(random_state) -> unfitted estimator)
-RECOMMENDED = "hybrid"
+RECOMMENDED = "effect-model"
 DESCRIPTIONS = {
-    "hybrid": "effect-model physics fit plus a small network on its residual (recommended)",
+    "hybrid": "effect-model physics fit plus a small network on its residual",
     "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
     "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
-    "effect-model": "least-squares fit of the twin's lost-motion effect model",
+    "effect-model": "least-squares fit of the twin's lost-motion effects (recommended)",
     "constant": "constant backlash (mean of the training targets)",
     "linear-temperature": "backlash linear in machine temperature",
     "bezier": "Bezier curve of degree 4 over position, 5 control points (least squares)",
@@ -155,7 +155,7 @@ def load_model(directory) -> TrainedModel:
                              file=meta_path)
         estimator = getattr(importlib.import_module(module), cls).load(directory / "estimator")
     else:
-        estimator = _load_skops(directory / "estimator.skops")
+        estimator = load_skops(directory / "estimator.skops")
     inputs_path = directory / "training_inputs.csv"
     training = pd.read_csv(inputs_path) if inputs_path.is_file() else None
     known = {"name", "estimator_format", "estimator_class", "features", "target_kind",
@@ -167,7 +167,7 @@ def load_model(directory) -> TrainedModel:
         {k: v for k, v in meta.items() if k not in known})
 
 
-def _load_skops(path: Path):
+def load_skops(path: Path):
     import skops.io
 
     if not path.is_file():

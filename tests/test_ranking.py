@@ -249,3 +249,20 @@ def test_unknown_rank_rule():
     X = conditions(40, seed=1)
     with pytest.raises(InputError, match="unknown rank rule"):
         ranking.rank_features(X, known_backlash(X, 1), rank_by="votes")
+
+
+def test_twin_drivers_rank_above_inputs_without_effect():
+    """Twin truth: backlash grows with feed and has a wear bump along the axis; humidity,
+    pressure, ambient and dwell have no effect on it."""
+    from features.table import feature_table
+    from models.physics.campaign import simulate
+
+    effects = {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 1.5},
+               "backlash_feed": {"k_um_per_m_min": 1.2}, "lead_error_linear": {}}
+    table = feature_table(simulate({"effects": effects}, seed=5).readings)
+    result = ranking.rank_features(table.X, table.y, n_boot=30, random_state=0)
+    rank = result.table["rank"]
+    drivers = max(rank["feed_mm_min"], rank["target"])
+    for idle in ("humidity_pct", "pressure_hpa", "ambient_temp_c", "dwell_s"):
+        assert rank[idle] > drivers, (idle, rank.to_dict())
+    assert not result.table.loc[["humidity_pct", "dwell_s"], "influence"].any()

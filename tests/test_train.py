@@ -87,3 +87,19 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, change, arg
     line = one_error_line(capsys)
     assert words in line, line
     assert not out.exists()
+
+
+def test_forward_split_on_the_twin_beats_the_noise_floor(capsys):
+    """Twin data with wear over six visits, trained on the first four: the best model's error
+    against the true backlash is at or below the noise floor of one measured target."""
+    from pathlib import Path
+
+    data = Path(__file__).parents[1] / "experiments" / "data" / "twin"
+    code = main(["compare", str(data / "readings.csv"), "--split", "forward", "--truth",
+                 str(data / "truth.csv"), "--models", "effect-model,hybrid,shallow-lm,constant",
+                 "--json"])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    truth = {m["model"]: m["truth_rmse_um"] for m in result["models"]}
+    assert min(truth.values()) <= result["noise_floor_um"]
+    assert truth["effect-model"] <= result["noise_floor_um"] < truth["constant"]

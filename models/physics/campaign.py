@@ -276,16 +276,19 @@ def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
 def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
     """Mean over cycles per test, target and direction of the true lost motion and of every
     effect's contribution [um]."""
-    n_tests, n_reads = out["deviation_um"].shape
-    frame = tests.loc[tests.index.repeat(n_reads), list(KEYS)].reset_index(drop=True)
-    frame["target"] = np.tile(out["target"], n_tests)
-    frame["direction"] = np.tile(np.where(out["direction"] > 0, "+", "-"), n_tests)
-    frame["true_backlash_um"] = out["true_backlash_um"].ravel()
-    frame["lost_motion_um"] = out["lost_motion_um"].ravel()
-    for key in out:
-        if key.startswith("effect:"):
-            frame[key.removeprefix("effect:") + "_um"] = out[key].ravel()
-    return frame.groupby([*KEYS, "target", "direction"], sort=False).mean().reset_index()
+    key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
+    codes, groups = pd.factorize(key)
+    onehot = np.zeros((len(codes), len(groups)))
+    onehot[np.arange(len(codes)), codes] = 1.0
+    onehot /= onehot.sum(axis=0)  # column means over the cycles
+    frame = tests.loc[tests.index.repeat(len(groups)), list(KEYS)].reset_index(drop=True)
+    frame["target"] = np.tile(groups.get_level_values(0), len(tests))
+    frame["direction"] = np.tile(np.where(groups.get_level_values(1) > 0, "+", "-"), len(tests))
+    columns = {"true_backlash_um": "true_backlash_um", "lost_motion_um": "lost_motion_um",
+               **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
+    for key_name, column in columns.items():
+        frame[column] = (out[key_name] @ onehot).ravel()
+    return frame
 
 
 def paper_table(readings: pd.DataFrame) -> pd.DataFrame:

@@ -1,0 +1,46 @@
+"""The twin: a fleet of 100 machines x 3 axes x 12 visits, the paper plan at each visit
+(15.6 million readings), against the goal of 30 s on 2 cores; and one visit against the fleet
+to show the cost per reading stays flat."""
+
+from __future__ import annotations
+
+import resource
+import subprocess
+import sys
+import time
+
+FLEET = {"fleet": {"machines": 100, "axes": ["X", "Y", "Z"], "visits": 12}}
+GOAL_S = 30.0
+
+
+def child(machines: int) -> None:
+    from models.physics.campaign import simulate
+
+    config = {"fleet": {**FLEET["fleet"], "machines": machines}}
+    start = time.perf_counter()
+    sim = simulate(config, seed=0)
+    print(time.perf_counter() - start, len(sim.readings))
+
+
+def _run(machines: int) -> tuple[float, int]:
+    out = subprocess.run([sys.executable, "-c",
+                          f"from bench.bench_twin import child; child({machines})"],
+                         capture_output=True, text=True, check=True)
+    elapsed, n = out.stdout.split()
+    return float(elapsed), int(n)
+
+
+def main() -> None:
+    small_s, small_n = _run(1)
+    fleet_s, fleet_n = _run(100)
+    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024**2
+    print(f"1 machine x 3 axes x 12 visits: {small_n:,} readings in {small_s:.2f} s")
+    print(f"100 machines x 3 axes x 12 visits: {fleet_n:,} readings in {fleet_s:.1f} s "
+          f"(goal < {GOAL_S:.0f} s, ratio {fleet_s / GOAL_S:.2f}), {fleet_n / fleet_s:,.0f} "
+          f"readings/s, peak memory {peak_gb:.1f} GB")
+    print(f"cost per reading, fleet / single machine: "
+          f"{(fleet_s / fleet_n) / (small_s / small_n):.2f}")
+
+
+if __name__ == "__main__":
+    main()
