@@ -26,7 +26,9 @@ failure_at = 0                          # visit of a sudden failure (0: none)
 failure_jump_um = 3.0
 start = "2026-01-05"
 [environment]
-machine_temp_c = 21.0                   # start-of-run screw temperature (spread 0.5 K)
+machine_temp_c = 21.0                   # start-of-run screw temperature
+machine_temp_spread_k = 0.5             # its run-to-run spread (also ambient_spread_k,
+                                        # pressure_spread_hpa, humidity_spread_pct)
 warmup_k = 1.5                          # warm-up of the screw during a run at 1000 mm/min
 ambient_temp_c = 20.5
 pressure_hpa = 1013.0
@@ -71,7 +73,10 @@ BASE = {
               "adjusted_b0_um": 1.2, "failure_at": 0, "failure_jump_um": 3.0,
               "start": "2026-01-05"},
     "environment": {"machine_temp_c": 21.0, "warmup_k": 1.5, "warmup_tau_s": 1200.0,
-                    "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0},
+                    "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0,
+                    # run-to-run spread (standard deviation) of the conditions
+                    "machine_temp_spread_k": 0.5, "ambient_spread_k": 0.3,
+                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0},
     "noise": {"noise_um": 0.3, "resolution_um": 0.1},
     "effects": {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
                 "backlash_feed": {"k_um_per_m_min": 1.2},
@@ -232,11 +237,12 @@ def simulate(config, seed: int = 0) -> Simulation:
     order = np.arange(len(tests)) % (len(tests) // len(visits))
     tests["started_at"] = tests["started_at"] + pd.to_timedelta(order * 20, unit="min")
     n = len(tests)
-    tests["machine_temp_start_c"] = env["machine_temp_c"] + rng.normal(0, 0.5, n)
+    tests["machine_temp_start_c"] = env["machine_temp_c"] + rng.normal(0, env["machine_temp_spread_k"], n)
     tests["warmup_k"] = env["warmup_k"] * tests["feed_mm_min"] / 1000.0
-    tests["ambient_temp_c"] = env["ambient_temp_c"] + rng.normal(0, 0.3, n)
-    tests["pressure_hpa"] = env["pressure_hpa"] + rng.normal(0, 4.0, n)
-    tests["humidity_pct"] = np.clip(env["humidity_pct"] + rng.normal(0, 5.0, n), 5, 95)
+    tests["ambient_temp_c"] = env["ambient_temp_c"] + rng.normal(0, env["ambient_spread_k"], n)
+    tests["pressure_hpa"] = env["pressure_hpa"] + rng.normal(0, env["pressure_spread_hpa"], n)
+    tests["humidity_pct"] = np.clip(env["humidity_pct"] + rng.normal(0, env["humidity_spread_pct"],
+                                                                     n), 5, 95)
     readings, truth = [], []
     for method, part in tests.groupby("method", sort=False):
         p = path(method, targets, int(plan["cycles"]), float(plan["overrun_mm"]))
