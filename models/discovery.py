@@ -252,7 +252,7 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
             break
         model[winner["effect"]] = winner["nuisance"]
         X = _stack(design, model)
-        coef, resid = lstsq_fit(X, design.demean(design.y)[:, 0])
+        _, resid = lstsq_fit(X, design.demean(design.y)[:, 0])
         result.named.append(winner["effect"])
         result.steps.append(Step(
             winner["effect"], {**winner["nuisance"], AMPLITUDE[winner["effect"]][0]:

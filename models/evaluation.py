@@ -32,7 +32,7 @@ def holdout(meta: pd.DataFrame, kind: str = "random", random_state: int = 0,
                          f"sets; expected at least {MIN_POINTS}", file=source)
     if kind == "random":
         order = np.random.default_rng(random_state).permutation(n)
-        n_test = max(1, int(round(TEST_FRACTION * n)))
+        n_test = max(1, round(TEST_FRACTION * n))
         return np.sort(order[n_test:]), np.sort(order[:n_test])
     if kind == "forward":
         rank = visit_order(meta)
@@ -40,7 +40,7 @@ def holdout(meta: pd.DataFrame, kind: str = "random", random_state: int = 0,
         if len(visits) < 2:
             raise InputError("the forward split needs readings from at least 2 visits; "
                              "use --split random", file=source)
-        n_test_visits = max(1, int(round(0.25 * len(visits))))
+        n_test_visits = max(1, round(0.25 * len(visits)))
         test = rank >= visits[-n_test_visits]
         return np.flatnonzero(~test), np.flatnonzero(test)
     raise InputError(f"unknown split {kind!r}; expected one of {', '.join(SPLITS)}")

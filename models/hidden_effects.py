@@ -123,8 +123,8 @@ def score(table: pd.DataFrame) -> dict:
     hard = table[table["kind"].isin(["confounded", "aliased"])]
     shrink = hidden["rmse_before_um"] / hidden["rmse_after_um"]
     return {
-        "scenarios": int(len(table)),
-        "hidden_scenarios": int(len(hidden)),
+        "scenarios": len(table),
+        "hidden_scenarios": len(hidden),
         "named_correctly": int((hidden["outcome"] == "correct").sum()),
         "named_correctly_pct": float(100 * (hidden["outcome"] == "correct").mean()),
         "ambiguous": int((table["outcome"] == "ambiguous").sum()),

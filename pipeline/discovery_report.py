@@ -9,10 +9,10 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from pipeline.fileio import atomic_path, write_text  # noqa: E402
+from pipeline.fileio import atomic_path, write_text
 
 
 def plot(result, readings, path: Path) -> Path:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
+import matplotlib.pyplot as plt
+import pandas as pd
 
-from pipeline import schema  # noqa: E402
-from pipeline.fileio import atomic_path  # noqa: E402
+from pipeline import schema
+from pipeline.fileio import atomic_path
 
 MAX_PANELS = 12
 UP, DOWN = "#1f77b4", "#d62728"

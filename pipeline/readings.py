@@ -73,7 +73,7 @@ def warn(message: str) -> None:
 # --------------------------------------------------------------------------- reading
 
 
-def read_readings(path, format: str = "auto") -> pd.DataFrame:  # noqa: A002 - CLI word
+def read_readings(path, format: str = "auto") -> pd.DataFrame:
     """Read a readings file in any accepted layout into the validated long frame."""
     path = Path(path)
     if format not in FORMATS:
@@ -141,7 +141,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, int]:
     if path.suffix.lower() == ".parquet":
         try:
             frame = pd.read_parquet(path)
-        except Exception as err:  # pyarrow raises many types for a broken file
+        except Exception as err:  # noqa: BLE001 - pyarrow raises many types for a broken file
             raise InputError(f"cannot read Parquet file: {err}", file=path) from None
         row_base = 1
     else:

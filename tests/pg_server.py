@@ -31,7 +31,8 @@ def _install() -> None:
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     for cmd in (["apt-get", "update", "-qq"],
                 ["apt-get", "install", "-y", "-qq", "--no-install-recommends", "postgresql"]):
-        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900,
+                              check=False)
         if done.returncode != 0:
             raise Unavailable(f"{' '.join(cmd)} failed: {done.stderr.strip()[-300:]}")
 
@@ -62,7 +63,8 @@ def start():
     port = _free_port()
 
     def run(args):
-        done = subprocess.run(_as_postgres(args), capture_output=True, text=True, timeout=120)
+        done = subprocess.run(_as_postgres(args), capture_output=True, text=True, timeout=120,
+                              check=False)
         if done.returncode != 0:
             raise Unavailable(f"{os.path.basename(args[0])} failed: {done.stderr.strip()[-300:]}")
 
@@ -73,7 +75,7 @@ def start():
 
     def stop():
         subprocess.run(_as_postgres([f"{bindir}/pg_ctl", "-D", data, "-m", "fast", "stop"]),
-                       capture_output=True, timeout=60)
+                       capture_output=True, timeout=60, check=False)
         time.sleep(0.2)
         shutil.rmtree(root, ignore_errors=True)
 

@@ -24,9 +24,9 @@ def hand_calculation(path) -> dict:
     FWD readings are the + direction. Deviations in um = (reference - target) * 1000.
     """
     text = path.read_text()
-    targets = {int(i): float(v) for i, v in re.findall(r"^TGT_DATA\[(\d+)\]=(\S+)", text, re.M)}
+    targets = {int(i): float(v) for i, v in re.findall(r"^TGT_DATA\[(\d+)\]=(\S+)", text, re.MULTILINE)}
     dev = {"FWD": {}, "BWD": {}}
-    for way, i, j, value in re.findall(r"^REF_DATA_(FWD|BWD)\[(\d+),(\d+)\]=(\S+)", text, re.M):
+    for way, i, j, value in re.findall(r"^REF_DATA_(FWD|BWD)\[(\d+),(\d+)\]=(\S+)", text, re.MULTILINE):
         dev[way].setdefault(int(i), []).append((float(value) - targets[int(i)]) * 1000.0)
     per = []
     for i in sorted(targets):

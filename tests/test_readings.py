@@ -187,11 +187,11 @@ def test_bad_table_gives_one_line_exit_2_and_no_output(tmp_path, capsys, case):
     ("empty_file", "", "empty file"),
     ("header_only", "machine_id,axis,test_id,method,target,direction,cycle,deviation_um\n",
      "no data rows"),
-    ("semicolon_delimiter", "machine_id;axis;test_id;method;target;direction;cycle;deviation_um\n"
-     "M;X;T;linear;0;+;1;1.0\n", "semicolons"),
+    ("semicolon_delimiter", ("machine_id;axis;test_id;method;target;direction;cycle;deviation_um\n"
+                             "M;X;T;linear;0;+;1;1.0\n"), "semicolons"),
     ("unknown_layout", "time,value\n1,2\n", "unknown format"),
-    ("malformed_csv", "machine_id,axis,test_id,method,target,direction,cycle,deviation_um\n"
-     'M,X,T,linear,0,+,1,"1.0\n', "malformed CSV"),
+    ("malformed_csv", ("machine_id,axis,test_id,method,target,direction,cycle,deviation_um\n"
+                       'M,X,T,linear,0,+,1,"1.0\n'), "malformed CSV"),
 ])
 def test_bad_file_gives_one_line_exit_2(tmp_path, capsys, case, text, words):
     path = _csv_text(tmp_path, text)

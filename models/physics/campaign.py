@@ -137,7 +137,7 @@ def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
                                  column=f"effects.{key}")
             unknown = set(value) - set(effects.DEFAULTS[key])
             if unknown:
-                raise InputError(f"unknown parameter {sorted(unknown)[0]!r} of {key}; expected "
+                raise InputError(f"unknown parameter {min(unknown)!r} of {key}; expected "
                                  f"{', '.join(effects.DEFAULTS[key]) or 'none'}", file=where,
                                  column=f"effects.{key}")
             out[key] = dict(value)
