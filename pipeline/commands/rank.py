@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from pipeline.commands.common import parse_features
 from pipeline.errors import InputError
 
 HELP = ("Rank the inputs by how much they drive backlash (weighted k-NN, ANOVA -ln(p), "
@@ -54,18 +55,6 @@ def parse_bins(text: str):
 def _bad_bins(text):
     raise InputError(f"--bins expects a class count such as 4 or boundaries in um such as "
                      f"2,4,6; got {text!r}")
-
-
-def parse_features(text: str | None) -> list[str] | None:
-    if text is None:
-        return None
-    names = [p.strip() for p in text.split(",") if p.strip()]
-    if not names:
-        raise InputError("--features is empty; give comma-separated column names")
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise InputError(f"--features names {duplicated[0]!r} twice")
-    return names
 
 
 def run(args: argparse.Namespace) -> int:
