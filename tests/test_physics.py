@@ -33,6 +33,11 @@ def test_indirect_backlash_only_gives_B_i_minus_b_at_every_target():
     stats = per_target_truth(sim)
     np.testing.assert_allclose(stats["B_i"], -stats["true_backlash_um"], atol=1e-9)
     assert stats["true_backlash_um"].between(2.4, 3.75).all()  # machine factor 0.8-1.25
+    points = backlash_targets(sim.readings)  # auto: the evidence says indirect
+    assert points.attrs["target_kind"] == "iso" and "indirect" in points.attrs["target_reason"]
+    np.testing.assert_allclose(points["backlash_um"], stats["true_backlash_um"].iloc[0],
+                               atol=1e-9)
+    assert backlash_targets(sim.readings, "paper")["backlash_um"].max() < 1e-9
 
 
 def test_direct_paper_target_recovers_b_inside_not_at_the_ends():
