@@ -52,7 +52,6 @@ GRIDS = {
     "lead_error_periodic": ("pitch_mm", np.r_[np.arange(4.0, 12.0, 0.5), np.arange(12.0, 20.5, 1.0)]),
     "thermal_drift": ("tau_s", np.geomspace(120.0, 7200.0, 12)),
     "dwell_settling": ("tau_s", np.geomspace(0.5, 20.0, 10)),
-    "backlash_position": ("center_mm", None),  # filled from the data's targets
 }
 # The parameter whose value is the fitted amplitude, its unit, and the plausible range.
 AMPLITUDE = {
@@ -137,10 +136,8 @@ def effect_column(name: str, x, d, cond, nuisance: dict | None = None) -> np.nda
     amp, _, _ = AMPLITUDE[name]
     params = {**(nuisance or {}), amp: 1.0}
     if name == "abbe":
-        params = {**params, "offset_mm": 150.0 / 1.0, "pitch_urad": 1.0,
-                  "length_mm": float(np.ptp(x) or 1.0)}
-        shifted = x - x.min()
-        return effects.contribution(name, shifted, d, cond, **params)
+        params = {**params, "length_mm": float(np.ptp(x) or 1.0)}  # bow over the measured travel
+        return effects.contribution(name, x - x.min(), d, cond, **params)
     if name == "lead_error_periodic":
         # amplitude and phase: two columns, sin and cos
         return np.column_stack([effects.contribution(name, x, d, cond, **params, phase_rad=ph)
@@ -224,7 +221,6 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
     for name, missing in skipped.items():
         result.notes.append(f"candidate {name} skipped: the readings lack "
                             f"{', '.join(missing)}")
-    GRIDS["backlash_position"] = ("center_mm", np.unique(design.x))
     model = {name: _best_nuisance(design, name, [])[0] for name in baseline}
     X = _stack(design, model)
     _, resid = lstsq_fit(X, design.demean(design.y)[:, 0])
@@ -285,7 +281,10 @@ def _stack(design: Design, model: dict) -> np.ndarray:
 
 
 def _best_nuisance(design: Design, name: str, others: list) -> tuple[dict, float]:
-    key, grid = GRIDS.get(name, (None, None))
+    if name == "backlash_position":  # the wear location: one of the measured targets
+        key, grid = "center_mm", np.unique(design.x)
+    else:
+        key, grid = GRIDS.get(name, (None, None))
     if key is None:
         return {}, float("nan")
     y = design.demean(design.y)[:, 0]
@@ -345,18 +344,14 @@ def _ambiguous_group(design: Design, model: dict, passing: pd.DataFrame) -> set:
     base = _stack(design, model)
     proj = _projector(base)
     w = _residualise(design.column(winner["effect"], winner["nuisance"]), proj)
-    gain_w = passing["sse"].iloc[0]
+    baseline_sse = float(np.sum(_residualise(design.demean(design.y), proj) ** 2))
+    winner_gain = baseline_sse - passing["sse"].iloc[0]
     group = {winner["effect"]}
-    sse_gap_scale = max(passing["sse"].max() - gain_w, 1e-12)
     for _, other in passing.iloc[1:].iterrows():
         o = _residualise(design.column(other["effect"], other["nuisance"]), proj)
-        corr = _max_corr(w, o)
-        baseline_sse = float(np.sum(_residualise(design.demean(design.y), proj) ** 2))
-        gains = (baseline_sse - gain_w, baseline_sse - other["sse"])
-        close = gains[1] >= (1 - CLOSE_GAIN) * gains[0]
-        if corr > COLLINEAR or close:
+        close = baseline_sse - other["sse"] >= (1 - CLOSE_GAIN) * winner_gain
+        if _max_corr(w, o) > COLLINEAR or close:
             group.add(other["effect"])
-    del sse_gap_scale
     return group
 
 

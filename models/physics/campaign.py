@@ -260,7 +260,7 @@ def simulate(config, seed: int = 0) -> Simulation:
     readings = pd.concat(readings, ignore_index=True)
     truth = pd.concat(truth, ignore_index=True)
     parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist()}
-    return Simulation(readings, truth, visits.drop(columns=[]), parameters)
+    return Simulation(readings, truth, visits, parameters)
 
 
 KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
