@@ -22,7 +22,7 @@ Per axis (one test):
   (x̄ + 2s) minus min over both directions of (x̄ - 2s)
 
 Figures are in um for linear axes and arcsec for rotary axes (the unit of ``deviation_um``).
-Tests are grouped by ``pipeline.schema.TEST_KEYS``; every step is one pandas/numpy operation
+Tests are grouped by ``features.readings.schema.TEST_KEYS``; every step is one pandas/numpy operation
 over all tests, so 10,000 tests cost about as much as one table of their size.
 """
 
@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
-from pipeline import schema
+from features.readings import schema
 
 PER_TARGET_FIGURES = ("n_up", "n_down", "mean_up", "mean_down", "mean_bi", "s_up", "s_down",
                       "B_i", "R_up_i", "R_down_i", "R_i")
@@ -65,7 +65,7 @@ def per_target(readings: pd.DataFrame) -> pd.DataFrame:
 
     Parameters
     ----------
-    readings : validated readings table (``pipeline.readings.read_readings``)
+    readings : validated readings table (``features.readings.read_readings``)
 
     Returns
     -------

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 N_NEIGHBORS = 5
 N_BINS = 4

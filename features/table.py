@@ -1,7 +1,7 @@
 """Feature table: the backlash paper's Table 2 inputs per paired interior point, plus target.
 
 One row per backlash point (``features.targets.backlash_targets``): the pair of tests
-(``pipeline.schema.PAIR_KEYS``) and the target position. Inputs, as in the paper (seed 004,
+(``features.readings.schema.PAIR_KEYS``) and the target position. Inputs, as in the paper (seed 004,
 section 4, Table 2 and Fig. 9):
 
 ==================  ====================================================================
@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from pipeline import schema
-from pipeline.errors import InputError
+from features.readings import schema
+from features.readings.errors import InputError
 
 PAPER_FEATURES = ("target", "deviation_down_um", "deviation_up_um", "feed_mm_min",
                   "machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct")
@@ -74,7 +74,7 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
     Parameters
     ----------
     readings : DataFrame
-        Validated readings (``pipeline.readings.read_readings``).
+        Validated readings (``features.readings.read_readings``).
     target : {'paper', 'iso', 'auto'}
         Backlash definition, see ``features.targets.backlash_targets``.
     features : list of str, optional

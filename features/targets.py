@@ -26,8 +26,8 @@ import numpy as np
 import pandas as pd
 
 from features import iso230
-from pipeline import schema
-from pipeline.errors import InputError
+from features.readings import schema
+from features.readings.errors import InputError
 
 KINDS = ("auto", "paper", "iso")
 POINT_KEYS = (*schema.PAIR_KEYS, "target")

@@ -25,6 +25,8 @@ from scipy.special import comb
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted
 
+from models.persistence import load_estimator, save_estimator
+
 REFERENCE_TEMP_C = 20.0
 
 
@@ -206,40 +208,6 @@ class EffectModelBaseline(RegressorMixin, BaseEstimator):
         return self._design(X, self.center_mm_, self.width_mm_)[0] @ self.coef_
 
 
-def _save_part(estimator, directory, name: str) -> dict:
-    """A fitted part by its own ``save`` (torch state dict) or skops; returns how."""
-    from pathlib import Path
-
-    directory = Path(directory)
-    cls = f"{type(estimator).__module__}.{type(estimator).__qualname__}"
-    if hasattr(estimator, "save"):
-        estimator.save(directory / name)
-        return {"format": "self", "class": cls, "path": name}
-    import skops.io
-
-    from pipeline.fileio import atomic_path
-
-    with atomic_path(directory / f"{name}.skops") as tmp:
-        skops.io.dump(estimator, tmp)
-    return {"format": "skops", "class": cls, "path": f"{name}.skops"}
-
-
-def _load_part(directory, spec: dict):
-    import importlib
-    from pathlib import Path
-
-    from models.registry import load_skops
-    from pipeline.errors import InputError
-
-    path = Path(directory) / spec["path"]
-    if spec["format"] == "skops":
-        return load_skops(path)
-    module, _, cls = spec["class"].rpartition(".")
-    if not module.startswith("models."):
-        raise InputError(f"refusing estimator class {spec['class']!r}", file=path)
-    return getattr(importlib.import_module(module), cls).load(path)
-
-
 def _hybrid_save(self, directory) -> None:
     """Physics part (skops) and residual part (its own format) side by side."""
     import json
@@ -247,8 +215,8 @@ def _hybrid_save(self, directory) -> None:
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    parts = {"physics": _save_part(self.physics_, directory, "physics"),
-             "residual": _save_part(self.residual_, directory, "residual")}
+    parts = {"physics": save_estimator(self.physics_, directory, "physics"),
+             "residual": save_estimator(self.residual_, directory, "residual")}
     (directory / "hybrid.json").write_text(json.dumps(parts, indent=2))
 
 
@@ -258,7 +226,7 @@ def _hybrid_load(cls, directory):
 
     directory = Path(directory)
     parts = json.loads((directory / "hybrid.json").read_text())
-    physics, residual = (_load_part(directory, parts[k]) for k in ("physics", "residual"))
+    physics, residual = (load_estimator(directory, parts[k]) for k in ("physics", "residual"))
     model = cls(physics=clone(physics), residual=clone(residual))
     model.physics_, model.residual_ = physics, residual
     model.n_features_in_ = getattr(physics, "n_features_in_", None)

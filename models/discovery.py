@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
+from features.readings.errors import InputError
 from models.physics import effects
-from pipeline import schema
-from pipeline.errors import InputError
 
 DEFAULT_BASELINE = ("backlash", "lead_error_linear")
 BIC_THRESHOLD = -10.0

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 SPLITS = ("random", "forward")
 TEST_FRACTION = 0.15
@@ -67,7 +67,7 @@ def target_noise_floor(readings: pd.DataFrame, kind: str) -> float:
     (pendulum and linear, both directions): u = 2 s / sqrt(n). The ISO reversal value
     combines two: u = sqrt(2) s / sqrt(n).
     """
-    from pipeline.schema import TEST_KEYS
+    from features.readings.schema import TEST_KEYS
 
     groups = readings.groupby([*TEST_KEYS, "target", "direction"], sort=False)["deviation_um"]
     var, n = groups.var(ddof=1), groups.size()

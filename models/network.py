@@ -34,7 +34,7 @@ import torch
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from pipeline.fileio import atomic_path
+from features.readings.fileio import atomic_path
 
 DTYPE = torch.float64
 FILE_NAME = "network.pt"

@@ -17,7 +17,8 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
+from models.persistence import load_estimator, save_estimator
 
 # name: (one-line description, factory(random_state) -> unfitted estimator)
 RECOMMENDED = "effect-model"
@@ -34,7 +35,6 @@ DESCRIPTIONS = {
     "gbr": "gradient boosting regressor",
     "ridge": "ridge regression on standardised inputs (alpha by cross-validation)",
 }
-TRUSTED_PREFIXES = ("sklearn.", "numpy.", "scipy.", "models.", "builtins.", "collections.")
 
 
 def names() -> list[str]:
@@ -106,26 +106,17 @@ class TrainedModel:
 
 def save_model(model: TrainedModel, directory) -> Path:
     """Write a trained model directory (see module docstring)."""
-    from pipeline.fileio import atomic_path, write_json
+    from features.readings.fileio import atomic_path, write_json
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    if hasattr(model.estimator, "save"):
-        model.estimator.save(directory / "estimator")
-        kind = "self"
-    else:
-        import skops.io
-
-        with atomic_path(directory / "estimator.skops") as tmp:
-            skops.io.dump(model.estimator, tmp)
-        kind = "skops"
+    spec = save_estimator(model.estimator, directory, "estimator")
     if model.training_inputs_ is not None:
         with atomic_path(directory / "training_inputs.csv") as tmp:
             model.training_inputs_.to_csv(tmp, index=False)
     write_json(directory / "model.json", {
-        "name": model.name, "estimator_format": kind,
-        "estimator_class": f"{type(model.estimator).__module__}."
-                           f"{type(model.estimator).__qualname__}",
+        "name": model.name, "estimator_format": spec["format"],
+        "estimator_class": spec["class"],
         "features": model.feature_names_, "target_kind": model.target_kind,
         "validation_rmse_um": model.validation_rmse_,
         "input_ranges": {k: list(v) for k, v in model.input_ranges_.items()},
@@ -136,7 +127,6 @@ def save_model(model: TrainedModel, directory) -> Path:
 
 def load_model(directory) -> TrainedModel:
     """Read a model directory written by ``save_model``; refuse anything unexpected."""
-    import importlib
 
     import pandas as pd
 
@@ -148,14 +138,10 @@ def load_model(directory) -> TrainedModel:
         meta = json.loads(meta_path.read_text())
     except json.JSONDecodeError as err:
         raise InputError(f"model.json is not valid JSON: {err}", file=meta_path) from None
-    if meta.get("estimator_format") == "self":
-        module, _, cls = meta["estimator_class"].rpartition(".")
-        if not module.startswith("models."):
-            raise InputError(f"refusing estimator class {meta['estimator_class']!r}",
-                             file=meta_path)
-        estimator = getattr(importlib.import_module(module), cls).load(directory / "estimator")
-    else:
-        estimator = load_skops(directory / "estimator.skops")
+    fmt = meta.get("estimator_format")
+    estimator = load_estimator(directory, {
+        "format": fmt, "class": meta.get("estimator_class", ""),
+        "path": "estimator" if fmt == "self" else "estimator.skops"}, where=meta_path)
     inputs_path = directory / "training_inputs.csv"
     training = pd.read_csv(inputs_path) if inputs_path.is_file() else None
     known = {"name", "estimator_format", "estimator_class", "features", "target_kind",
@@ -165,16 +151,3 @@ def load_model(directory) -> TrainedModel:
         float(meta.get("validation_rmse_um", float("nan"))),
         {k: tuple(v) for k, v in meta.get("input_ranges", {}).items()}, training,
         {k: v for k, v in meta.items() if k not in known})
-
-
-def load_skops(path: Path):
-    import skops.io
-
-    if not path.is_file():
-        raise InputError("model directory has no estimator file", file=path)
-    untrusted = skops.io.get_untrusted_types(file=path)
-    refused = [t for t in untrusted if not t.startswith(TRUSTED_PREFIXES)]
-    if refused:
-        raise InputError(f"refusing to load type {refused[0]!r} from an untrusted model file",
-                         file=path)
-    return skops.io.load(path, trusted=untrusted)

@@ -8,7 +8,7 @@ import argparse
 import importlib
 import sys
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 # Order is the order shown in --help.
 COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "drift", "discover", "hidden-effects", "run")

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from pipeline.fileio import atomic_path, write_text
+from features.readings.fileio import atomic_path, write_text
 
 
 def plot(result, readings, path: Path) -> Path:

@@ -47,7 +47,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 DAYS_PER_MONTH = 30.4375
 # Tests of one visit may span a few days (several shifts); more means two visits share an id.

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline import fileio
+from features.readings import fileio
 from pipeline.drift import prediction_band
 
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}

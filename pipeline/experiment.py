@@ -23,7 +23,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 
 @dataclass

@@ -9,8 +9,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from pipeline import schema
-from pipeline.fileio import atomic_path
+from features.readings import schema
+from features.readings.fileio import atomic_path
 
 MAX_PANELS = 12
 UP, DOWN = "#1f77b4", "#d62728"

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from pipeline.fileio import atomic_path
+from features.readings.fileio import atomic_path
 
 
 def _save(fig, path: Path) -> Path:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.fileio import atomic_path, clean_nan, write_json, write_text
+from features.readings.fileio import atomic_path, clean_nan, write_json, write_text
 
 # Seed 004, Table 5: ANOVA scores -log(p) on the FM38 X axis, for comparison only.
 PAPER_TABLE5 = {

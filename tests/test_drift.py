@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from features.readings.errors import InputError
 from pipeline import drift
 from pipeline.commands import drift as drift_cmd
-from pipeline.errors import InputError
 
 START = pd.Timestamp("2024-01-15T08:00:00Z")
 
@@ -108,7 +108,7 @@ def visit_readings(b_um, *, machine="M1", axis="X", months=None, noise_um=0.2, s
 
 
 def test_visit_backlash_recovers_known_backlash(tmp_path):
-    from pipeline.readings import read_readings
+    from features.readings import read_readings
 
     b = np.array([2.0, 2.5, 3.0, 1.0])
     path = tmp_path / "r.csv"
@@ -241,7 +241,7 @@ class FakeModel:
 
 
 def _readings(frame, tmp_path):
-    from pipeline.readings import read_readings
+    from features.readings import read_readings
 
     path = tmp_path / "m.csv"
     frame.to_csv(path, index=False)

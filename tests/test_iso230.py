@@ -14,8 +14,8 @@ import pandas as pd
 import pytest
 
 from features import iso230
+from features.readings import read_readings
 from pipeline.cli import main
-from pipeline.readings import read_readings
 
 
 def hand_calculation(path) -> dict:

@@ -107,7 +107,7 @@ def test_every_effect_matches_its_formula():
     np.testing.assert_allclose(f("air_refraction", x, d, c), ppm * x / 1000)
     np.testing.assert_allclose(f("abbe", x, d, c), [2.25, 0.0, 2.25])
     np.testing.assert_allclose(f("dwell_settling", x, d, c), d * np.exp(-2.0))
-    assert set(effects.EFFECTS) == set(__import__("pipeline.schema").schema.EFFECTS)
+    assert set(effects.EFFECTS) == set(__import__("features.readings.schema").readings.schema.EFFECTS)
 
 
 def test_play_operator_ignores_a_reversal_shorter_than_the_clearance():
@@ -169,7 +169,7 @@ def test_simulate_writes_readings_that_read_back(tmp_path, capsys):
     assert main(["simulate", "--preset", "demo", "--seed", "3", "--out", str(tmp_path / "d")]) == 0
     names = sorted(p.name for p in (tmp_path / "d").iterdir())
     assert names == ["parameters.json", "readings.csv", "truth.csv", "truth_visits.csv"]
-    from pipeline.readings import read_readings
+    from features.readings import read_readings
 
     readings = read_readings(tmp_path / "d" / "readings.csv")
     assert readings["visit"].nunique() == 6 and "operating_hours" in readings

@@ -10,8 +10,8 @@ import pytest
 from scipy import stats
 
 from features import ranking
-from pipeline.errors import InputError
-from pipeline.fileio import clean_nan, dumps
+from features.readings.errors import InputError
+from features.readings.fileio import clean_nan, dumps
 
 DRIVERS = ("target", "feed_mm_min")
 NON_DRIVERS = ("humidity_pct", "pressure_hpa")

@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from features.readings import read_readings, write_readings
 from pipeline.cli import main
-from pipeline.readings import read_readings, write_readings
 
 TARGETS = (0.0, 50.0, 100.0)
 

@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from features.readings.errors import InputError
 from features.table import PAPER_FEATURES, feature_table, prediction_inputs
 from features.targets import backlash_targets
-from pipeline.errors import InputError
 
 TARGETS = np.linspace(0, 350, 8)
 

@@ -58,10 +58,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings.errors import InputError
 from models.physics import effects
 from models.physics.axis import SYSTEMS, simulate_tests
 from models.physics.cycles import path, target_positions
-from pipeline.errors import InputError
 
 BASE = {
     "system": "direct",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 FORMATS = ("auto", "canonical", "paper", "ecmc")
 
@@ -41,9 +41,9 @@ def parse_features(text: str | None) -> list[str] | None:
 
 def load_table(args):
     """Readings -> feature table (validated), noise floor of one target, and the truth table."""
+    from features.readings import read_readings
     from features.table import check_features, feature_table
     from models.evaluation import target_noise_floor
-    from pipeline.readings import read_readings
 
     readings = read_readings(args.data, args.format)
     table = feature_table(readings, target=args.target, features=parse_features(args.features))

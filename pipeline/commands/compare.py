@@ -24,11 +24,11 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
     from tqdm import tqdm
 
+    from features.readings.fileio import atomic_path, clean_nan, dumps
     from models import registry
     from models.training import fit_model
     from pipeline import model_tracking, tracking
     from pipeline.commands.common import load_table, parse_features
-    from pipeline.fileio import atomic_path, clean_nan, dumps
     from pipeline.model_report import write_figures
 
     names = parse_features(args.models) or registry.names()  # same list syntax as --features

@@ -17,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from pipeline.readings import read_readings, write_readings
+    from features.readings import read_readings, write_readings
 
     frame = read_readings(args.file, args.format)
     write_readings(frame, args.out)

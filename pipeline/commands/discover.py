@@ -23,10 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from features.readings import read_readings
+    from features.readings.fileio import clean_nan, dumps
     from models.discovery import check_baseline, discover
     from pipeline import discovery_report, tracking
-    from pipeline.fileio import clean_nan, dumps
-    from pipeline.readings import read_readings
 
     baseline = check_baseline(args.baseline)
     readings = read_readings(args.data, args.format)

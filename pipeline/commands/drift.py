@@ -6,7 +6,7 @@ import argparse
 import math
 import os
 
-from pipeline.errors import InputError
+from features.readings.errors import InputError
 
 HELP = ("Follow backlash across maintenance visits: robust trend, change points, the date it "
         "crosses a threshold, and (with --model) residual and input drift of a trained model. "
@@ -49,10 +49,10 @@ def check_options(args) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
+    from features.readings import read_readings
+    from features.readings.fileio import clean_nan, dumps
     from pipeline import drift
     from pipeline.drift_report import write_drift_report
-    from pipeline.fileio import clean_nan, dumps
-    from pipeline.readings import read_readings
 
     os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     check_options(args)

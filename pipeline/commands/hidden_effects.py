@@ -20,10 +20,10 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from features.readings.errors import InputError
+    from features.readings.fileio import atomic_path, clean_nan, dumps, write_json
     from models import hidden_effects
     from pipeline import tracking
-    from pipeline.errors import InputError
-    from pipeline.fileio import atomic_path, clean_nan, dumps, write_json
 
     if args.seeds < 1:
         raise InputError("--seeds must be at least 1", column="--seeds")

@@ -24,9 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features import iso230
-    from pipeline.errors import InputError
-    from pipeline.fileio import clean_nan, dumps
-    from pipeline.readings import read_readings
+    from features.readings import read_readings
+    from features.readings.errors import InputError
+    from features.readings.fileio import clean_nan, dumps
 
     if args.plot and not args.plot.lower().endswith(".png"):
         raise InputError("expected a .png file name", column="--plot", file=args.plot)

@@ -19,11 +19,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from features.readings import read_readings
+    from features.readings.errors import InputError
+    from features.readings.fileio import atomic_path
     from features.table import prediction_inputs
     from models.registry import load_model
-    from pipeline.errors import InputError
-    from pipeline.fileio import atomic_path
-    from pipeline.readings import read_readings
 
     if not str(args.out).lower().endswith(".csv"):
         raise InputError("expected a .csv file name", file=args.out, column="--out")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from features.readings.errors import InputError
 from pipeline.commands.common import parse_features
-from pipeline.errors import InputError
 
 HELP = ("Rank the inputs by how much they drive backlash (weighted k-NN, ANOVA -ln(p), "
         "permutation importance, mutual information) and write an HTML report.")
@@ -61,10 +61,10 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.ranking import rank_features
+    from features.readings import read_readings
+    from features.readings.fileio import clean_nan, dumps
     from features.table import feature_table
-    from pipeline.fileio import clean_nan, dumps
     from pipeline.rank_report import write_rank_report
-    from pipeline.readings import read_readings
 
     os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     if args.k < 1:

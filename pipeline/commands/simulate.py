@@ -18,8 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from features.readings.errors import InputError
     from models.physics.campaign import PRESETS, load_config, simulate
-    from pipeline.errors import InputError
 
     if args.preset not in PRESETS:
         raise InputError(f"unknown preset {args.preset!r}; expected one of "
@@ -41,8 +41,8 @@ def write(sim, out_dir) -> None:
     import tempfile
     from pathlib import Path
 
-    from pipeline.fileio import write_json
-    from pipeline.readings import write_readings
+    from features.readings import write_readings
+    from features.readings.fileio import write_json
 
     out = Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)

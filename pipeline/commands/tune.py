@@ -28,9 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import uuid
 
+    from features.readings.errors import InputError
     from models import tuning
     from pipeline.commands.common import load_table
-    from pipeline.errors import InputError
 
     if args.trials < 1 or args.workers < 1 or args.folds < 2:
         raise InputError("--trials and --workers must be at least 1 and --folds at least 2")
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _open_study(tuning, name, storage, seed):
-    from pipeline.errors import InputError
+    from features.readings.errors import InputError
 
     try:
         return tuning.create_study(name, storage, seed)
@@ -87,8 +87,8 @@ def _log(study, tag, args, table, readings, storage, floor) -> int:
     import mlflow
     import optuna
 
+    from features.readings.fileio import clean_nan, dumps
     from pipeline import tracking
-    from pipeline.fileio import clean_nan, dumps
 
     study = optuna.load_study(study_name=args.study, storage=storage)
     mine = [t for t in study.trials if t.user_attrs.get("tag") == tag

@@ -1,54 +1,18 @@
-"""Read, validate and write readings tables (SCHEMA.md).
+"""Validation of long readings frames: once, at the edge; everything downstream trusts them.
 
-Three layouts are accepted and all become the same long, validated frame
-(see ``pipeline.schema``):
-
-- ``canonical``: the readings table itself, CSV or Parquet;
-- ``paper``: the wide layout of the backlash paper's Table 2 (seed 004), one row per
-  target and condition with linear and pendulum deviations forward/reverse;
-- ``ecmc``: ``*_ISO230.dat`` files of the ecmc motion-control test scripts.
-
-Validation happens here, once, at the edge; everything downstream trusts the frame.
 Every problem is an ``InputError`` naming file, row and column.
 """
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pipeline import schema
-from pipeline.errors import InputError
-from pipeline.fileio import atomic_path
-
-FORMATS = ("auto", "canonical", "paper", "ecmc")
-
-# Paper Table 2 columns: canonical wide names and the spellings accepted for them.
-PAPER_COLUMNS = {
-    "position_mm": ("position_mm", "pos. [mm]", "pos [mm]", "pos", "position"),
-    "dev_lin_f_mm": ("dev_lin_f_mm", "dev_lin_f [mm]", "dev_lin_f"),
-    "dev_lin_r_mm": ("dev_lin_r_mm", "dev_lin_r [mm]", "dev_lin_r"),
-    "dev_pend_f_mm": ("dev_pend_f_mm", "dev_pend_f [mm]", "dev_pend_f"),
-    "dev_pend_r_mm": ("dev_pend_r_mm", "dev_pend_r [mm]", "dev_pend_r"),
-    "speed_mm_min": ("speed_mm_min", "speed [mm/min]", "speed", "feed_mm_min"),
-    "dwell_s": ("dwell_s", "dwell [s]", "dwell"),
-    "t_machine_c": ("t_machine_c", "t_m [°c]", "t_m", "machine_temp_c"),
-    "t_ambient_c": ("t_ambient_c", "t_e [°c]", "t_e", "ambient_temp_c"),
-    "pressure_hpa": ("pressure_hpa", "p [hpa]", "pressure"),
-    "humidity_pct": ("humidity_pct", "rh [%]", "humidity"),
-    "repeat": ("repeat",),
-    "visit": ("visit",),
-    "machine_id": ("machine_id",),
-    "axis": ("axis",),
-}
-PAPER_REQUIRED = ("position_mm", "dev_lin_f_mm", "dev_lin_r_mm", "dev_pend_f_mm",
-                  "dev_pend_r_mm", "speed_mm_min")
-PAPER_TO_SCHEMA = {"speed_mm_min": "feed_mm_min", "t_machine_c": "machine_temp_c",
-                   "t_ambient_c": "ambient_temp_c"}
+from features.readings import schema
+from features.readings.errors import InputError
 
 # Plausible ranges of condition columns; outside them a value is a unit mistake or a typo.
 PLAUSIBLE = {
@@ -73,203 +37,7 @@ def warn(message: str) -> None:
 # --------------------------------------------------------------------------- reading
 
 
-def read_readings(path, format: str = "auto") -> pd.DataFrame:
-    """Read a readings file in any accepted layout into the validated long frame."""
-    path = Path(path)
-    if format not in FORMATS:
-        raise InputError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}",
-                         file=path)
-    if not path.is_file():
-        raise InputError("cannot read file: no such file", file=path)
-    if format == "auto":
-        format = detect_format(path)
-    if format == "ecmc":
-        raw, row_base = _ecmc_frame(path), None
-    else:
-        raw, row_base = _read_table(path)
-        if format == "paper":
-            raw = _paper_to_long(raw, path, row_base)
-            row_base = None
-    return validate(raw, path, row_base)
-
-
-def detect_format(path: Path) -> str:
-    if path.suffix.lower() == ".parquet":
-        return "canonical"
-    head = _head(path)
-    if not head.strip():
-        raise InputError("empty file; expected a header row and readings", file=path)
-    if "TGT_DATA[" in head or "REF_DATA_" in head:
-        return "ecmc"
-    header = head.splitlines()[0].lower() if head.strip() else ""
-    names = {c.strip().strip('"') for c in header.split(",")}
-    if {"direction", "method"} <= names:
-        return "canonical"
-    if any(alias in names for alias in PAPER_COLUMNS["dev_lin_f_mm"]):
-        return "paper"
-    _check_delimiter(header, path)
-    raise InputError(
-        "unknown format: expected a readings table (columns machine_id, axis, test_id, method, "
-        "target, direction, cycle, deviation_um), a paper Table-2 file (Dev_lin_f ...) "
-        "or an ecmc *_ISO230.dat file", file=path, row=1)
-
-
-def _head(path: Path, size: int = 8192) -> str:
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(size)
-    except OSError as err:
-        raise InputError(f"cannot read file: {err.strerror}", file=path) from None
-    if b"\x00" in data:
-        raise InputError("cannot read file: binary content, expected CSV text", file=path)
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError("cannot read file: not UTF-8 text", file=path) from None
-
-
-def _check_delimiter(header: str, path: Path) -> None:
-    for sep, name in ((";", "semicolon"), ("\t", "tab"), ("|", "pipe")):
-        if sep in header and "," not in header:
-            raise InputError(f"columns are separated by {name}s; expected commas", file=path,
-                             row=1)
-
-
-def _read_table(path: Path) -> tuple[pd.DataFrame, int]:
-    """Read CSV or Parquet as strings/objects; returns the frame and the row number of its
-    first data row (2 for CSV, whose header is row 1; 1 for Parquet)."""
-    if path.suffix.lower() == ".parquet":
-        try:
-            frame = pd.read_parquet(path)
-        except Exception as err:  # noqa: BLE001 - pyarrow raises many types for a broken file
-            raise InputError(f"cannot read Parquet file: {err}", file=path) from None
-        row_base = 1
-    else:
-        head = _head(path)
-        if not head.strip():
-            raise InputError("empty file; expected a header row and readings", file=path)
-        try:
-            frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True,
-                                encoding="utf-8-sig")
-        except pd.errors.ParserError as err:
-            raise InputError(f"malformed CSV: {err}", file=path) from None
-        except pd.errors.EmptyDataError:
-            raise InputError("empty file; expected a header row and readings",
-                             file=path) from None
-        if frame.shape[1] == 1:
-            _check_delimiter(frame.columns[0], path)
-        row_base = 2
-    frame.columns = [str(c).strip() for c in frame.columns]
-    if frame.empty:
-        raise InputError("no readings: the file has a header but no data rows", file=path)
-    return frame, row_base
-
-
-def _ecmc_frame(path: Path) -> pd.DataFrame:
-    """Parse an ecmc ``*_ISO230.dat`` file. FWD readings are the ``+`` direction."""
-    text = _head(path, size=50_000_000)
-    targets, refs, unit = {}, [], "mm"
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        line = line.strip()
-        if m := re.fullmatch(r"TGT_DATA\[(\d+)\]\s*=\s*(\S+)", line):
-            targets[int(m[1])] = _ecmc_number(m[2], path, lineno)
-        elif m := re.fullmatch(r"REF_DATA_(FWD|BWD)\[(\d+),(\d+)\]\s*=\s*(\S+)", line):
-            refs.append((m[1], int(m[2]), int(m[3]), _ecmc_number(m[4], path, lineno)))
-        elif m := re.fullmatch(r"UNIT\s*=\s*(\S+)", line):
-            unit = m[1].lower()
-    if not targets or not refs:
-        raise InputError("no TGT_DATA/REF_DATA lines: not an ecmc ISO230 file", file=path)
-    scale = {"mm": 1000.0, "um": 1.0, "deg": 3600.0}.get(unit)
-    if scale is None:
-        raise InputError(f"UNIT={unit}: expected mm, um or deg", file=path)
-    ref = pd.DataFrame(refs, columns=["dir", "pos_id", "cycle", "measured"])
-    missing = sorted(set(ref["pos_id"]) - set(targets))
-    if missing:
-        raise InputError(f"REF_DATA for position {missing[0]} has no TGT_DATA[{missing[0]}]",
-                         file=path)
-    ref["target"] = ref["pos_id"].map(targets)
-    stem = path.stem.removesuffix("_ISO230")
-    rotary = unit == "deg"
-    # Deviations in um (arcsec); readings are converted here so `measured` keeps its unit.
-    ref["deviation_um"] = (ref["measured"] - ref["target"]) * scale
-    if unit == "um":
-        ref["target"] = ref["target"] / 1000.0
-        ref["measured"] = ref["measured"] / 1000.0
-    return pd.DataFrame({
-        "machine_id": stem, "axis": "A" if rotary else "X", "test_id": path.stem,
-        "method": "linear", "target": ref["target"],
-        "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
-        "deviation_um": ref["deviation_um"], "measured": ref["measured"],
-    })
-
-
-def _ecmc_number(text: str, path: Path, lineno: int) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"{text!r} is not a number", file=path, row=lineno) from None
-
-
-# --------------------------------------------------------------------------- paper layout
-
-
-def _paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame:
-    """Paper Table 2 (one row per target and condition) -> long readings.
-
-    Each wide row holds four readings: linear and pendulum, forward (+) and reverse (-).
-    A test is one method at one (visit, speed, dwell, repeat); the cycle index is the
-    occurrence count of the position within that test. Deviations are in mm; cells that
-    hold absolute positions (Table 2 has such rows) are converted to deviations.
-    """
-    lookup = {c.lower(): c for c in wide.columns}
-    cols = {}
-    for name, aliases in PAPER_COLUMNS.items():
-        found = next((lookup[a] for a in aliases if a in lookup), None)
-        if found is not None:
-            cols[name] = found
-    for name in PAPER_REQUIRED:
-        if name not in cols:
-            raise InputError(f"missing paper Table-2 column {name!r}", file=path, row=1,
-                             column=name)
-    frame = pd.DataFrame({name: wide[src] for name, src in cols.items()})
-    numeric = [c for c in frame.columns if c not in ("visit", "machine_id", "axis")]
-    for col in numeric:
-        frame[col] = _to_float(frame[col], path, cols[col], row_base)
-    frame["row"] = np.arange(len(frame)) + row_base
-    frame["machine_id"] = frame.get("machine_id", path.stem)
-    frame["axis"] = frame.get("axis", "X")
-    frame["visit"] = frame.get("visit", "1")
-    frame["repeat"] = frame["repeat"].astype(int) if "repeat" in frame else 1
-    if "dwell_s" not in frame:
-        frame["dwell_s"] = np.nan
-
-    dev_cols = ["dev_lin_f_mm", "dev_lin_r_mm", "dev_pend_f_mm", "dev_pend_r_mm"]
-    n_absolute = 0
-    for col in dev_cols:
-        absolute = _looks_absolute(frame[col], frame["position_mm"])
-        n_absolute += int(absolute.sum())
-        frame.loc[absolute, col] = frame.loc[absolute, col] - frame.loc[absolute, "position_mm"]
-    if n_absolute:
-        warn(f"{path}: {n_absolute} cells of the deviation columns hold absolute positions; "
-             "converted to deviations (value - position)")
-
-    conditions = ["machine_id", "axis", "visit", "speed_mm_min", "dwell_s", "repeat"]
-    frame["cycle"] = frame.groupby(conditions + ["position_mm"], dropna=False).cumcount() + 1
-    parts = []
-    for col, method, direction in zip(dev_cols, ("linear", "linear", "pendulum", "pendulum"),
-                                      ("+", "-", "+", "-")):
-        part = frame.drop(columns=dev_cols).assign(
-            method=method, direction=direction, deviation_um=frame[col] * 1000.0)
-        parts.append(part)
-    long = pd.concat(parts, ignore_index=True)
-    dwell = long["dwell_s"].map(lambda v: "" if pd.isna(v) else f"-D{v:g}")
-    long["test_id"] = (long["method"].str[:3] + "-F" + long["speed_mm_min"].map("{:g}".format)
-                       + dwell + "-R" + long["repeat"].astype(str))
-    long = long.rename(columns={"position_mm": "target", **PAPER_TO_SCHEMA})
-    return long.sort_values(["row", "method", "direction"], kind="stable")
-
-
-def _looks_absolute(value: pd.Series, position: pd.Series) -> pd.Series:
+def looks_absolute(value: pd.Series, position: pd.Series) -> pd.Series:
     """A deviation cell holds an absolute position when it lies within 10 % of a target at
     least 1 mm from zero (real deviations are micrometres to tenths of a millimetre)."""
     return (position.abs() >= 1.0) & ((value - position).abs() < 0.1 * position.abs())
@@ -305,14 +73,14 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
                                   "'linear' or 'pendulum' (aliases lin, pend)")
     frame["direction"] = _map_labels(frame, "direction", schema.DIRECTION_ALIASES, path,
                                      "'+' or '-' (aliases fwd/up/1/+1, bwd/down/-1)")
-    frame["target"] = _to_float(frame["target"], path, "target", frame["row"])
+    frame["target"] = to_float(frame["target"], path, "target", frame["row"])
     frame["cycle"] = _to_int(frame["cycle"], path, "cycle", frame["row"])
     frame["visit"] = _to_label(frame["visit"], path, "visit", frame["row"]) if "visit" in frame else "1"
     frame["repeat"] = _to_int(frame["repeat"], path, "repeat", frame["row"]) \
         if "repeat" in frame else 1
     for col in schema.NUMERIC_OPTIONAL:
         if col in frame:
-            frame[col] = _to_float(frame[col], path, col, frame["row"], allow_nan=True)
+            frame[col] = to_float(frame[col], path, col, frame["row"], allow_nan=True)
             _check_plausible(frame, col, path)
     for col in schema.DATETIME_OPTIONAL:
         if col in frame:
@@ -354,7 +122,7 @@ def _to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
     return labels
 
 
-def _to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = False):
+def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = False):
     if pd.api.types.is_numeric_dtype(series):
         values = series.astype(float)
         bad_text = pd.Series(False, index=series.index)
@@ -380,7 +148,7 @@ def _to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = F
 
 
 def _to_int(series, path, col, rows) -> pd.Series:
-    values = _to_float(series, path, col, rows)
+    values = to_float(series, path, col, rows)
     fractional = values != np.round(values)
     if fractional.any() or (values < 1).any():
         i = _first_bad(fractional | (values < 1))
@@ -434,7 +202,7 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
     measured = None
     if schema.MEASURED in frame:
         allow_nan = schema.DEVIATION in frame
-        measured = _to_float(frame["measured"], path, "measured", frame["row"], allow_nan)
+        measured = to_float(frame["measured"], path, "measured", frame["row"], allow_nan)
         off = (measured - frame["target"]).abs() > MAX_DEVIATION_POS_UNITS
         if off.any():
             i = _first_bad(off)
@@ -446,13 +214,13 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
     if schema.DEVIATION not in frame:
         return (measured - frame["target"]) * scale
 
-    deviation = _to_float(frame["deviation_um"], path, "deviation_um", frame["row"],
+    deviation = to_float(frame["deviation_um"], path, "deviation_um", frame["row"],
                           allow_nan=measured is not None)
     if measured is not None:
         deviation = deviation.fillna((measured - frame["target"]) * scale)
     # Absolute positions in mm: only when a whole test reads like positions, so that a real
     # deviation of, say, 15 um at the 15 mm target is never mistaken for one.
-    looks = _looks_absolute(deviation, frame["target"]) | (frame["target"].abs() < 1.0)
+    looks = looks_absolute(deviation, frame["target"]) | (frame["target"].abs() < 1.0)
     tests = [frame[k] for k in schema.TEST_KEYS]
     absolute = looks.groupby(tests, sort=False).transform("all") & (frame["target"].abs() >= 1.0)
     if absolute.any():
@@ -526,20 +294,3 @@ def _check_structure(frame: pd.DataFrame, path: Path) -> None:
                          f"{frame['direction'].iloc[i]!r} of test {frame['test_id'].iloc[i]!r} "
                          "has 1 reading; expected at least 2 cycles", file=path,
                          row=_row_of(frame["row"], i), column="cycle")
-
-
-# --------------------------------------------------------------------------- writing
-
-
-def write_readings(frame: pd.DataFrame, path) -> Path:
-    """Write a readings frame as CSV or Parquet (by suffix), atomically."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet"):
-        raise InputError("unknown output type; expected a .csv or .parquet file name", file=path)
-    with atomic_path(path) as tmp:
-        if suffix == ".parquet":
-            frame.to_parquet(tmp, index=False)
-        else:
-            frame.to_csv(tmp, index=False, date_format="%Y-%m-%dT%H:%M:%S.%f%z")
-    return path

@@ -1,6 +1,6 @@
 """Names of the readings table (SCHEMA.md section 1). These are public contracts: never rename.
 
-After ``pipeline.readings.read_readings`` a frame always has every column in ``REQUIRED``
+After ``features.readings.read_readings`` a frame always has every column in ``REQUIRED``
 plus ``visit`` and ``repeat`` (defaults filled in) and ``deviation_um`` (computed from
 ``measured`` when absent), with these normalised values:
 
