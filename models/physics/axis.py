@@ -52,7 +52,8 @@ def machine_temperature_c(start_c, warmup_k, tau_s, elapsed_s):
 
 
 def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dict, system: str,
-                   noise_um: float, resolution_um: float, rng: np.random.Generator) -> dict:
+                   noise_um: float, resolution_um: float, rng: np.random.Generator,
+                   compensation=None) -> dict:
     """Readings of every test on one path.
 
     ``tests``: arrays per test — feed_mm_min, dwell_s, machine_temp_start_c, warmup_k,
@@ -60,6 +61,10 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     name -> dict of parameter arrays, per test). Returns arrays of shape (tests, readings):
     deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
     conditions at each reading, and per-reading target, direction and cycle.
+
+    ``compensation`` (optional): one controller model per test (or None), with
+    ``motor_path(commanded_mm, direction)`` (``models.physics.controller.Compensation``); its
+    offsets are added to the commanded path ahead of the play, as the controller does.
     """
     n = len(tests["feed_mm_min"])
     elapsed = run_times_s(path, tests["feed_mm_min"], tests["dwell_s"])
@@ -82,10 +87,15 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     read = path.read
     target = targets_mm[path.target_index[read]]
     direction = path.direction[read]
-    if system == "indirect":
+    if system == "indirect" and compensation is not None:
+        lost = (_compensated_table(path, compensation, width)[:, read] - position[:, read]) * 1000.0
+    elif system == "indirect":
         lost = (play(position, width)[:, read] - position[:, read]) * 1000.0
     else:
         lost = -direction * width[:, read] / 2 * path.reversal[read]
+        if compensation is not None:  # the scale loop drives the table onto setpoint + offset
+            offsets = _compensated_motor(path, compensation)[:, 1::2] - position
+            lost = lost + offsets[:, read] * 1000.0
     at_read = {k: v[:, read] for k, v in conditions.items()}
     out = {"true_backlash_um": width[:, read], "lost_motion_um": lost}
     deviation = lost.copy()
@@ -108,3 +118,23 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
 def _column(params: dict) -> dict:
     """Per-test parameter arrays as a column against the (tests, points) arrays."""
     return {k: (np.asarray(v)[:, None] if np.ndim(v) else v) for k, v in params.items()}
+
+
+def _compensated_motor(path: Path, compensation) -> np.ndarray:
+    """Motor path per test with each test's controller offsets, two points per move (start,
+    end), shape (tests, 2 * waypoints); a test without a controller follows the plain path."""
+    plain = np.repeat(path.position_mm, 2)
+    plain[0::2] = np.r_[path.position_mm[0], path.position_mm[:-1]]
+    cache = {}
+    for c in compensation:
+        if c is not None and id(c) not in cache:
+            cache[id(c)] = c.motor_path(path.position_mm, path.direction)
+    return np.stack([plain if c is None else cache[id(c)] for c in compensation])
+
+
+def _compensated_table(path: Path, compensation, width: np.ndarray) -> np.ndarray:
+    """Table positions [mm] at the waypoints when the motor follows the compensated path."""
+    motor = _compensated_motor(path, compensation)
+    before = np.c_[width[:, :1], width[:, :-1]]
+    widths = np.stack([before, width], axis=2).reshape(motor.shape)
+    return play(motor, widths)[:, 1::2]

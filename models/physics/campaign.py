@@ -218,8 +218,10 @@ def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def simulate(config, seed: int = 0) -> Simulation:
-    """Readings and truth of a whole campaign; same config and seed give the same numbers."""
+def simulate(config, seed: int = 0, compensation: dict | None = None) -> Simulation:
+    """Readings and truth of a whole campaign; same config and seed give the same numbers.
+    ``compensation`` maps (machine_id, axis) to a controller model applied to its commanded
+    path (``models.physics.controller``); the random draws do not depend on it."""
     config = load_config(config)
     rng = np.random.default_rng(seed)
     plan, env = config["plan"], config["environment"]
@@ -253,8 +255,11 @@ def simulate(config, seed: int = 0) -> Simulation:
         arrays["params"] = {name: dict(params) for name, params in config["effects"].items()}
         if "backlash" in arrays["params"]:
             arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
+        comp = None if compensation is None else [
+            compensation.get(key) for key in zip(part["machine_id"], part["axis"])]
         out = simulate_tests(p, targets, arrays, config["effects"], config["system"],
-                             config["noise"]["noise_um"], config["noise"]["resolution_um"], rng)
+                             config["noise"]["noise_um"], config["noise"]["resolution_um"], rng,
+                             compensation=comp)
         readings.append(_readings_frame(part, out))
         truth.append(_truth_frame(part, out))
     readings = pd.concat(readings, ignore_index=True)

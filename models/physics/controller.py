@@ -1,0 +1,298 @@
+"""Controller model: reads a written compensation file and applies it the way that controller does.
+
+Every supported controller reduces to one structure (``Compensation``): per approach direction
+an offset table over the axis position that the controller adds to the *commanded* position
+(linear interpolation between points, the end values held outside the table), plus a scalar
+backlash b added at every reversal (+b/2 moving +, -b/2 moving -; a controller that adds the
+whole b after a reversal to one side differs by the constant b/2, which no ISO 230-2 figure
+sees). The parsers below turn each file's own sign convention into those offsets:
+
+- LinuxCNC ``COMP_FILE_TYPE 0`` (``nominal actual_plus actual_minus`` [mm]): the motion module
+  adds ``nominal - actual`` of the current direction to the commanded position
+  (``usrmotLoadComp`` converts type-0 triplets to ``nom - fwd``, ``nom - rev``; ``control.c``
+  adds the interpolated trim to ``joint_pos_cmd``); reading stops at the first line that is not
+  three numbers; at most 256 lines; ``BACKLASH`` is ignored when ``COMP_FILE`` is set.
+- SINUMERIK EEC (``$AA_ENC_COMP[0,N,AXn]`` = error [mm], equidistant from ``_MIN`` by
+  ``_STEP`` to ``_MAX``): offset = -error, one table for both directions; ``MD32450 BACKLASH``
+  [mm] at reversal.
+- Fanuc (1851 backlash and incremental pitch-error values per section, detection units):
+  offset = cumulative sum of the increments from the reference point, linear within a section.
+- Heidenhain (``.COM`` error table, ``MP710`` backlash [mm]): offset = -error.
+- Marlin / RepRapFirmware ``M425``, grblHAL ``$160-$162``: backlash only [mm].
+- CSV written by the product: the ``correction_*`` columns are the offsets.
+
+The twin (``models.physics.axis``) runs the commanded path plus these offsets through its play
+operator, so the reversal step is taken up by the clearance exactly as on the machine.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from features.readings.errors import InputError
+
+LINUXCNC_MAX_LINES = 256
+CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "marlin", "reprap", "grblhal", "csv")
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """What a controller adds to the commanded position [mm].
+
+    ``nominal_mm`` ascending table positions (may be empty), ``plus_mm`` / ``minus_mm`` the
+    offsets at those positions when moving + / -, ``backlash_mm`` the scalar reversal value.
+    """
+
+    nominal_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plus_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    minus_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    backlash_mm: float = 0.0
+    source: str = ""
+
+    def offset_mm(self, position_mm, direction) -> np.ndarray:
+        """Offset [mm] added to the commanded ``position_mm`` moving in ``direction`` (+1/-1)."""
+        x = np.asarray(position_mm, float)
+        d = np.broadcast_to(np.asarray(direction, float), x.shape)
+        out = np.where(d > 0, self.backlash_mm / 2, -self.backlash_mm / 2)
+        if len(self.nominal_mm):
+            plus = np.interp(x, self.nominal_mm, self.plus_mm)
+            minus = np.interp(x, self.nominal_mm, self.minus_mm)
+            out = out + np.where(d > 0, plus, minus)
+        return out
+
+    def motor_path(self, commanded_mm, direction) -> np.ndarray:
+        """Commanded path with the compensation, two points per move [mm]: where the move
+        starts (the previous waypoint, already with the new direction's offset: the reversal
+        step comes first) and where it ends. Shape (2 * waypoints,)."""
+        cmd = np.asarray(commanded_mm, float)
+        d = np.asarray(direction, float)
+        prev = np.r_[cmd[0], cmd[:-1]]
+        start = prev + self.offset_mm(prev, d)
+        end = cmd + self.offset_mm(cmd, d)
+        return np.stack([start, end], axis=1).ravel()
+
+
+def flipped(comp: Compensation) -> Compensation:
+    """The same compensation with every sign reversed (what a sign mistake does)."""
+    return Compensation(comp.nominal_mm, -comp.plus_mm, -comp.minus_mm, -comp.backlash_mm,
+                        comp.source + " (flipped)")
+
+
+# --------------------------------------------------------------------------- parsers
+
+
+def _text(path) -> str:
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise InputError(f"cannot read compensation file: {err.strerror}", file=path) from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def _number(text: str, path, row: int, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{what}: {text!r} is not a number", file=path, row=row) from None
+    if not np.isfinite(value):
+        raise InputError(f"{what}: {text!r} is not a finite number", file=path, row=row)
+    return value
+
+
+def _ascending(nominal: np.ndarray, path) -> None:
+    if len(nominal) and np.any(np.diff(nominal) <= 0):
+        row = int(np.argmax(np.diff(nominal) <= 0)) + 2
+        raise InputError("nominal positions must be strictly ascending", file=path, row=row)
+
+
+def linuxcnc(comp_path, ini_path=None) -> Compensation:
+    """LinuxCNC joint compensation: a ``COMP_FILE_TYPE 0`` table and/or ``BACKLASH`` (INI)."""
+    backlash, comp_file, comp_type = 0.0, None, 0
+    if ini_path is not None:
+        for row, line in enumerate(_text(ini_path).splitlines(), start=1):
+            line = line.split("#")[0].strip()
+            if line.startswith(";") or "=" not in line:
+                continue
+            key, value = (p.strip() for p in line.split("=", 1))
+            if key == "BACKLASH":
+                backlash = _number(value, ini_path, row, "BACKLASH")
+            elif key == "COMP_FILE":
+                comp_file = value
+            elif key == "COMP_FILE_TYPE":
+                comp_type = int(_number(value, ini_path, row, "COMP_FILE_TYPE"))
+        if comp_type != 0:
+            raise InputError(f"COMP_FILE_TYPE {comp_type}: only type 0 is modelled",
+                             file=ini_path)
+    if comp_path is None or (ini_path is not None and comp_file is None):
+        return Compensation(backlash_mm=backlash, source="linuxcnc BACKLASH")
+    rows = []
+    for line in _text(comp_path).splitlines():
+        parts = line.split()
+        if len(parts) < 3:  # LinuxCNC: sscanf("%lf %lf %lf") != 3 ends the table
+            break
+        try:
+            rows.append([float(p) for p in parts[:3]])
+        except ValueError:
+            break
+    if not rows:
+        raise InputError("no 'nominal actual_plus actual_minus' lines", file=comp_path, row=1)
+    if len(rows) > LINUXCNC_MAX_LINES:
+        raise InputError(f"{len(rows)} lines; LinuxCNC reads at most {LINUXCNC_MAX_LINES}",
+                         file=comp_path)
+    table = np.asarray(rows)
+    _ascending(table[:, 0], comp_path)
+    # BACKLASH is not used when COMP_FILE is given: the table carries the reversal
+    return Compensation(table[:, 0], table[:, 0] - table[:, 1], table[:, 0] - table[:, 2], 0.0,
+                        "linuxcnc COMP_FILE_TYPE 0")
+
+
+_EEC = re.compile(r"\$AA_ENC_COMP(_STEP|_MIN|_MAX|_IS_MODULO)?\[(\d+),(?:(\d+),)?(\w+)\]\s*=\s*(\S+)")
+
+
+def siemens(eec_path, md_path=None) -> Compensation:
+    """SINUMERIK EEC table (``%_N_AX_EEC_INI``) and ``MD32450 BACKLASH``."""
+    values, meta = {}, {}
+    for row, line in enumerate(_text(eec_path).splitlines(), start=1):
+        line = line.split(";")[0].strip()
+        if m := _EEC.fullmatch(line):
+            kind, _, index, _, value = m.groups()
+            number = _number(value, eec_path, row, f"$AA_ENC_COMP{kind or ''}")
+            if kind:
+                meta[kind] = number
+            else:
+                values[int(index)] = number
+    for kind in ("_STEP", "_MIN", "_MAX"):
+        if kind not in meta:
+            raise InputError(f"missing $AA_ENC_COMP{kind}", file=eec_path)
+    if meta.get("_IS_MODULO", 0):
+        raise InputError("modulo EEC tables are not modelled", file=eec_path)
+    n = round((meta["_MAX"] - meta["_MIN"]) / meta["_STEP"]) + 1
+    if sorted(values) != list(range(n)):
+        raise InputError(f"expected compensation values 0..{n - 1} from _MIN, _MAX and _STEP, "
+                         f"got {len(values)}", file=eec_path)
+    nominal = meta["_MIN"] + meta["_STEP"] * np.arange(n)
+    error = np.array([values[i] for i in range(n)])
+    backlash = 0.0
+    if md_path is not None:
+        for row, line in enumerate(_text(md_path).splitlines(), start=1):
+            line = line.split(";")[0].strip()
+            if m := re.fullmatch(r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", line):
+                backlash = _number(m[1], md_path, row, "MD32450 BACKLASH")
+    # the EEC value is the error: the control takes it off the position
+    return Compensation(nominal, -error, -error, backlash, "siemens EEC")
+
+
+def fanuc(path) -> Compensation:
+    """Fanuc parameter sheet: 1851 backlash, 3620-3624 and incremental pitch-error values."""
+    params, pitch, unit_um, reference = {}, {}, None, None
+    for row, line in enumerate(_text(path).splitlines(), start=1):
+        line = line.split(";")[0].strip()
+        if m := re.fullmatch(r"(\d{4})\s+\w+\s*=\s*(\S+)", line):
+            params[int(m[1])] = _number(m[2], path, row, f"parameter {m[1]}")
+        elif m := re.fullmatch(r"PITCH\s+(\d+)\s*=\s*(\S+)", line):
+            pitch[int(m[1])] = _number(m[2], path, row, f"pitch error point {m[1]}")
+        elif m := re.fullmatch(r"DETECTION UNIT\s*=\s*(\S+)\s*um", line):
+            unit_um = _number(m[1], path, row, "detection unit")
+        elif m := re.fullmatch(r"REFERENCE POSITION\s*=\s*(\S+)\s*mm", line):
+            reference = _number(m[1], path, row, "reference position")
+    if unit_um is None or reference is None:
+        raise InputError("missing 'DETECTION UNIT = ... um' or 'REFERENCE POSITION = ... mm'",
+                         file=path)
+    unit_mm = unit_um / 1000.0
+    backlash = params.get(1851, 0.0) * unit_mm
+    if not pitch:
+        return Compensation(backlash_mm=backlash, source="fanuc 1851")
+    missing = [p for p in (3620, 3621, 3622, 3623, 3624) if p not in params]
+    if missing:
+        raise InputError(f"missing parameter {missing[0]}", file=path)
+    ref, low, high = (int(params[p]) for p in (3620, 3621, 3622))
+    points = np.arange(low, high + 1)
+    if sorted(pitch) != list(points) or not low <= ref <= high:
+        raise InputError(f"expected pitch error values for points {low}..{high} around the "
+                         f"reference point {ref}", file=path)
+    increment = np.array([pitch[p] for p in points]) * params[3623] * unit_mm
+    # the value of point N is output over the section from point N-1 to N; 0 at the reference
+    cumulative = np.cumsum(np.r_[0.0, increment[1:]])
+    cumulative -= cumulative[ref - low]
+    nominal = reference + (points - ref) * params[3624] * unit_mm
+    return Compensation(nominal, cumulative, cumulative, backlash, "fanuc pitch error")
+
+
+def heidenhain(com_path, mp_path=None) -> Compensation:
+    """Heidenhain ``.COM`` error table (``NR position error`` [mm]) and ``MP710`` backlash."""
+    rows = []
+    for row, line in enumerate(_text(com_path).splitlines(), start=1):
+        parts = line.split(";")[0].split()
+        if len(parts) == 3 and parts[0].isdigit():
+            rows.append([_number(p, com_path, row, "compensation value") for p in parts[1:]])
+    if not rows:
+        raise InputError("no 'NR position error' lines", file=com_path)
+    table = np.asarray(rows)
+    _ascending(table[:, 0], com_path)
+    backlash = 0.0
+    if mp_path is not None:
+        for row, line in enumerate(_text(mp_path).splitlines(), start=1):
+            line = line.split(";")[0].strip()
+            if m := re.fullmatch(r"MP710\.\d+\s*=\s*(\S+)", line):
+                backlash = _number(m[1], mp_path, row, "MP710")
+    return Compensation(table[:, 0], -table[:, 1], -table[:, 1], backlash, "heidenhain .COM")
+
+
+def m425(path) -> Compensation:
+    """Marlin / RepRapFirmware ``M425 X... `` backlash distance [mm] (first axis given)."""
+    for row, line in enumerate(_text(path).splitlines(), start=1):
+        line = line.split(";")[0].strip()
+        if m := re.match(r"M425\s+[XYZ](\S+)", line):
+            return Compensation(backlash_mm=_number(m[1], path, row, "M425"), source="M425")
+    raise InputError("no 'M425 X|Y|Z<mm>' line", file=path)
+
+
+def grblhal(path) -> Compensation:
+    """grblHAL ``$160-$162`` backlash [mm] (first setting given)."""
+    for row, line in enumerate(_text(path).splitlines(), start=1):
+        line = line.split(";")[0].strip()
+        if m := re.fullmatch(r"\$16[0-2]\s*=\s*(\S+)", line):
+            return Compensation(backlash_mm=_number(m[1], path, row, "$16x"), source="grblHAL")
+    raise InputError("no '$160..$162=<mm>' line", file=path)
+
+
+def csv_table(path) -> Compensation:
+    """The product's CSV: ``target_mm``, ``correction_plus_um``, ``correction_minus_um``."""
+    import pandas as pd
+
+    frame = pd.read_csv(path, comment="#")
+    need = ("target_mm", "correction_plus_um", "correction_minus_um")
+    for column in need:
+        if column not in frame:
+            raise InputError(f"missing column {column}", file=path, column=column)
+    return Compensation(frame["target_mm"].to_numpy(float),
+                        frame["correction_plus_um"].to_numpy(float) / 1000.0,
+                        frame["correction_minus_um"].to_numpy(float) / 1000.0, 0.0, "csv")
+
+
+def load(controller: str, files: dict) -> Compensation:
+    """Parse the files written for one machine axis: ``files`` maps a role (``table``,
+    ``parameters``) to a path."""
+    table, params = files.get("table"), files.get("parameters")
+    readers = {
+        "linuxcnc": lambda: linuxcnc(table, params),
+        "siemens": lambda: siemens(table, params),
+        "fanuc": lambda: fanuc(params or table),
+        "heidenhain": lambda: heidenhain(table, params),
+        "marlin": lambda: m425(params),
+        "reprap": lambda: m425(params),
+        "grblhal": lambda: grblhal(params),
+        "csv": lambda: csv_table(table),
+    }
+    if controller not in readers:
+        raise InputError(f"unknown controller {controller!r}; expected one of "
+                         f"{', '.join(CONTROLLERS)}", column="--controller")
+    return readers[controller]()

@@ -1,0 +1,31 @@
+"""Helpers shared by the controller writers: options, units, headers, axis numbering."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2, "A": 3, "B": 4, "C": 5}
+
+
+@dataclass(frozen=True)
+class Options:
+    spacing_mm: float | None = None      # table spacing of equidistant formats
+    reference_mm: float | None = None    # where a table is 0 (reference point), default: see below
+    fanuc_unit_um: float = 1.0           # Fanuc detection unit
+
+
+def reference_position(points, reference_mm: float | None) -> float:
+    """The table point taken as the reference point (compensation 0 there): the one nearest
+    ``reference_mm``, by default nearest 0 (machine zero) within the table, else its start."""
+    import numpy as np
+
+    wanted = 0.0 if reference_mm is None else reference_mm
+    return float(points[int(np.argmin(np.abs(points - wanted)))])
+
+
+def header(profile, controller: str, comment: str, lines: list[str]) -> str:
+    """Comment block naming the machine, axis, source, signs and unconfirmed conventions."""
+    head = [f"backlash-pipeline compensation for {controller}",
+            f"machine {profile.machine_id}, axis {profile.axis}, from {profile.source} data",
+            *lines, *profile.notes]
+    return "".join(f"{comment} {line}\n" for line in head)

@@ -1,0 +1,52 @@
+"""Heidenhain TNC: reversal value (MP710 / MP750) and a ``.COM`` nonlinear axis-error table.
+
+MP710.x (TNC 426/430 and iTNC 530): backlash outside the control loop (rotary encoder), the
+value the control adds to or subtracts from the encoder signal after a reversal, -1..+1 mm;
+positive backlash = the encoder is ahead of the table, traverse too short (TNC 426/430
+technical manual, 6.4.1). MP750.x (iTNC 530): reversal error inside the control loop (linear
+encoder), -9.9999..+9.9999 mm, with MP752.x its compensation time. Nonlinear axis-error
+compensation (selected per axis in MP730) reads ``.COM`` tables assigned in a ``.CMA`` file,
+at most 256 entries per table. Values are the error (as MP720's linear error: positive when the
+travel is too long); one table for both directions, so it holds the bidirectional mean error.
+Not confirmed: the column layout of the ``.COM`` file written here (``NR position error``
+lines between a ``BEGIN``/``[END]`` frame: check it against the control's table editor before
+loading), its spacing rules on your control, and the sign of the ``.COM`` values.
+"""
+
+from __future__ import annotations
+
+from features.readings.fileio import write_text
+from pipeline.compensation.common import AXIS_INDEX, header, reference_position
+from pipeline.compensation.profile import grid, resample
+
+NAME = "heidenhain"
+KIND = "table"
+MAX_POINTS = 256
+
+
+def write(profile, out_dir, options) -> dict:
+    points = grid(profile.target, options.spacing_mm, MAX_POINTS)
+    error, interp_error = resample(profile.target, profile.position_error, points)
+    ref = reference_position(points, options.reference_mm)
+    error = (error - error[points == ref][0]) / profile.scale
+    unconfirmed = [".COM column layout", ".COM spacing rules", "sign of the .COM values (error)"]
+    a = profile.axis
+    head = header(profile, "Heidenhain TNC", ";", [
+        (f"{a} = F({a}): error (measured - nominal) [mm], 0 at {ref:g} mm; {len(points)} points; "
+        f"interpolation error at the measured targets {interp_error:.4f} um"),
+        *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
+    body = [f"BEGIN {profile.stem}.COM MM", f"NR    {a}-POS           {a}-ERROR"]
+    body += [f"{i:<5d} {x:+.4f} {v:+.5f}" for i, (x, v) in enumerate(zip(points, error))]
+    body.append("[END]")
+    com = write_text(out_dir / f"{profile.stem}.COM", head + "\n".join(body) + "\n")
+    index = AXIS_INDEX[a]
+    b_mm = profile.backlash / profile.scale
+    mp = write_text(out_dir / f"{profile.stem}_heidenhain_MP.txt", header(
+        profile, "Heidenhain TNC machine parameters", ";",
+        ["MP710: backlash with a rotary encoder (outside the control loop) [mm]",
+         "MP750 (iTNC 530): reversal error with a linear encoder; use instead of MP710 then"])
+        + f"MP710.{index} = {b_mm:+.4f}\n; MP750.{index} = {b_mm:+.4f}\n")
+    return {"files": {"table": com, "parameters": mp}, "interpolation_error_um": interp_error,
+            "points": len(points),
+            "spacing_mm": float(points[1] - points[0]) if len(points) > 1 else None,
+            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed}

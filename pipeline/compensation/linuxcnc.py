@@ -1,0 +1,48 @@
+"""LinuxCNC: ``COMP_FILE_TYPE 0`` joint compensation table and an INI snippet.
+
+Table (``*.comp``): one line per point, ``nominal actual_plus actual_minus`` in machine units
+(mm, deg), nominals strictly ascending, at most 256 lines, nothing else: LinuxCNC stops reading
+at the first line that is not three numbers (``usrmotLoadComp``). "actual" is where the axis
+really is when commanded to ``nominal`` approaching in that direction, i.e. nominal + deviation;
+LinuxCNC adds ``nominal - actual`` of the current direction to the commanded position, linearly
+interpolated between nominals. ``BACKLASH`` is not used when ``COMP_FILE`` is set, so the table
+carries the reversal; the INI gives ``BACKLASH`` (commented out) for a scalar-only set-up.
+LinuxCNC interpolates between any ascending nominals, so the measured targets are used as they
+are (no resampling, interpolation error 0 at the targets).
+"""
+
+from __future__ import annotations
+
+from features.readings.errors import InputError
+from features.readings.fileio import write_text
+from pipeline.compensation.common import AXIS_INDEX, header
+
+NAME = "linuxcnc"
+KIND = "table"
+MAX_LINES = 256
+
+
+def write(profile, out_dir, options) -> dict:
+    if len(profile.target) > MAX_LINES:
+        raise InputError(f"{len(profile.target)} targets; a LinuxCNC table holds at most "
+                         f"{MAX_LINES} lines", column="DATA")
+    x = profile.target
+    plus = x + profile.mean_up / profile.scale
+    minus = x + profile.mean_down / profile.scale
+    table = "".join(f"{a:.7f} {b:.7f} {c:.7f}\n" for a, b, c in zip(x, plus, minus))
+    comp = out_dir / f"{profile.stem}.comp"
+    joint = AXIS_INDEX[profile.axis]
+    ini = header(profile, "LinuxCNC", ";", [
+        f"add to [JOINT_{joint}] (joint number assumes trivkins X=0 Y=1 Z=2 A=3 B=4 C=5)",
+        ("COMP_FILE columns: nominal, actual position moving +, actual position moving - "
+        "(actual = nominal + measured deviation)"),
+        "BACKLASH is ignored when COMP_FILE is set: the table carries the reversal",
+    ]) + (f"[JOINT_{joint}]\nCOMP_FILE = {comp.name}\nCOMP_FILE_TYPE = 0\n"
+          f"; scalar-only alternative (without COMP_FILE):\n"
+          f"; BACKLASH = {profile.backlash / profile.scale:.6f}\n")
+    write_text(comp, table)
+    snippet = write_text(out_dir / f"{profile.stem}_linuxcnc.ini", ini)
+    return {"files": {"table": comp, "parameters": snippet}, "interpolation_error_um": 0.0,
+            "points": len(x), "spacing_mm": None,
+            "backlash": round(profile.backlash, 4), "unconfirmed": []}
+

@@ -1,0 +1,204 @@
+"""What to compensate, per machine and axis: the error of each approach direction along the axis.
+
+From measured tests: the ISO 230-2 per-target means of the axis's latest visit (flagged outlier
+readings left out), pooled over its linear tests (the standard's cycle; pendulum tests only when
+there are no linear ones), weighted by the number of readings. From a trained predictor: its
+backlash at the requested conditions, split symmetrically (mean_up = -b/2, mean_down = +b/2),
+with no position error (a predictor of backlash knows nothing of the lead error).
+
+Sign conventions (SCHEMA.md): deviation x = measured - target; lost motion makes
+B_i = mean_up - mean_down negative; the scalar backlash written to controllers is
+b = max(0, -mean B_i), the mean lost motion. A correction is what the controller must add to
+the commanded position: correction = -deviation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from features.readings import schema
+from features.readings.errors import InputError
+
+
+@dataclass
+class AxisProfile:
+    machine_id: str
+    axis: str
+    target: np.ndarray          # [mm] (deg for rotary), ascending
+    mean_up: np.ndarray         # [um] (arcsec), deviation approaching +
+    mean_down: np.ndarray       # [um] (arcsec), deviation approaching -
+    u_up: np.ndarray            # standard uncertainty of mean_up [um]
+    u_down: np.ndarray
+    source: str                 # "measured" or "predicted"
+    notes: list = field(default_factory=list)
+
+    @property
+    def scale(self) -> float:
+        """Deviation units per position unit (um per mm, arcsec per deg)."""
+        return schema.deviation_scale(self.axis)
+
+    @property
+    def reversal(self) -> np.ndarray:
+        return self.mean_up - self.mean_down
+
+    @property
+    def position_error(self) -> np.ndarray:
+        """Bidirectional mean deviation [um]: what a one-table controller corrects."""
+        return (self.mean_up + self.mean_down) / 2
+
+    @property
+    def backlash(self) -> float:
+        """Scalar backlash [um] >= 0: the mean lost motion over the targets."""
+        return max(0.0, -float(np.mean(self.reversal)))
+
+    @property
+    def stem(self) -> str:
+        safe = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in str(self.machine_id))
+        return f"{safe}_{self.axis}"
+
+
+def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
+    """One profile per machine and axis from validated readings (see module docstring)."""
+    from features import iso230
+
+    flagged = iso230.outliers(readings)
+    profiles = []
+    for (machine, axis), part in readings.groupby(["machine_id", "axis"], sort=True):
+        notes = []
+        bad = flagged.loc[part.index]
+        if bad.any():
+            notes.append(f"{int(bad.sum())} flagged outlier reading(s) not used")
+        part = part.loc[~bad]
+        visit = max(part["visit"].unique())
+        if part["visit"].nunique() > 1:
+            notes.append(f"latest visit {visit} used (of {part['visit'].nunique()})")
+        part = part[part["visit"] == visit]
+        methods = set(part["method"])
+        if "linear" in methods and len(methods) > 1:
+            part = part[part["method"] == "linear"]
+            notes.append("linear tests used (the ISO 230-2 cycle); pendulum tests left out")
+        per = iso230.per_target(part)
+        profiles.append(_pool(per, str(machine), str(axis), notes))
+    return profiles
+
+
+def _pool(per: pd.DataFrame, machine: str, axis: str, notes: list) -> AxisProfile:
+    """Pool per-test per-target means over tests, weighted by readings; combine uncertainties."""
+    rows = []
+    for target, g in per.groupby("target", sort=True):
+        row = {"target": float(target)}
+        for side in ("up", "down"):
+            n = g[f"n_{side}"].to_numpy(float)
+            mean = g[f"mean_{side}"].to_numpy(float)
+            s = g[f"s_{side}"].to_numpy(float)
+            row[f"mean_{side}"] = float(np.sum(n * mean) / np.sum(n))
+            # within-test scatter of the pooled mean; between-test spread when it is larger
+            u_within = np.sqrt(np.sum((n - 1) * s ** 2) / max(np.sum(n) - len(n), 1) / np.sum(n))
+            u_between = np.std(mean, ddof=1) / np.sqrt(len(mean)) if len(mean) > 1 else 0.0
+            row[f"u_{side}"] = float(max(u_within, u_between))
+        rows.append(row)
+    t = pd.DataFrame(rows)
+    if len(per["test_id"].unique()) > 1:
+        notes.append(f"{per['test_id'].nunique()} tests pooled")
+    return AxisProfile(machine, axis, t["target"].to_numpy(), t["mean_up"].to_numpy(),
+                       t["mean_down"].to_numpy(), t["u_up"].to_numpy(), t["u_down"].to_numpy(),
+                       "measured", notes)
+
+
+def parse_conditions(text: str | None) -> dict[str, float]:
+    """``feed_mm_min=500,machine_temp_c=21`` -> dict; only readings-table condition names."""
+    if not text:
+        return {}
+    out = {}
+    for item in text.split(","):
+        if "=" not in item:
+            raise InputError(f"{item!r}: expected NAME=VALUE", column="--conditions")
+        name, value = (p.strip() for p in item.split("=", 1))
+        allowed = (*schema.NUMERIC_OPTIONAL,)
+        if name not in allowed:
+            raise InputError(f"unknown condition {name!r}; expected one of {', '.join(allowed)}",
+                             column="--conditions")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise InputError(f"{name}={value!r} is not a number", column="--conditions") from None
+    return out
+
+
+def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | None
+                      ) -> AxisProfile:
+    """A profile from a trained predictor at ``conditions`` over its training target range."""
+    features = list(model.feature_names_)
+    ranges = model.input_ranges_
+    if "target" not in ranges:
+        raise InputError("the model has no 'target' input range; cannot choose positions",
+                         column="MODEL_DIR")
+    low, high = (float(v) for v in ranges["target"])
+    step = spacing_mm or (high - low) / 10 or 1.0
+    target = np.arange(low, high + step / 2, step)
+    plan = pd.DataFrame({"target": target})
+    notes = []
+    for name in features:
+        if name == "target":
+            continue
+        if name in conditions:
+            plan[name] = conditions[name]
+        elif model.training_inputs_ is not None and name in model.training_inputs_:
+            plan[name] = float(model.training_inputs_[name].median())
+            notes.append(f"{name} not given: training median {plan[name].iloc[0]:g} used")
+        else:
+            raise InputError(f"the model needs {name}; give it with --conditions",
+                             column="--conditions")
+    unused = sorted(set(conditions) - set(features))
+    if unused:
+        notes.append(f"conditions the model does not use: {', '.join(unused)}")
+    b = np.maximum(np.asarray(model.predict(plan), float), 0.0)
+    u = np.full_like(b, float(model.validation_rmse_) / 2 if np.isfinite(
+        model.validation_rmse_) else np.nan)
+    notes.append(f"predicted by {model.name}: backlash only, no position error")
+    return AxisProfile(model.meta.get("machine_id", model.name), axis, target, -b / 2, b / 2, u, u,
+                       "predicted", notes)
+
+
+# --------------------------------------------------------------------------- resampling
+
+
+def nice_step(step: float) -> float:
+    """The largest of 1, 2, 2.5, 5 x 10^k not above ``step``."""
+    exponent = np.floor(np.log10(step))
+    for mantissa in (5.0, 2.5, 2.0, 1.0):
+        if mantissa * 10 ** exponent <= step * (1 + 1e-9):
+            return float(mantissa * 10 ** exponent)
+    return float(10 ** exponent)
+
+
+def grid(target: np.ndarray, spacing: float | None, max_points: int) -> np.ndarray:
+    """Equidistant points covering the targets. Default: equidistant targets are used as they
+    are; otherwise a quarter of the smallest target interval rounded down to a nice step, from a
+    multiple of it. A given ``spacing`` starts at a multiple of itself."""
+    low, high = float(target.min()), float(target.max())
+    steps = np.diff(target)
+    if spacing is None and len(steps) and np.allclose(steps, steps[0], rtol=0, atol=1e-9):
+        start, spacing = low, float(steps[0])
+    else:
+        if spacing is None:
+            spacing = nice_step(float(np.min(steps)) / 4) if len(steps) else 1.0
+        if spacing <= 0:
+            raise InputError("must be > 0", column="--spacing")
+        start = np.floor(low / spacing + 1e-9) * spacing
+    n = int(np.ceil((high - start) / spacing - 1e-9)) + 1
+    if n > max_points:
+        raise InputError(f"{n} points at {spacing:g} mm spacing; this controller takes at most "
+                         f"{max_points}: choose a larger --spacing", column="--spacing")
+    return start + spacing * np.arange(n)
+
+
+def resample(target: np.ndarray, values: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Values at ``points`` by linear interpolation (end values held), and the interpolation
+    error at the measured targets [same unit]: max |table interpolated back - measured|."""
+    table = np.interp(points, target, values)
+    back = np.interp(target, points, table)
+    return table, float(np.max(np.abs(back - values)))
