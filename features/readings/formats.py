@@ -3,7 +3,8 @@
 - ``canonical``: the readings table itself, CSV or Parquet;
 - ``paper``: the wide layout of the backlash paper's Table 2 (seed 004), one row per
   target and condition with linear and pendulum deviations forward/reverse;
-- ``ecmc``: ``*_ISO230.dat`` files of the ecmc motion-control test scripts.
+- ``ecmc``: ``*_ISO230.dat`` files of the ecmc motion-control test scripts;
+- ``rtl``: Renishaw ``.rtl`` laser test files (``features.readings.rtl``).
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.readings.rtl import looks_like_rtl
 from features.readings.validation import looks_absolute, to_float, warn
 
-FORMATS = ("auto", "canonical", "paper", "ecmc")
+FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
 
 # Paper Table 2 columns: canonical wide names and the spellings accepted for them.
 PAPER_COLUMNS = {
@@ -47,6 +49,8 @@ PAPER_TO_SCHEMA = {"speed_mm_min": "feed_mm_min", "t_machine_c": "machine_temp_c
 def detect_format(path: Path) -> str:
     if path.suffix.lower() == ".parquet":
         return "canonical"
+    if looks_like_rtl(path):  # before the UTF-8 check: .rtl files may be Latin-1
+        return "rtl"
     head = _head(path)
     if not head.strip():
         raise InputError("empty file; expected a header row and readings", file=path)

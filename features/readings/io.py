@@ -9,6 +9,7 @@ import pandas as pd
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path
 from features.readings.formats import FORMATS, detect_format, paper_to_long, read_ecmc, read_table
+from features.readings.rtl import read_rtl
 from features.readings.validation import validate
 
 
@@ -24,6 +25,8 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
         format = detect_format(path)
     if format == "ecmc":
         raw, row_base = read_ecmc(path), None
+    elif format == "rtl":
+        raw, row_base = read_rtl(path), None
     else:
         raw, row_base = read_table(path)
         if format == "paper":

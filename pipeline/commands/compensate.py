@@ -76,17 +76,22 @@ def run(args: argparse.Namespace) -> int:
         from pipeline.compensation.profile import measured_profiles
 
         profiles = measured_profiles(read_readings(source, args.format))
+    if args.verify:  # refuse before anything is written
+        from pipeline.compensation.verify import twin_parameters
+
+        twin_parameters(source)
     options = Options(args.spacing, args.reference_mm, args.fanuc_unit_um)
     written = write_all(profiles, names, Path(args.out), options)
     code, checks = 0, []
     if args.verify:
         from pipeline.compensation.report import write_report
-        from pipeline.compensation.verify import closed_loop
+        from pipeline.compensation.verify import closed_loop, uncompensated
 
+        before = uncompensated(source)
         for name in names:
             files = {(r["machine_id"], r["axis"]): r["files"] for r in written
                      if r["controller"] == name}
-            results = closed_loop(source, profiles, name, files)
+            results = closed_loop(source, profiles, name, files, before)
             folder = Path(args.out) / "verify" / name
             report = write_report(results, name, folder)
             checks += [_check_json(r, name, report) for r in results]
@@ -139,8 +144,9 @@ def write_all(profiles, names, out, options) -> list[dict]:
 
 def _profile_json(p) -> dict:
     return {"machine_id": p.machine_id, "axis": p.axis, "source": p.source,
-            "backlash_um": p.backlash, "targets_mm": p.target, "mean_up_um": p.mean_up,
-            "mean_down_um": p.mean_down, "reversal_um": p.reversal, "notes": p.notes}
+            "backlash_um": p.backlash, "targets_mm": p.target.tolist(),
+            "mean_up_um": p.mean_up.tolist(), "mean_down_um": p.mean_down.tolist(),
+            "reversal_um": p.reversal.tolist(), "notes": p.notes}
 
 
 def _written_json(w) -> dict:

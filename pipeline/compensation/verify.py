@@ -34,7 +34,16 @@ def twin_parameters(data_path) -> dict:
         raise InputError(f"not a twin parameters file: {err}", file=path) from None
 
 
-def closed_loop(data_path, profiles, controller: str, written: dict) -> list[dict]:
+def uncompensated(data_path) -> pd.DataFrame:
+    """The twin's readings re-simulated without compensation (the 'before' of every check)."""
+    from models.physics.campaign import simulate
+
+    params = twin_parameters(data_path)
+    return simulate(params["config"], params["seed"]).readings
+
+
+def closed_loop(data_path, profiles, controller: str, written: dict,
+                before: pd.DataFrame | None = None) -> list[dict]:
     """ISO figures before and after per machine axis; ``written`` maps (machine, axis) to the
     writer's ``files``. Returns one dict per axis with ``before``/``after`` per-target tables."""
     from models.physics import controller as model
@@ -42,7 +51,7 @@ def closed_loop(data_path, profiles, controller: str, written: dict) -> list[dic
 
     params = twin_parameters(data_path)
     comps = {key: model.load(controller, files) for key, files in written.items()}
-    before = simulate(params["config"], params["seed"]).readings
+    before = uncompensated(data_path) if before is None else before
     after = simulate(params["config"], params["seed"], compensation=comps).readings
     results = []
     for profile in profiles:

@@ -1,0 +1,240 @@
+"""`backlash compensate`: controller files, their conventions read back, and the closed loop.
+
+Golden files: ``BACKLASH_UPDATE_GOLDEN=1 pytest tests/test_compensate.py`` rewrites them from a
+hand-made profile; a change to any writer then shows up as a diff to review.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from features import iso230
+from features.readings import read_readings
+from models.physics import controller as ctl
+from pipeline.cli import main
+from pipeline.compensation import CONTROLLERS
+from pipeline.compensation.common import Options
+from pipeline.compensation.profile import AxisProfile, grid, resample
+from pipeline.compensation.verify import closed_loop
+
+GOLDEN = Path(__file__).parent / "golden"
+PRESET = Path(__file__).resolve().parents[1] / "experiments" / "presets" / "compensation.toml"
+
+
+def golden_profile() -> AxisProfile:
+    """Irregular targets; lead error 10 um/m plus a 1.5 um wave; backlash 4 um with a 1 um
+    wear bump at 150 mm (indirect axis: mean_up = e - b/2, mean_down = e + b/2)."""
+    x = np.array([0.0, 48.7, 101.3, 150.0, 203.9, 250.0])
+    e = 0.01 * x + 1.5 * np.sin(x / 40)
+    b = 4 + np.exp(-((x - 150) / 60) ** 2)
+    u = np.full_like(x, 0.2)
+    return AxisProfile("G1", "X", x, e - b / 2, e + b / 2, u, u, "measured", [])
+
+
+def written_files(name: str, out: Path, profile=None) -> dict:
+    writer, _ = CONTROLLERS[name]
+    return writer(profile or golden_profile(), out, Options())
+
+
+@pytest.mark.parametrize("name", list(CONTROLLERS))
+def test_golden_file_per_controller(name, tmp_path):
+    result = written_files(name, tmp_path)
+    folder = GOLDEN / name
+    if os.environ.get("BACKLASH_UPDATE_GOLDEN"):
+        folder.mkdir(parents=True, exist_ok=True)
+        for path in result["files"].values():
+            (folder / path.name).write_bytes(path.read_bytes())
+    for path in result["files"].values():
+        assert path.read_bytes() == (folder / path.name).read_bytes(), path.name
+
+
+@pytest.mark.parametrize("name", list(CONTROLLERS))
+def test_golden_files_read_back_with_the_controllers_semantics(name):
+    """Each golden file, parsed as its controller reads it and applied to the profile, leaves
+    only what that format cannot carry: nothing for per-direction tables; the reversal's
+    variation along the axis (and interpolation/rounding) for one-table formats; the whole
+    position error for scalar-only ones."""
+    p = golden_profile()
+    folder = GOLDEN / name
+    roles = {"linuxcnc": {"table": "G1_X.comp", "parameters": "G1_X_linuxcnc.ini"},
+             "siemens": {"table": "G1_X_AX_EEC.INI", "parameters": "G1_X_MD32450.INI"},
+             "fanuc": {"parameters": "G1_X_fanuc.txt"},
+             "heidenhain": {"table": "G1_X.COM", "parameters": "G1_X_heidenhain_MP.txt"},
+             "marlin": {"parameters": "G1_X_marlin.gcode"},
+             "reprap": {"parameters": "G1_X_reprap.gcode"},
+             "grblhal": {"parameters": "G1_X_grblhal.txt"},
+             "csv": {"table": "G1_X_compensation.csv"}}[name]
+    comp = ctl.load(name, {k: folder / v for k, v in roles.items()})
+    up = p.mean_up + 1000 * comp.offset_mm(p.target, 1)
+    down = p.mean_down + 1000 * comp.offset_mm(p.target, -1)
+    reversal_after = up - down
+    if name in ("linuxcnc", "csv"):
+        assert np.max(np.abs(up)) < 1e-3 and np.max(np.abs(down)) < 1e-3
+        return
+    # the scalar takes off the mean lost motion; its variation along the axis remains
+    # written to 1 nm (SINUMERIK), 0.1 um (others) or whole detection units of 1 um (Fanuc)
+    rounding_b = {"fanuc": 0.5, "siemens": 1e-3}.get(name, 0.05)
+    assert np.allclose(reversal_after, p.reversal - p.reversal.mean(), atol=rounding_b)
+    assert np.max(np.abs(reversal_after)) <= np.ptp(p.reversal) + rounding_b
+    position_after = (up + down) / 2
+    if name in ("siemens", "heidenhain", "fanuc"):
+        points = grid(p.target, None, 10_000)
+        _, interp = resample(p.target, p.position_error, points)
+        rounding = 0.5 if name == "fanuc" else 1e-3  # 1 um detection unit
+        assert np.ptp(position_after) <= 2 * (interp + rounding)
+        assert np.ptp(position_after) < 0.2 * np.ptp(p.position_error) + 2 * rounding
+    else:  # scalar only: the position error is untouched
+        assert np.allclose(position_after, p.position_error, atol=1e-3)
+
+
+def test_linuxcnc_table_layout_and_reading_rules(tmp_path):
+    p = golden_profile()
+    comp_path = written_files("linuxcnc", tmp_path)["files"]["table"]
+    rows = [line.split() for line in comp_path.read_text().splitlines()]
+    assert all(len(r) == 3 for r in rows) and len(rows) == len(p.target)  # no header
+    nominal = np.array([float(r[0]) for r in rows])
+    assert np.all(np.diff(nominal) > 0)
+    # actual moving + = nominal + deviation: a lost-motion axis is short going up
+    assert float(rows[2][1]) == pytest.approx(p.target[2] + p.mean_up[2] / 1000, abs=1e-7)
+    # LinuxCNC stops at the first line that is not three numbers
+    comp_path.write_text(comp_path.read_text() + "# comment\n999 1000 1001\n")
+    assert len(ctl.linuxcnc(comp_path).nominal_mm) == len(p.target)
+    comp_path.write_text("".join(f"{i} {i} {i}\n" for i in range(257)))
+    with pytest.raises(Exception, match="at most 256"):
+        ctl.linuxcnc(comp_path)
+
+
+def _apply(readings: pd.DataFrame, comp) -> pd.DataFrame:
+    """Re-apply a controller's offsets to the readings: the axis lands shifted by the offset
+    the controller adds to the commanded position at that target and direction."""
+    d = np.where(readings["direction"] == "+", 1.0, -1.0)
+    shift = 1000 * comp.offset_mm(readings["target"].to_numpy(float), d)
+    return readings.assign(deviation_um=readings["deviation_um"] + shift)
+
+
+@pytest.mark.parametrize("fixture", ["ess_file", "psi_file"])
+def test_linuxcnc_table_shrinks_reversal_and_E_on_real_tests(fixture, request, tmp_path, capsys):
+    path = request.getfixturevalue(fixture)
+    assert main(["compensate", str(path), "--controller", "linuxcnc", "--out",
+                 str(tmp_path / "out"), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    files = result["files"][0]["files"]
+    comp = ctl.linuxcnc(files["table"], files["parameters"])
+    readings = read_readings(path)
+    clean = readings.loc[~iso230.outliers(readings)]  # the means the table was made from
+    before, after = iso230.per_target(clean), iso230.per_target(_apply(clean, comp))
+    u_b = np.sqrt(after["s_up"] ** 2 / after["n_up"] + after["s_down"] ** 2 / after["n_down"])
+    ok = (after["B_i"].abs() <= 2 * u_b) | (after["B_i"].abs() <= 0.2 * before["B_i"].abs())
+    assert ok.all()
+    e_before = iso230.axis_figures(clean, before)["E"].iloc[0]
+    e_after = iso230.axis_figures(clean, after)["E"].iloc[0]
+    u_mean = np.sqrt(np.r_[after["s_up"] ** 2 / after["n_up"],
+                           after["s_down"] ** 2 / after["n_down"]]).max()
+    assert e_after <= max(0.2 * e_before, 2 * u_mean)
+    # the same check catches a flipped sign: the reversal values double
+    flipped = iso230.per_target(_apply(clean, ctl.flipped(comp)))
+    assert not ((flipped["B_i"].abs() <= 2 * u_b)
+                | (flipped["B_i"].abs() <= 0.2 * before["B_i"].abs())).all()
+    assert np.allclose(flipped["B_i"], 2 * before["B_i"], rtol=1e-3, atol=1e-3)
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory):
+    """The compensation preset: indirect axis, backlash with a wear bump growing with hours,
+    linear + periodic lead error and an Abbe bow, irregular targets."""
+    out = tmp_path_factory.mktemp("twin")
+    assert main(["simulate", "--config", str(PRESET), "--seed", "11", "--out", str(out)]) == 0
+    return out / "readings.csv"
+
+
+def test_twin_closed_loop_linuxcnc(twin, tmp_path, capsys):
+    code = main(["compensate", str(twin), "--controller", "linuxcnc,siemens",
+                 "--out", str(tmp_path), "--verify", "--json"])
+    assert code == 0
+    checks = json.loads(capsys.readouterr().out)["verify"]
+    assert len(checks) == 4 and all(c["passed"] for c in checks)
+    for c in checks:
+        assert c["before"]["B"] > 8  # backlash 6 um + wear + bump
+        if c["controller"] == "linuxcnc":
+            assert c["ratio_B"] <= 0.2 and c["ratio_E"] <= 0.3
+        else:  # one position table + scalar backlash: the wear bump's variation remains
+            assert c["ratio_B"] <= 0.35 and c["ratio_E"] <= 0.35
+    assert (tmp_path / "verify" / "linuxcnc" / "verify.html").is_file()
+
+
+def test_twin_closed_loop_catches_a_flipped_sign(twin, tmp_path):
+    assert main(["compensate", str(twin), "--controller", "linuxcnc", "--out",
+                 str(tmp_path)]) == 0
+    files = {}
+    for comp_path in sorted(tmp_path.glob("*.comp")):
+        table = np.loadtxt(comp_path, ndmin=2)
+        table[:, 1:] = 2 * table[:, [0]] - table[:, 1:]  # actual mirrored: the sign mistake
+        np.savetxt(comp_path, table, fmt="%.7f")
+        machine = comp_path.stem.rsplit("_", 1)[0]
+        files[(machine, "X")] = {"table": comp_path,
+                                 "parameters": comp_path.with_name(f"{comp_path.stem}_linuxcnc.ini")}
+    from pipeline.compensation.profile import measured_profiles
+
+    profiles = measured_profiles(read_readings(twin))
+    results = closed_loop(twin, profiles, "linuxcnc", files)
+    assert results and not any(r["passed"] for r in results)
+    assert all(r["ratio_B"] > 1.8 for r in results)  # a wrong sign doubles the error
+
+
+def test_predictor_source(tmp_path, capsys):
+    """A trained predictor's backlash at the given conditions becomes the reversal; no
+    position error is claimed."""
+    from models.registry import TrainedModel, make, save_model
+
+    X = pd.DataFrame({"target": [0.0, 100.0, 200.0, 300.0], "feed_mm_min": [500.0] * 4})
+    y = np.array([3.0, 3.2, 2.8, 3.0])
+    model = TrainedModel("constant", make("constant").fit(X, y), ["target", "feed_mm_min"],
+                         "iso", 0.2, {"target": (0.0, 300.0), "feed_mm_min": (500.0, 500.0)},
+                         X)
+    save_model(model, tmp_path / "model")
+    assert main(["compensate", str(tmp_path / "model"), "--controller", "linuxcnc", "--out",
+                 str(tmp_path / "out"), "--conditions", "feed_mm_min=800", "--json"]) == 0
+    axis = json.loads(capsys.readouterr().out)["axes"][0]
+    assert axis["source"] == "predicted" and axis["backlash_um"] == pytest.approx(3.0)
+    assert np.allclose(axis["reversal_um"], -3.0)
+    comp = ctl.linuxcnc(next((tmp_path / "out").glob("*.comp")))
+    assert comp.offset_mm(150.0, 1) - comp.offset_mm(150.0, -1) == pytest.approx(0.003)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--controller", "okuma"], "unknown controller 'okuma'"),
+    (["--controller", "linuxcnc", "--conditions", "feed_mm_min=500"],
+     "--conditions applies to a model directory"),
+    (["--controller", "heidenhain", "--spacing", "0.01"], "at most 256"),
+    (["--controller", "siemens", "--spacing", "-1"], "must be > 0"),
+    (["--controller", "linuxcnc", "--verify"], "--verify needs twin data"),
+])
+def test_bad_input_is_one_line_and_writes_nothing(extra, message, ess_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["compensate", str(ess_file), "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_bad_conditions_and_model_dir(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert main(["compensate", str(tmp_path / "empty"), "--controller", "csv", "--out",
+                 str(tmp_path / "o")]) == 2
+    assert "no model.json" in capsys.readouterr().err
+    assert main(["compensate", str(tmp_path / "empty"), "--controller", "csv", "--out",
+                 str(tmp_path / "o"), "--conditions", "speed=3"]) == 2
+    assert "unknown condition 'speed'" in capsys.readouterr().err
+
+
+def test_scalar_controllers_refuse_rotary_axes(tmp_path):
+    p = golden_profile()
+    p.axis = "A"
+    with pytest.raises(Exception, match="X, Y and Z only"):
+        written_files("grblhal", tmp_path, p)
