@@ -218,14 +218,19 @@ def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def simulate(config, seed: int = 0, compensation: dict | None = None) -> Simulation:
+def simulate(config, seed: int = 0, compensation: dict | None = None,
+             session_seed: int | None = None) -> Simulation:
     """Readings and truth of a whole campaign; same config and seed give the same numbers.
     ``compensation`` maps (machine_id, axis) to a controller model applied to its commanded
-    path (``models.physics.controller``); the random draws do not depend on it."""
+    path (``models.physics.controller``); the random draws do not depend on it.
+    ``session_seed`` re-measures the same machines (same seed) in a new session: new run
+    conditions and noise."""
     config = load_config(config)
     rng = np.random.default_rng(seed)
     plan, env = config["plan"], config["environment"]
     visits = visit_table(config, rng)
+    if session_seed is not None:
+        rng = np.random.default_rng([seed, session_seed])
     targets = _targets(plan)
     grid = pd.MultiIndex.from_product(
         [range(len(visits)), plan["methods"], plan["feeds_mm_min"], plan["dwells_s"],
