@@ -5,8 +5,9 @@ position-dependent part of the test (lead error, varying backlash) is not compen
 output says how much of the reversal varies along the axis.
 - Marlin ``M425 [F<fade>] [S<smoothing mm>] [X|Y|Z<mm>]`` (marlinfw.org, M425; needs
   BACKLASH_COMPENSATION and BACKLASH_GCODE); ``F1`` applies it fully.
-- RepRapFirmware ``M425 X|Y|Z<mm>``; NOT CONFIRMED against its G-code dictionary (its
-  optional S parameter, distributing the correction, is left at its default).
+- RepRapFirmware ``M425 X|Y|Z...<mm> [S<multiplier>]`` (RRF 3.5 and later, Duet3D G-code
+  reference): extra steps inserted after a reversal over at least S (default 10) times the
+  backlash; S is left at its default.
 - grblHAL ``$160``/``$161``/``$162`` = X/Y/Z backlash [mm] (needs a build with backlash
   compensation); NOT CONFIRMED against the settings reference of your build.
 """
@@ -47,12 +48,9 @@ def write_marlin(profile, out_dir, options) -> dict:
 
 def write_reprap(profile, out_dir, options) -> dict:
     b, lines = _scalar(profile, "RepRapFirmware")
-    unconfirmed = ["M425 syntax of RepRapFirmware"]
-    text = header(profile, "RepRapFirmware M425", ";",
-                  [*lines, "NOT CONFIRMED: M425 syntax of RepRapFirmware"]) + (
+    text = header(profile, "RepRapFirmware M425 (RRF 3.5 or later)", ";", lines) + (
         f"M425 {profile.axis}{b:.4f} ; backlash [mm]\n")
-    return _result(write_text(out_dir / f"{profile.stem}_reprap.gcode", text), profile,
-                   unconfirmed)
+    return _result(write_text(out_dir / f"{profile.stem}_reprap.gcode", text), profile, [])
 
 
 def write_grblhal(profile, out_dir, options) -> dict:

@@ -38,13 +38,13 @@ def write(profile, out_dir, options) -> dict:
         (f"{len(points)} points every {step:g} mm; linear interpolation error at the measured "
         f"targets {interp_error:.4f} um; needs MD38000 MM_ENC_COMP_MAX_POINTS >= {len(points)}"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
-    lines = ["%_N_AX_EEC_INI", "CHANDATA(1)"]
+    lines = ["%_N_AX_EEC_INI", "CHANDATA(1)", head.rstrip("\n")]  # %_N_ must be line 1
     lines += [f"$AA_ENC_COMP[0,{i},{axis}]={v:.6f}" for i, v in enumerate(error)]
     lines += [f"$AA_ENC_COMP_STEP[0,{axis}]={step:.6f}",
               f"$AA_ENC_COMP_MIN[0,{axis}]={points[0]:.6f}",
               f"$AA_ENC_COMP_MAX[0,{axis}]={points[-1]:.6f}",
               f"$AA_ENC_COMP_IS_MODULO[0,{axis}]=0", "M17"]
-    eec = write_text(out_dir / f"{profile.stem}_AX_EEC.INI", head + "\n".join(lines) + "\n")
+    eec = write_text(out_dir / f"{profile.stem}_AX_EEC.INI", "\n".join(lines) + "\n")
     md = write_text(out_dir / f"{profile.stem}_MD32450.INI", header(
         profile, "SINUMERIK machine data", ";",
         ["MD32450 BACKLASH [mm]: mean lost motion, added at every reversal",
