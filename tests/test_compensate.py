@@ -214,6 +214,8 @@ def test_predictor_source(tmp_path, capsys):
     (["--controller", "heidenhain", "--spacing", "0.01"], "at most 256"),
     (["--controller", "siemens", "--spacing", "-1"], "must be > 0"),
     (["--controller", "linuxcnc", "--verify"], "--verify needs twin data"),
+    (["--controller", ","], "unknown controller"),
+    (["--controller", "fanuc", "--fanuc-unit-um", "0"], "--fanuc-unit-um"),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(extra, message, ess_file, tmp_path, capsys):
     out = tmp_path / "out"
@@ -231,6 +233,27 @@ def test_bad_conditions_and_model_dir(tmp_path, capsys):
     assert main(["compensate", str(tmp_path / "empty"), "--controller", "csv", "--out",
                  str(tmp_path / "o"), "--conditions", "speed=3"]) == 2
     assert "unknown condition 'speed'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("conditions, message", [
+    ("feed_mm_min", "expected NAME=VALUE"),
+    ("feed_mm_min=fast", "is not a number"),
+])
+def test_bad_condition_values(conditions, message, tmp_path, capsys):
+    (tmp_path / "m").mkdir()
+    assert main(["compensate", str(tmp_path / "m"), "--controller", "csv", "--out",
+                 str(tmp_path / "o"), "--conditions", conditions]) == 2
+    assert message in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_broken_twin_parameters(ess_file, tmp_path, capsys):
+    data = tmp_path / "readings.dat"
+    data.write_bytes(ess_file.read_bytes())
+    (tmp_path / "parameters.json").write_text("{not json")
+    assert main(["compensate", str(data), "--controller", "csv", "--out", str(tmp_path / "o"),
+                 "--verify"]) == 2
+    assert "not a twin parameters file" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_scalar_controllers_refuse_rotary_axes(tmp_path):

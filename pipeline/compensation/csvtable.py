@@ -12,9 +12,6 @@ import pandas as pd
 
 from features.readings.fileio import atomic_path
 
-NAME = "csv"
-KIND = "table"
-
 
 def write(profile, out_dir, options) -> dict:
     frame = pd.DataFrame({

@@ -23,8 +23,6 @@ from features.readings.fileio import write_text
 from pipeline.compensation.common import header, reference_position
 from pipeline.compensation.profile import grid, resample
 
-NAME = "fanuc"
-KIND = "table"
 MAX_POINTS = 1024
 FIRST_POINT = 1
 VALUE_LIMIT = 127

@@ -19,8 +19,6 @@ from features.readings.fileio import write_text
 from pipeline.compensation.common import AXIS_INDEX, header, reference_position
 from pipeline.compensation.profile import grid, resample
 
-NAME = "heidenhain"
-KIND = "table"
 MAX_POINTS = 256
 
 

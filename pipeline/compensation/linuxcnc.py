@@ -17,8 +17,6 @@ from features.readings.errors import InputError
 from features.readings.fileio import write_text
 from pipeline.compensation.common import AXIS_INDEX, header
 
-NAME = "linuxcnc"
-KIND = "table"
 MAX_LINES = 256
 
 

@@ -18,8 +18,6 @@ from features.readings.fileio import write_text
 from pipeline.compensation.common import AXIS_INDEX, header, reference_position
 from pipeline.compensation.profile import grid, resample
 
-NAME = "siemens"
-KIND = "table"
 MAX_POINTS = 2000
 
 
