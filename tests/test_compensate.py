@@ -256,6 +256,16 @@ def test_broken_twin_parameters(ess_file, tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_latest_visit_follows_dates_then_numbers():
+    from pipeline.compensation.profile import latest_visit
+
+    frame = pd.DataFrame({"visit": ["9", "10", "10"]})
+    assert latest_visit(frame) == "10"
+    dated = frame.assign(started_at=pd.to_datetime(["2026-03-01", "2026-01-01", "2026-01-02"]))
+    assert latest_visit(dated) == "9"
+    assert latest_visit(pd.DataFrame({"visit": ["a", "b"]})) == "b"
+
+
 def test_scalar_controllers_refuse_rotary_axes(tmp_path):
     p = golden_profile()
     p.axis = "A"

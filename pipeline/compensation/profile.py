@@ -72,7 +72,7 @@ def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
         if bad.any():
             notes.append(f"{int(bad.sum())} flagged outlier reading(s) not used")
         part = part.loc[~bad]
-        visit = max(part["visit"].unique())
+        visit = latest_visit(part)
         if part["visit"].nunique() > 1:
             notes.append(f"latest visit {visit} used (of {part['visit'].nunique()})")
         part = part[part["visit"] == visit]
@@ -83,6 +83,18 @@ def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
         per = iso230.per_target(part)
         profiles.append(_pool(per, str(machine), str(axis), notes))
     return profiles
+
+
+def latest_visit(readings: pd.DataFrame) -> str:
+    """The visit measured last: by ``started_at`` when known, else by its id (numerically when
+    every id is a number, so that visit 10 follows visit 9)."""
+    if "started_at" in readings and readings["started_at"].notna().all():
+        return str(readings.groupby("visit")["started_at"].min().idxmax())
+    visits = readings["visit"].unique()
+    numeric = pd.to_numeric(pd.Series(visits), errors="coerce")
+    if numeric.notna().all():
+        return str(visits[int(numeric.to_numpy().argmax())])
+    return str(max(visits))
 
 
 def _pool(per: pd.DataFrame, machine: str, axis: str, notes: list) -> AxisProfile:

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from pipeline.compensation.profile import latest_visit
 
 FIGURES = ("A", "E", "M", "R", "B", "B_mean")
 SESSION = 1  # seed of the re-measuring session
@@ -79,7 +80,7 @@ def _ratio(after: float, before: float) -> float:
 
 def _tests_used(readings: pd.DataFrame, machine: str, axis: str) -> pd.DataFrame:
     part = readings[(readings["machine_id"] == machine) & (readings["axis"] == axis)]
-    part = part[part["visit"] == max(part["visit"].unique())]
+    part = part[part["visit"] == latest_visit(part)]
     if "linear" in set(part["method"]):
         part = part[part["method"] == "linear"]
     return part
