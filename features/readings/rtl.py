@@ -14,7 +14,9 @@ agree on, and refuses anything else with one line:
 
 Runs alternate direction in a bidirectional test: odd runs approach in the direction of the
 target list (first to last target), even runs in the opposite one; cycle j is runs 2j-1 and 2j.
-Readings are indexed by the target number of each line, never by row order.
+Readings are indexed by the target number of each line, never by row order. ``Machine``
+gives ``machine_id`` (else the file name) and ``Axis`` the axis (default X); ``Serial No`` and
+``Date`` are not used (the files state no date format, so a date would be a guess).
 """
 
 from __future__ import annotations
