@@ -271,3 +271,23 @@ def test_scalar_controllers_refuse_rotary_axes(tmp_path):
     p.axis = "A"
     with pytest.raises(Exception, match="X, Y and Z only"):
         written_files("grblhal", tmp_path, p)
+
+
+def test_zero_compensation_leaves_the_twin_unchanged_and_backlash_alone_is_taken_up():
+    """The hook is backwards compatible, and on an indirect axis with backlash only a scalar
+    equal to the clearance, added at reversal, is taken up by the play: B_i -> 0."""
+    from models.physics.campaign import simulate
+
+    config = {"system": "indirect", "effects": {"backlash": {"b0_um": 5.0}},
+              "plan": {"feeds_mm_min": [500.0], "dwells_s": [3.0], "repeats": 1,
+                       "methods": ["linear", "pendulum"]},
+              "noise": {"noise_um": 0.0, "resolution_um": 0.0}}
+    plain = simulate(config, 4).readings
+    zero = simulate(config, 4, compensation={("M01", "X"): ctl.Compensation()}).readings
+    pd.testing.assert_frame_equal(plain, zero)
+    b = -iso230.per_target(plain)["B_i"].mean() / 1000
+    taken = simulate(config, 4, compensation={("M01", "X"): ctl.Compensation(backlash_mm=b)})
+    per = iso230.per_target(taken.readings)
+    assert per["B_i"].abs().max() < 1e-9 and iso230.per_target(plain)["B_i"].abs().min() > 4
+    wrong = simulate(config, 4, compensation={("M01", "X"): ctl.Compensation(backlash_mm=-b)})
+    assert iso230.per_target(wrong.readings)["B_i"].abs().min() > 1.9 * 4
