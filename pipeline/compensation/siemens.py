@@ -8,8 +8,11 @@ outside the table, and the value at the reference point is 0. One table serves b
 directions, so it holds the bidirectional mean error; the reversal goes to MD32450 [mm].
 MD38000 ``MM_ENC_COMP_MAX_POINTS`` must be at least the number of points, and the table is
 activated with MD32700 ``ENC_COMP_ENABLE`` (machine builder).
+Sign (K3, 4.4.2.1): the control modifies the position actual value by the compensation value,
+and "a positive compensation value causes the corresponding machine axis to move in the negative
+direction", so the value is the measured error; the table should be 0 at the reference point.
 Not confirmed against the manual: the ``$MA_BACKLASH[0,AXn]`` assignment syntax of the
-machine-data file, and the sign (the value is the measured error, the control takes it off).
+machine-data file.
 """
 
 from __future__ import annotations
@@ -28,11 +31,11 @@ def write(profile, out_dir, options) -> dict:
     ref = reference_position(points, options.reference_mm)
     error = (error - error[points == ref][0]) / profile.scale  # 0 at the reference point
     step = points[1] - points[0] if len(points) > 1 else 1.0
-    unconfirmed = ["sign: value = measured error (the control takes it off)",
-                   "$MA_BACKLASH[0,AXn] syntax of the machine-data file"]
+    unconfirmed = ["$MA_BACKLASH[0,AXn] syntax of the machine-data file"]
     head = header(profile, "SINUMERIK EEC", ";", [
         (f"$AA_ENC_COMP = bidirectional mean error (measured - nominal) [mm], 0 at the "
-        f"reference point {ref:g} mm; machine axis {axis}"),
+        f"reference point {ref:g} mm (a positive value moves the axis negative); machine "
+        f"axis {axis}"),
         (f"{len(points)} points every {step:g} mm; linear interpolation error at the measured "
         f"targets {interp_error:.4f} um; needs MD38000 MM_ENC_COMP_MAX_POINTS >= {len(points)}"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
@@ -46,7 +49,7 @@ def write(profile, out_dir, options) -> dict:
     md = write_text(out_dir / f"{profile.stem}_MD32450.INI", header(
         profile, "SINUMERIK machine data", ";",
         ["MD32450 BACKLASH [mm]: mean lost motion, added at every reversal",
-         *(f"NOT CONFIRMED: {u}" for u in unconfirmed[1:])])
+         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
         + f"$MA_BACKLASH[0,{axis}]={profile.backlash / profile.scale:.6f}\nM17\n")
     return {"files": {"table": eec, "parameters": md}, "interpolation_error_um": interp_error,
             "points": len(points), "spacing_mm": float(step),
