@@ -191,8 +191,19 @@ def test_unknown_placeholder_in_the_output_folder(tmp_path, capsys, psi_file):
     assert "'out': unknown placeholder {data}" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("path", sorted((REPO / "experiments").glob("*.toml")),
-                         ids=lambda p: p.name)
+def experiment_files() -> list[Path]:
+    """The shipped experiment files: TOML files with steps (parameter sets have none)."""
+    import tomllib
+
+    return sorted(p for p in (REPO / "experiments").rglob("*.toml")
+                  if "steps" in tomllib.loads(p.read_text(encoding="utf-8")))
+
+
+def test_the_demo_is_an_experiment_file():
+    assert REPO / "experiments" / "demo.toml" in experiment_files()
+
+
+@pytest.mark.parametrize("path", experiment_files(), ids=lambda p: p.name)
 def test_shipped_experiments_are_valid_and_stay_in_their_folder(path, tmp_path):
     loaded = experiment.load(path, str(tmp_path / "out"))
     assert loaded.steps
