@@ -47,9 +47,10 @@ from features.readings.errors import InputError
 TOP_KEYS = ("name", "description", "out", "steps")
 STEP_KEYS = ("title", "command", "with")
 PLACEHOLDERS = ("data", "out", "here")
-# Options that name files or folders, by argparse dest (or metavar for model directories).
-INPUT_DESTS = ("file", "data", "truth", "config")
-INPUT_METAVARS = ("DIR", "FILE", "FILE.toml")
+# Options that name files or folders: by argparse dest, or by a metavar that says so
+# (``DIR``, ``FILE.toml``, ``DATA|MODEL_DIR``; ``OUT.png`` for an output).
+INPUT_DESTS = ("file", "data", "source", "truth", "config")
+INPUT_WORDS = ("DIR", "FILE", "DATA")
 OUTPUT_DESTS = ("out", "plot")
 SQLITE = "sqlite:///"
 ALERT_EXIT = 3  # an alert (drift monitoring) is a result, not a failure
@@ -101,7 +102,7 @@ def path_role(action: argparse.Action) -> str | None:
     metavar = action.metavar if isinstance(action.metavar, str) else ""
     if action.dest in OUTPUT_DESTS or action.dest.endswith("_out") or metavar.startswith("OUT"):
         return "output"
-    if action.dest in INPUT_DESTS or metavar in INPUT_METAVARS:
+    if action.dest in INPUT_DESTS or any(w in metavar.upper() for w in INPUT_WORDS):
         return "input"
     if action.dest == "storage":
         return "storage"
@@ -364,8 +365,9 @@ def run_step(step: Step, module, total: int) -> int:
             raise InputError(f"step {step.index} ({step.command}): no such file or folder "
                              f"{str(missing[0])!r} (no earlier step wrote it)")
         return int(module.run(step.args) or 0)
-    except InputError as err:
-        print(f"backlash {step.command}: error: {err.line()}", file=sys.stderr)
+    except (InputError, ValueError) as err:  # a user error, as the command line treats it
+        line = err.line() if isinstance(err, InputError) else " ".join(str(err).split())
+        print(f"backlash {step.command}: error: {line}", file=sys.stderr)
         return 2
 
 

@@ -89,14 +89,20 @@ out = "drift"
     assert step.argv[:3] == ["drift", str(psi_file.resolve()), "--out"]
 
 
-def test_failing_step_stops_the_experiment(tmp_path, capsys):
+@pytest.mark.parametrize("library_error", [False, True])
+def test_failing_step_stops_the_experiment(tmp_path, capsys, monkeypatch, library_error):
     bad = tmp_path / "bad.csv"
     bad.write_text("machine_id,axis\nM1,X\n")
+    if library_error:  # library code names the parameter in a ValueError
+        def refuse(args):
+            raise ValueError("alpha must lie in (0, 1), got 2 (bad.csv)")
+
+        monkeypatch.setattr(experiment.commands()["convert"], "run", refuse)
     spec = write_spec(tmp_path, convert_step(bad, "{out}/x.csv")
                       + convert_step(bad, "{out}/never-reached.csv"))
     assert main(["run", str(spec)]) == 2
     err = capsys.readouterr().err
-    assert "backlash convert: error: " in err and "bad.csv" in err
+    assert "backlash convert: error: " in err and "bad.csv" in err and "Traceback" not in err
     assert "step 1 failed with exit code 2" in err and "never-reached" not in err
     assert not (tmp_path / "out" / "x.csv").exists()
 
@@ -210,3 +216,16 @@ def test_shipped_experiments_are_valid_and_stay_in_their_folder(path, tmp_path):
     for step in loaded.steps:
         assert step.outputs, f"step {step.index} writes nothing"
         assert all(experiment.inside(p, loaded.out) for p in step.outputs)
+
+
+@pytest.mark.parametrize("flags, kwargs, role", [
+    (["--out"], {}, "output"), (["--plot"], {"metavar": "OUT.png"}, "output"),
+    (["--report-out"], {}, "output"), (["data"], {}, "input"),
+    (["--model"], {"metavar": "DIR"}, "input"), (["source"], {"metavar": "DATA|MODEL_DIR"}, "input"),
+    (["--config"], {"metavar": "FILE.toml"}, "input"), (["--model"], {}, None),
+    (["--storage"], {}, "storage"), (["--seed"], {"type": int}, None)])
+def test_path_role_of_an_option(flags, kwargs, role):
+    import argparse
+
+    action = argparse.ArgumentParser().add_argument(*flags, **kwargs)
+    assert experiment.path_role(action) == role
