@@ -129,6 +129,8 @@ def load(path, out: str | None = None) -> Experiment:
     if out is None:
         out = expand(spec.get("out", f"{spec.get('name', path.stem)}-out"),
                      {"here": str(here)}, path, "'out'")
+    if not out.strip():
+        raise InputError("the output folder is empty; give 'out' a folder name", file=path)
     out_dir = Path(os.path.realpath(out))
     values = {"data": str(here / "data"), "out": str(out_dir), "here": str(here)}
 
@@ -152,7 +154,7 @@ def load_step(index: int, raw, known: dict, values: dict, path: Path) -> Step:
                          f"[steps.with]), got {_kind(raw)}", file=path)
     _check_keys(raw, STEP_KEYS, f"key in {where}", path)
     command = raw.get("command")
-    if command not in known:
+    if not isinstance(command, str) or command not in known:
         raise InputError(f"{where}: unknown command {command!r}; expected one of "
                          f"{', '.join(known)}", file=path)
     where = f"step {index} ({command})"
@@ -266,6 +268,8 @@ def _place(value, role, step: Step, values: dict, path: Path, label: str):
     earlier step writes them), outputs against the output folder (they must stay inside)."""
     if value is None or role not in ("input", "output"):
         return value
+    if isinstance(value, list):
+        return [_place(v, role, step, values, path, label) for v in value]
     out = Path(values["out"])
     base = Path(values["here"]) if role == "input" else out
     resolved = Path(os.path.realpath(base / Path(value).expanduser()))

@@ -129,6 +129,8 @@ STEP = '[[steps]]\ncommand = "convert"\n'
     ('steps = "iso"\n', "'steps' must be an array of tables"),
     ('steps = ["iso"]\n', "step 1: expected a table"),
     ('[[steps]]\ncommand = "bake"\n', "step 1: unknown command 'bake'"),
+    ('[[steps]]\ncommand = ["iso"]\n', "step 1: unknown command ['iso']"),
+    ('[[steps]]\ntitle = "no command"\n', "step 1: unknown command None"),
     ('[[steps]]\ncommand = "run"\n', "step 1: unknown command 'run'"),
     ('[[steps]]\ncommand = "iso"\nargs = ["x"]\n', "unknown key in step 1 'args'"),
     ('[[steps]]\ncommand = "iso"\nwith = "x"\n', "'with' must be a table of options"),
@@ -191,10 +193,13 @@ def test_output_through_a_symlink_out_of_the_folder_is_refused(tmp_path, capsys,
     assert list(outside.iterdir()) == []
 
 
-def test_unknown_placeholder_in_the_output_folder(tmp_path, capsys, psi_file):
-    spec = write_spec(tmp_path, convert_step(psi_file), out="{data}/out")
+@pytest.mark.parametrize("out, message", [("{data}/out", "'out': unknown placeholder {data}"),
+                                          ("", "the output folder is empty")])
+def test_bad_output_folder(tmp_path, capsys, psi_file, out, message):
+    spec = tmp_path / "exp.toml"
+    spec.write_text(f'out = "{out}"\n' + convert_step(psi_file), encoding="utf-8")
     assert main(["run", str(spec)]) == 2
-    assert "'out': unknown placeholder {data}" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
 
 
 def experiment_files() -> list[Path]:
