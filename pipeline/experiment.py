@@ -152,7 +152,8 @@ def load_step(index: int, raw, known: dict, values: dict, path: Path) -> Step:
     if not isinstance(raw, dict):
         raise InputError(f"{where}: expected a table ([[steps]] with title, command and "
                          f"[steps.with]), got {_kind(raw)}", file=path)
-    _check_keys(raw, STEP_KEYS, f"key in {where}", path)
+    _check_keys(raw, STEP_KEYS, "key", path, where=f"{where}: ",
+                hint=" (a command's options go in [steps.with])")
     command = raw.get("command")
     if not isinstance(command, str) or command not in known:
         raise InputError(f"{where}: unknown command {command!r}; expected one of "
@@ -317,11 +318,12 @@ def _argv(action: argparse.Action, value) -> list[str]:
     return [action.option_strings[0], *words] if action.option_strings else words
 
 
-def _check_keys(table: dict, allowed: tuple, what: str, path: Path) -> None:
+def _check_keys(table: dict, allowed: tuple, what: str, path: Path, *, where: str = "",
+                hint: str = "") -> None:
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        raise InputError(f"unknown {what} {unknown[0]!r}; expected {', '.join(allowed)}",
-                         file=path)
+        raise InputError(f"{where}unknown {what} {unknown[0]!r}; expected "
+                         f"{', '.join(allowed)}{hint}", file=path)
 
 
 def _kind(value) -> str:

@@ -132,7 +132,7 @@ STEP = '[[steps]]\ncommand = "convert"\n'
     ('[[steps]]\ncommand = ["iso"]\n', "step 1: unknown command ['iso']"),
     ('[[steps]]\ntitle = "no command"\n', "step 1: unknown command None"),
     ('[[steps]]\ncommand = "run"\n', "step 1: unknown command 'run'"),
-    ('[[steps]]\ncommand = "iso"\nargs = ["x"]\n', "unknown key in step 1 'args'"),
+    ('[[steps]]\ncommand = "iso"\nargs = ["x"]\n', "step 1: unknown key 'args'; expected title, command, with (a command's options go in "),
     ('[[steps]]\ncommand = "iso"\nwith = "x"\n', "'with' must be a table of options"),
     ('[[steps]]\ncommand = "iso"\ntitle = 1\n', "'title' must be a string"),
     (STEP + '[steps.with]\nout = "{out}/a.csv"\nbogus = 1\n', "unknown option 'bogus'"),
