@@ -46,7 +46,6 @@ from features.readings.errors import InputError
 
 TOP_KEYS = ("name", "description", "out", "steps")
 STEP_KEYS = ("title", "command", "with")
-PLACEHOLDERS = ("data", "out", "here")
 # Options that name files or folders: by argparse dest, or by a metavar that says so
 # (``DIR``, ``FILE.toml``, ``DATA|MODEL_DIR``; ``OUT.png`` for an output).
 INPUT_DESTS = ("file", "data", "source", "truth", "config")
