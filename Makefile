@@ -21,8 +21,9 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/backlash run experiments/demo.toml
 
+# -rs prints why a test was skipped (the browser test without Chromium, PostgreSQL tests).
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -rs
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

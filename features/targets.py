@@ -1,4 +1,4 @@
-"""Per-point backlash targets (SCHEMA.md section 3) from a readings table.
+"""Per-point backlash targets (docs/data-contract.md §3) from a readings table.
 
 Two definitions, one row per backlash point (``PAIR_KEYS`` + ``target``):
 

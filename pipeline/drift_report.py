@@ -15,18 +15,20 @@ import numpy as np
 import pandas as pd
 
 from features.readings import fileio
-from pipeline.drift import prediction_band
+from features.visits import DAYS_PER_MONTH
+from models.drift import prediction_band
+from pipeline.report_page import new_figure, save_figure, write_page
 
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
 
 
 def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
-    """Write PNG, HTML and JSON for analysed series (``pipeline.drift.DriftSeries``)."""
+    """Write PNG, HTML and JSON for analysed series (``models.drift.DriftSeries``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {k: out / name for k, name in FILES.items()}
     plot_series(series, paths["png"])
-    fileio.write_text(paths["html"], render_html(series, source=source, notes=notes))
+    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes))
     fileio.write_json(paths["json"], fileio.clean_nan(
         {"source": source, "series": [s.to_json() for s in series]}))
     return paths
@@ -34,18 +36,10 @@ def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
 
 def plot_series(series, path) -> None:
     """One panel per series: visits, trend, change points, threshold and forecast band."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(series), 1, figsize=(8, 3.2 * len(series)), squeeze=False,
-                             layout="constrained")
+    fig, axes = new_figure(8, 3.2 * len(series), nrows=len(series), ncols=1, squeeze=False)
     for ax, s in zip(axes[:, 0], series):
         _panel(ax, s)
-    with fileio.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _panel(ax, s) -> None:
@@ -53,7 +47,7 @@ def _panel(ax, s) -> None:
     to_date = s.origin.tz_localize(None) if s.origin.tzinfo else s.origin
 
     def dates(t_month):
-        return to_date + pd.to_timedelta(np.asarray(t_month) * 30.4375, unit="D")
+        return to_date + pd.to_timedelta(np.asarray(t_month) * DAYS_PER_MONTH, unit="D")
 
     ax.errorbar(dates(v["t_month"]), v["backlash_um"], yerr=2 * v["sigma_um"], fmt="o",
                 ms=4, capsize=2, color="C0", label="|B_mean| per visit (±2σ)")
@@ -86,9 +80,7 @@ def _panel(ax, s) -> None:
     ax.tick_params(axis="x", labelrotation=20, labelsize=8)
 
 
-CSS = """body{font-family:sans-serif;max-width:60em;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;
-text-align:right}th{background:#eee}.alert{color:#b00;font-weight:bold}"""
+TITLE = "Backlash drift across visits"
 
 
 def _fmt(value, fmt=".3g") -> str:
@@ -97,8 +89,8 @@ def _fmt(value, fmt=".3g") -> str:
     return format(value, fmt) if isinstance(value, (int, float)) else html.escape(str(value))
 
 
-def render_html(series, *, source: str = "", notes=()) -> str:
-    """The report page: a summary table, the figure, and per-series visit tables."""
+def render_body(series, *, source: str = "", notes=()) -> str:
+    """The report body: a summary table, the figure, and per-series visit tables."""
     rows = []
     for s in series:
         j = s.to_json()
@@ -110,17 +102,19 @@ def render_html(series, *, source: str = "", notes=()) -> str:
             f"<td>{html.escape(', '.join(j['change_points']) or '–')}</td>"
             f"<td>{_fmt(j['threshold_crossing'])} [{_fmt(j['crossing_interval'][0])}, "
             f"{_fmt(j['crossing_interval'][1])}]</td>"
-            f"<td class='alert'>{html.escape('; '.join(a['kind'] for a in s.alerts))}</td></tr>")
+            f"<td>{html.escape('; '.join(a['kind'] for a in s.alerts) or '–')}</td></tr>")
     details = []
     for s in series:
         v = s.visits
         body = "".join(
             f"<tr><td>{html.escape(str(r.visit))}</td><td>{r.date.date().isoformat()}</td>"
-            f"<td>{r.n_tests}</td><td>{r.B_um:.3f}</td><td>{r.B_mean_um:.3f}</td>"
-            f"<td>{r.backlash_um:.3f}</td><td>{r.u_um:.3f}</td><td>{r.sigma_um:.3f}</td></tr>"
+            + "".join(f"<td class='num'>{x}</td>" for x in (
+                r.n_tests, f"{r.B_um:.3f}", f"{r.B_mean_um:.3f}", f"{r.backlash_um:.3f}",
+                f"{r.u_um:.3f}", f"{r.sigma_um:.3f}")) + "</tr>"
             for r in v.itertuples())
-        alerts = "".join(f"<li class='alert'>{html.escape(a['kind'])}: "
-                         f"{html.escape(a['message'])}</li>" for a in s.alerts) or "<li>none</li>"
+        items = "".join(f"<li>{html.escape(a['kind'])}: {html.escape(a['message'])}</li>"
+                        for a in s.alerts)
+        alerts = f"<div class='alert'><ul>{items}</ul></div>" if items else "<p>No alert.</p>"
         model = ""
         if s.model:
             m = s.model
@@ -130,23 +124,22 @@ def render_html(series, *, source: str = "", notes=()) -> str:
                      f"{html.escape(', '.join(m['out_of_range']) or 'none')}; drifted inputs "
                      f"(KS): {html.escape(', '.join(m['drifted_inputs']) or 'none')}.</p>")
         details.append(
-            f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2><ul>{alerts}</ul>"
+            f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2>{alerts}"
             f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>B [µm]</th>"
             f"<th>B_mean [µm]</th><th>|B_mean| [µm]</th><th>u [µm]</th><th>σ [µm]</th></tr>"
             f"{body}</table>")
     note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>Backlash drift</title>
-<style>{CSS}</style></head><body><h1>Backlash drift across visits</h1>
-<p>Data: {html.escape(source)}</p>
+    level = f"{100 * (1 - series[0].alpha):g} %" if series else ""
+    return f"""<p>Data: {html.escape(source)}</p>
 <p>Series value: |B_mean| (mean signed ISO 230-2 reversal value of the visit's tests); σ is the
 larger of the repeatability uncertainty u = mean sqrt(s↑²/n↑ + s↓²/n↓) and the robust scatter
-between visits. Slope: Theil-Sen since the last change point (95 % interval); change points by
+between visits. Slope: Theil-Sen since the last change point ({level} interval); change points by
 optimal partitioning into straight-line segments; crossing: Theil-Sen line, interval from the
 OLS prediction band of a future visit.</p>
 {f'<ul>{note_html}</ul>' if note_html else ''}
 <table><tr><th>machine</th><th>axis</th><th>visits</th><th>last [µm]</th>
 <th>slope [µm/month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
 {''.join(rows)}</table>
-<p><img src="{FILES['png']}" alt="backlash series" style="max-width:100%"></p>
-{''.join(details)}</body></html>
+<p><img src="{FILES['png']}" alt="backlash series"></p>
+{''.join(details)}
 """

@@ -3,14 +3,10 @@
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import pandas as pd
 
 from features.readings import schema
-from features.readings.fileio import atomic_path
+from pipeline.report_page import new_figure, save_figure
 
 MAX_PANELS = 12
 UP, DOWN = "#1f77b4", "#d62728"
@@ -48,14 +44,11 @@ def plot_tests(targets: pd.DataFrame, figures: pd.DataFrame, path) -> None:
     """Write one PNG with a panel per test (at most ``MAX_PANELS``)."""
     keys = list(schema.TEST_KEYS)
     n = len(figures)
-    fig, axes = plt.subplots(2 * n, 1, figsize=(10, 5 * n), squeeze=False,
-                             gridspec_kw={"height_ratios": [3, 1] * n, "right": 0.8, "left": 0.08,
-                                          "hspace": 0.35})
+    fig, axes = new_figure(10, 5 * n, nrows=2 * n, ncols=1, squeeze=False,
+                           gridspec_kw={"height_ratios": [3, 1] * n})
     for i, (_, row) in enumerate(figures.iterrows()):
         mine = (targets[keys] == row[keys].to_numpy()).all(axis=1)
         ax, ax_reversal = axes[2 * i, 0], axes[2 * i + 1, 0]
         ax_reversal.sharex(ax)
         draw_test(ax, ax_reversal, targets.loc[mine], row)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

@@ -5,20 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-from features.readings.fileio import atomic_path
-
-
-def _save(fig, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+from pipeline.report_page import new_figure, save_figure
 
 
 def training_history(estimator) -> dict | None:
@@ -33,7 +22,7 @@ def training_history(estimator) -> dict | None:
 
 def plot_training(info: dict, path: Path) -> Path:
     """Fig. 10: mean squared error per epoch on the training, validation and test splits."""
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1)
     for key, label in (("train_mse", "training"), ("val_mse", "validation"), ("test_mse", "test")):
         values = info["history"].get(key)
         if values is not None and len(values):
@@ -45,13 +34,13 @@ def plot_training(info: dict, path: Path) -> Path:
     ax.set_ylabel("mean squared error (scaled target)")
     ax.legend()
     ax.set_title("Training performance")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_error_histogram(fit, path: Path) -> Path:
     """Fig. 11: histogram of prediction errors (predicted - target) on training and test."""
     error = fit.predicted_um - fit.table.y.to_numpy(float)
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1)
     bins = np.histogram_bin_edges(error, bins=20)
     ax.hist(error[fit.train_index], bins=bins, alpha=0.6, label="training")
     ax.hist(error[fit.test_index], bins=bins, alpha=0.6, label="test")
@@ -60,14 +49,14 @@ def plot_error_histogram(fit, path: Path) -> Path:
     ax.set_ylabel("points")
     ax.legend()
     ax.set_title("Error histogram")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_predictions(fit, path: Path) -> Path:
     """Fig. 12: backlash per test point: target, prediction and (twin) true backlash."""
     idx = fit.test_index
     order = np.arange(len(idx))
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = new_figure(8, 4, nrows=1, ncols=1)
     ax.plot(order, fit.table.y.to_numpy(float)[idx], "o", ms=4, label="measured target")
     ax.plot(order, fit.predicted_um[idx], "x", ms=5, label=f"predicted ({fit.name})")
     if fit.truth_um is not None:
@@ -76,14 +65,14 @@ def plot_predictions(fit, path: Path) -> Path:
     ax.set_ylabel("backlash [um]")
     ax.legend()
     ax.set_title("Predictions against the reference (test split)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_regression(fit, path: Path) -> Path:
     """Fig. 13: predicted against target for training, test and all points, with R."""
     y = fit.table.y.to_numpy(float)
     parts = {"training": fit.train_index, "test": fit.test_index, "all": np.arange(len(y))}
-    fig, axes = plt.subplots(1, 3, figsize=(12, 4), sharex=True, sharey=True)
+    fig, axes = new_figure(12, 4, nrows=1, ncols=3, sharex=True, sharey=True)
     lo, hi = float(min(y.min(), fit.predicted_um.min())), float(max(y.max(), fit.predicted_um.max()))
     for ax, (label, idx) in zip(axes, parts.items()):
         t, p = y[idx], fit.predicted_um[idx]
@@ -98,7 +87,7 @@ def plot_regression(fit, path: Path) -> Path:
         ax.set_xlabel("target [um]")
         ax.legend(fontsize=7)
     axes[0].set_ylabel("predicted [um]")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_figures(fit, directory) -> list[Path]:

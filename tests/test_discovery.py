@@ -27,7 +27,8 @@ def test_hidden_effect_benchmark_meets_its_bar():
 
 def foreign_readings(seed: int = 0, feed_effect: bool = True) -> pd.DataFrame:
     """Linear tests written by hand, not by the twin: lost motion 2 um + 1.5 um per m/min of
-    feed (indirect system), scale error 10 um/m, noise 0.25 um, only SCHEMA.md columns."""
+    feed (indirect system), scale error 10 um/m, noise 0.25 um, only the columns of
+    docs/data-contract.md."""
     rng = np.random.default_rng(seed)
     targets = np.array([0.0, 33.1, 71.9, 104.2, 148.8, 177.5, 221.0, 259.3, 300.0])
     parts = []

@@ -9,8 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from features import visits
 from features.readings.errors import InputError
-from pipeline import drift
+from models import drift, monitoring
 from pipeline.commands import drift as drift_cmd
 
 START = pd.Timestamp("2024-01-15T08:00:00Z")
@@ -80,7 +81,7 @@ def test_mann_kendall_detects_monotone_trend():
 
 
 def test_residual_band_matches_chi_square():
-    band = drift.residual_band_um(1.0, np.array([1, 10, 1000]), 0.99)
+    band = monitoring.residual_band_um(1.0, np.array([1, 10, 1000]), 0.99)
     assert band[0] == pytest.approx(np.sqrt(6.6349), rel=1e-4)
     assert band[2] == pytest.approx(1.0, abs=0.12)
     assert band[0] > band[1] > band[2] > 1.0
@@ -96,7 +97,7 @@ def visit_readings(b_um, *, machine="M1", axis="X", months=None, noise_um=0.2, s
     v, p, c, d = np.meshgrid(np.arange(len(b_um)), np.asarray(targets), np.arange(1, cycles + 1),
                              np.array([1, -1]), indexing="ij")
     v, p, c, d = (a.ravel() for a in (v, p, c, d))
-    dates = START + pd.to_timedelta(months * drift.DAYS_PER_MONTH, unit="D")
+    dates = START + pd.to_timedelta(months * visits.DAYS_PER_MONTH, unit="D")
     return pd.DataFrame({
         "machine_id": machine, "axis": axis, "visit": [f"v{i + 1:02d}" for i in v],
         "test_id": [f"t{i + 1}" for i in v], "method": "linear", "target": p,
@@ -113,7 +114,7 @@ def test_visit_backlash_recovers_known_backlash(tmp_path):
     b = np.array([2.0, 2.5, 3.0, 1.0])
     path = tmp_path / "r.csv"
     visit_readings(b, noise_um=0.2).to_csv(path, index=False)
-    table = drift.visit_backlash(read_readings(path))
+    table = visits.visit_backlash(read_readings(path))
     assert table["visit"].tolist() == ["v01", "v02", "v03", "v04"]
     # mean of 5 targets of B_i with s_B = 0.2 sqrt(2/5) -> error of the mean about 0.06 um
     np.testing.assert_allclose(table["backlash_um"], b, atol=0.25)
@@ -161,7 +162,7 @@ def test_growing_series_with_adjustment_exits_3(tmp_path, capsys):
     assert lo <= 0.25 <= hi
     assert s["slope_um_per_month"] == pytest.approx(0.25, abs=0.05)
     # true crossing: 1 + 0.25 (m - 8) = 4.5 -> m = 22
-    true = (START + pd.Timedelta(days=22 * drift.DAYS_PER_MONTH)).date()
+    true = (START + pd.Timedelta(days=22 * visits.DAYS_PER_MONTH)).date()
     early, late = (pd.Timestamp(d).date() for d in s["crossing_interval"])
     assert early <= true <= late
     assert "crossing_soon" in [a["kind"] for a in s["alerts"]]
@@ -224,6 +225,35 @@ def test_cli_exit_code_2_for_bad_input(tmp_path, capsys):
     assert "at least two visits" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("option, value", [
+    ("--threshold-um", "inf"), ("--threshold-um", "nan"), ("--threshold-um", "-1"),
+    ("--threshold-um", "0"), ("--min-jump-sigma", "inf"), ("--min-jump-sigma", "nan"),
+    ("--warn-months", "inf"), ("--warn-months", "-1"), ("--alpha", "nan")])
+def test_bad_numeric_option_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, option,
+                                                                   value):
+    from pipeline import cli
+
+    path = tmp_path / "r.csv"
+    visit_readings([2.0, 2.5, 3.0]).to_csv(path, index=False)
+    out = tmp_path / "o"
+    assert cli.main(["drift", str(path), "--out", str(out), f"{option}={value}"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and option in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_machine_id_with_path_and_markup_characters_is_tracked(tmp_path, capsys):
+    b = 2.0 + 0.2 * np.arange(6)
+    code, out = _run(tmp_path, visit_readings(b, machine="cell/1 #<b>", noise_um=0.1),
+                     capsys=capsys)
+    assert code == 3 and out["series"][0]["machine_id"] == "cell/1 #<b>"
+    import mlflow
+
+    (run,) = mlflow.search_runs(experiment_names=["drift"]).to_dict("records")
+    assert run["metrics.backlash_um_cell_1___b__X"] == pytest.approx(b[-1], abs=0.3)
+    assert "&lt;b&gt;" in (tmp_path / "out" / "drift.html").read_text(encoding="utf-8")
+
+
 # --------------------------------------------------------------------------- model monitoring
 class FakeModel:
     """Constant-backlash predictor with the attributes of a trained model directory."""
@@ -250,7 +280,7 @@ def _readings(frame, tmp_path):
 
 def test_model_residuals_raise_retrain_on_changed_visit(tmp_path):
     readings = _readings(visit_readings([3.0, 3.0, 4.5], noise_um=0.1), tmp_path)
-    mon = drift.monitor_model(FakeModel(3.0, 0.3, 0.0, 90.0), readings)
+    mon = monitoring.monitor_model(FakeModel(3.0, 0.3, 0.0, 90.0), readings)
     assert mon["retrain"].tolist() == [False, False, True]
     assert mon["bias_um"].iloc[2] == pytest.approx(1.5, abs=0.2)
     assert mon["out_of_range"].map(len).sum() == 0
@@ -262,7 +292,7 @@ def test_input_outside_training_range_and_ks_drift(tmp_path):
     new["visit"], new["test_id"] = "v03", "t3"
     new["started_at"] = "2024-05-01T08:00:00Z"
     readings = _readings(pd.concat([old, new]), tmp_path)
-    mon = drift.monitor_model(FakeModel(3.0, 0.3, 0.0, 90.0), readings)
+    mon = monitoring.monitor_model(FakeModel(3.0, 0.3, 0.0, 90.0), readings)
     assert mon["out_of_range"].tolist() == [[], [], ["target"]]
     assert mon["drifted"].iloc[2] == ["target"]
     assert mon["drifted"].iloc[0] == []

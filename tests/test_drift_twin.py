@@ -6,8 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from features.visits import DAYS_PER_MONTH
+from models import drift
 from models.physics.campaign import simulate
-from pipeline import drift
 
 THRESHOLD_UM = 8.0
 
@@ -39,12 +40,12 @@ def test_slope_interval_and_crossing_interval_cover_the_truth(fleet):
         j = s.to_json()
         truth = true_series(sim, s.machine_id)
         last = truth.loc[j["change_points"][-1]:]
-        months = (last["started_at"] - last["started_at"].iloc[0]).dt.days / drift.DAYS_PER_MONTH
+        months = (last["started_at"] - last["started_at"].iloc[0]).dt.days / DAYS_PER_MONTH
         slope, intercept = np.polyfit(months, last["true_backlash_um"], 1)
         low, high = j["slope_interval"]
         assert low <= slope <= high
         crossing = last["started_at"].iloc[0] + pd.Timedelta(
-            days=(THRESHOLD_UM - intercept) / slope * drift.DAYS_PER_MONTH)
+            days=(THRESHOLD_UM - intercept) / slope * DAYS_PER_MONTH)
         early, late = (pd.Timestamp(d) for d in j["crossing_interval"])
         assert early <= crossing <= late, (s.machine_id, crossing, early, late)
 

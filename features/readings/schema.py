@@ -1,4 +1,4 @@
-"""Names of the readings table (SCHEMA.md section 1). These are public contracts: never rename.
+"""Names of the readings table (docs/data-contract.md §1): public, never rename.
 
 After ``features.readings.read_readings`` a frame always has every column in ``REQUIRED``
 plus ``visit`` and ``repeat`` (defaults filled in) and ``deviation_um`` (computed from
@@ -29,7 +29,7 @@ CONDITIONS = ("feed_mm_min", "dwell_s", "machine_temp_c", "ambient_temp_c", "pre
 
 # A test: one run with one method, one feed, one set of conditions.
 TEST_KEYS = ("machine_id", "axis", "visit", "test_id")
-# A linear and a pendulum test are paired when they share these (SCHEMA.md).
+# A linear and a pendulum test are paired when they share these (docs/data-contract.md).
 PAIR_KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat")
 
 METHODS = ("linear", "pendulum")

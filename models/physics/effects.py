@@ -1,4 +1,4 @@
-"""Named physical effects of a ball-screw feed axis, one definition each (SCHEMA.md section 4).
+"""Named physical effects of a ball-screw feed axis, one record each (docs/data-contract.md §4).
 
 Every effect is a pure function of arrays, in the manner of pvlib: inputs with units in their
 names, parameters with physically plausible defaults (``DEFAULTS``), output in um.

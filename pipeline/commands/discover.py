@@ -10,8 +10,8 @@ HELP = ("Find where simulation and measurement disagree, name the missing physic
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="readings file (SCHEMA.md columns; measured_at for time "
-                                     "effects)")
+    parser.add_argument("data", help="readings file (columns of docs/data-contract.md; "
+                                     "measured_at for time effects)")
     parser.add_argument("--baseline", default="backlash,lead_error_linear",
                         help="comma-separated effects of the simulation model "
                              "(default backlash,lead_error_linear)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 
 from features.readings.errors import InputError
 
@@ -36,14 +37,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_options(args) -> None:
-    if args.threshold_um is not None and not args.threshold_um > 0:
-        raise InputError(f"--threshold-um must be positive, got {args.threshold_um:g}")
+    """Every number must be finite and in range (inf and nan are refused, not propagated)."""
+    if args.threshold_um is not None and not 0 < args.threshold_um < math.inf:
+        raise InputError(f"--threshold-um must be a positive finite number [um], got "
+                         f"{args.threshold_um:g}")
     if not 0 < args.alpha < 0.5:
         raise InputError(f"--alpha must lie in (0, 0.5), got {args.alpha:g}")
-    if not args.min_jump_sigma > 0:
-        raise InputError(f"--min-jump-sigma must be positive, got {args.min_jump_sigma:g}")
-    if not args.warn_months >= 0:
-        raise InputError(f"--warn-months must be zero or more, got {args.warn_months:g}")
+    if not 0 < args.min_jump_sigma < math.inf:
+        raise InputError(f"--min-jump-sigma must be a positive finite number, got "
+                         f"{args.min_jump_sigma:g}")
+    if not 0 <= args.warn_months < math.inf:
+        raise InputError(f"--warn-months must be a finite number of months, zero or more, got "
+                         f"{args.warn_months:g}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,10 +56,10 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings import read_readings
     from features.readings.fileio import clean_nan, dumps
-    from pipeline import drift
+    from features.visits import SERIES_KEYS, visit_backlash
+    from models import drift, monitoring
     from pipeline.drift_report import write_drift_report
 
-    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     check_options(args)
     model = None
     if args.model is not None:
@@ -62,16 +67,16 @@ def run(args: argparse.Namespace) -> int:
 
         model = load_model(args.model)
     readings = read_readings(args.data, args.format)
-    visits = drift.visit_backlash(readings)
-    counts = visits.groupby(list(drift.SERIES_KEYS)).size()
+    visits = visit_backlash(readings)
+    counts = visits.groupby(list(SERIES_KEYS)).size()
     notes = [f"{m} axis {a}: a single visit, no drift analysis"
              for (m, a), c in counts.items() if c < 2]
     series = [drift.analyse_series(g, threshold_um=args.threshold_um, alpha=args.alpha,
                                    min_jump_sigma=args.min_jump_sigma,
                                    warn_months=args.warn_months)
-              for _, g in visits.groupby(list(drift.SERIES_KEYS), sort=True) if len(g) >= 2]
+              for _, g in visits.groupby(list(SERIES_KEYS), sort=True) if len(g) >= 2]
     if model is not None:
-        drift.attach_model(series, drift.monitor_model(model, readings))
+        drift.attach_model(series, monitoring.monitor_model(model, readings))
     paths = write_drift_report(series, args.out, source=str(args.data), notes=notes)
     log_to_mlflow(series, paths, args, readings)
 
@@ -98,7 +103,7 @@ def log_to_mlflow(series, paths, args, readings) -> None:
         })
         metrics = {"n_alerts": float(sum(len(s.alerts) for s in series))}
         for s in series:
-            key = f"{s.machine_id}_{s.axis}".replace(" ", "_")
+            key = metric_key(f"{s.machine_id}_{s.axis}")
             metrics[f"backlash_um_{key}"] = float(s.visits["backlash_um"].iloc[-1])
             metrics[f"slope_um_per_month_{key}"] = s.trend.get("slope", float("nan"))
             metrics[f"n_change_points_{key}"] = float(len(s.change_points))
@@ -106,6 +111,11 @@ def log_to_mlflow(series, paths, args, readings) -> None:
                             if v is not None and math.isfinite(float(v))})
         for path in paths.values():
             mlflow.log_artifact(str(path), artifact_path="drift")
+
+
+def metric_key(text: str) -> str:
+    """An MLflow metric name from a machine id: characters MLflow refuses become ``_``."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", text)
 
 
 def print_summary(series, html_path, file) -> None:

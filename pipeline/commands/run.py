@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "Run an experiment file (TOML: data, steps, parameters) and log it to MLflow."
+HELP = ("Run an experiment file (TOML steps: a command and its options each) and log it to "
+        "MLflow.")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="experiment file, e.g. experiments/demo.toml")
-    parser.add_argument("--out", help="output folder (default: the file's `out`)")
+    parser.add_argument("--out", help="output folder (default: the file's `out`); relative to "
+                                      "the working directory")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,14 +1,7 @@
-"""Backlash drift across maintenance visits: series, robust trend, change points, forecast.
+"""Drift of a visit series: change points, robust trend, threshold forecast and alerts.
 
-One series per machine and axis, one value per visit:
-
-- ``backlash_um = |mean_tests(B_mean)|`` with ``B_mean`` the mean signed reversal value of a
-  test (ISO 230-2, ``features.iso230.axis_figures``); ``B_um`` (mean of the tests' B = max|B_i|)
-  is carried alongside.
-- ``u_um``: repeatability uncertainty of a reversal value, ``s_B = sqrt(s_up²/n_up +
-  s_down²/n_down)`` per target, averaged over the targets and tests of the visit.
-
-Statistics (all on the time axis in months of 30.4375 days since the first visit):
+The series (one value per visit, ``features.visits.visit_backlash``) is analysed on the time
+axis in months of 30.4375 days since the first visit:
 
 - change points: exact optimal partitioning (dynamic programming) into piecewise linear
   segments, cost = chi-square of a weighted straight-line fit per segment, penalty
@@ -28,12 +21,13 @@ Statistics (all on the time axis in months of 30.4375 days since the first visit
   last visit is already at or above the threshold (an ``above_threshold`` alert fires instead)
   or when the Theil-Sen slope is not positive.
 
-Alerts (each a dict with ``kind`` and ``message``): ``above_threshold``, ``crossing_soon``
-(early end of the crossing interval within ``warn_months`` of the last visit),
-``increasing_trend`` (no threshold given: Mann-Kendall p < alpha and the Theil-Sen interval
-above zero), ``level_jump`` (the latest change point raised the level: failure suspected),
-``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`` sigma above the
-prediction of the segment before it; one visit cannot confirm a change point).
+Alert policy (each alert a dict with ``kind`` and ``message``): ``above_threshold``,
+``crossing_soon`` (early end of the crossing interval within ``warn_months`` of the last
+visit), ``increasing_trend`` (no threshold given: Mann-Kendall p < alpha and the Theil-Sen
+interval above zero), ``level_jump`` (the latest change point raised the level: failure
+suspected), ``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`` sigma above the
+prediction of the segment before it; one visit cannot confirm a change point) and, with a
+monitored model (``models.monitoring``), ``retrain``, ``input_out_of_range``, ``input_drift``.
 
 References: Sen (1968), Theil (1950); Mann (1945), Kendall (1975); Jackson et al. (2005),
 "An algorithm for optimal partitioning of data on an interval", IEEE SPL 12(2).
@@ -47,93 +41,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from features.readings.errors import InputError
+from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between, visit_backlash
 
-DAYS_PER_MONTH = 30.4375
-# Tests of one visit may span a few days (several shifts); more means two visits share an id.
-MAX_VISIT_SPAN_DAYS = 14.0
-SERIES_KEYS = ("machine_id", "axis")
 MIN_VISITS_FOR_SCATTER = 7
-
-
-# --------------------------------------------------------------------------- visit series
-def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
-    """Backlash per machine, axis and visit with its repeatability uncertainty.
-
-    Parameters
-    ----------
-    readings : validated readings table with ``visit`` and ``started_at``
-
-    Returns
-    -------
-    DataFrame, one row per (machine_id, axis, visit) sorted by date: ``date`` (earliest
-    ``started_at``, UTC), ``n_tests``, ``B_um`` (mean of B = max|B_i|) [um],
-    ``B_mean_um`` (mean signed B_i) [um], ``backlash_um = |B_mean_um|`` [um] and
-    ``u_um`` (mean of sqrt(s_up²/n_up + s_down²/n_down)) [um].
-    """
-    from features import iso230
-
-    source = readings.attrs.get("source", "readings")
-    check_dates(readings, source)
-    targets = iso230.per_target(readings)
-    figures = iso230.axis_figures(readings, targets)
-    keys = [*SERIES_KEYS, "visit"]
-    s_b = np.sqrt(targets["s_up"] ** 2 / targets["n_up"]
-                  + targets["s_down"] ** 2 / targets["n_down"])
-    u = targets.assign(u_um=s_b).groupby(keys, sort=False)["u_um"].mean()
-    dates = readings.groupby(keys, sort=False, observed=True)["started_at"].min()
-    per_visit = figures.groupby(keys, sort=False).agg(
-        n_tests=("test_id", "size"), B_um=("B", "mean"), B_mean_um=("B_mean", "mean"))
-    table = per_visit.join(u).join(dates.rename("date")).reset_index()
-    table["backlash_um"] = table["B_mean_um"].abs()
-    table = table.sort_values([*SERIES_KEYS, "date"], kind="stable").reset_index(drop=True)
-    check_visits(table, source)
-    return table[[*keys, "date", "n_tests", "B_um", "B_mean_um", "backlash_um", "u_um"]]
-
-
-def check_dates(readings: pd.DataFrame, source: str = "readings") -> None:
-    """Every test needs a ``started_at`` date, and one visit may not span weeks."""
-    if "started_at" not in readings.columns:
-        raise InputError("drift needs visit dates: no column 'started_at'", file=source,
-                         column="started_at")
-    missing = readings["started_at"].isna().to_numpy()
-    if missing.any():
-        i = int(np.argmax(missing))
-        raise InputError("drift needs a date on every test: 'started_at' is empty "
-                         f"(visit {readings['visit'].iloc[i]!r}, test "
-                         f"{readings['test_id'].iloc[i]!r})", file=source, column="started_at")
-    span = readings.groupby([*SERIES_KEYS, "visit"], observed=True)["started_at"].agg(
-        ["min", "max"])
-    days = (span["max"] - span["min"]).dt.total_seconds() / 86400.0
-    if (days > MAX_VISIT_SPAN_DAYS).any():
-        (machine, axis, visit), d = next(iter(days[days > MAX_VISIT_SPAN_DAYS].items()))
-        raise InputError(f"visit {visit!r} of {machine} axis {axis} has tests {d:.0f} days "
-                         f"apart (at most {MAX_VISIT_SPAN_DAYS:.0f}): one visit id used for "
-                         "two visits? give each visit its own id", file=source, column="visit")
-
-
-def check_visits(table: pd.DataFrame, source: str = "readings") -> None:
-    """Two visit ids starting at the same instant are one visit entered twice."""
-    dup = table.duplicated([*SERIES_KEYS, "date"], keep=False)
-    if dup.any():
-        rows = table[dup]
-        machine, axis, date = rows.iloc[0][["machine_id", "axis", "date"]]
-        same = rows[(rows["machine_id"] == machine) & (rows["axis"] == axis)
-                    & (rows["date"] == date)]["visit"].tolist()
-        raise InputError(f"visits {', '.join(map(repr, same))} of {machine} axis {axis} both "
-                         f"start at {date.isoformat()}: the same visit entered twice?",
-                         file=source, column="visit")
-    counts = table.groupby(list(SERIES_KEYS)).size()
-    if (counts < 2).all():
-        machine, axis = counts.index[0]
-        raise InputError(f"drift needs at least two visits per machine and axis; {machine} "
-                         f"axis {axis} has {int(counts.iloc[0])}", file=source, column="visit")
-
-
-def months_between(dates: pd.Series, origin) -> np.ndarray:
-    """Elapsed time [month of 30.4375 d] from ``origin`` to each date."""
-    return ((pd.to_datetime(dates) - origin).dt.total_seconds() / 86400.0
-            / DAYS_PER_MONTH).to_numpy(float)
 
 
 # --------------------------------------------------------------------------- statistics
@@ -453,70 +363,10 @@ def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
             if len(group) >= 2]
 
 
-# --------------------------------------------------------------------------- model monitoring
-def residual_band_um(validation_rmse_um: float, n_points, quantile: float = 0.99):
-    """Upper bound [um] of a visit's RMSE when the model still performs as validated.
-
-    With n independent residuals of scale rmse_val, n RMSE²/rmse_val² ~ chi²_n, so
-    bound = rmse_val sqrt(chi²_{n, quantile} / n).
-    """
-    n = np.asarray(n_points, float)
-    return validation_rmse_um * np.sqrt(stats.chi2.ppf(quantile, n) / n)
-
-
-def monitor_model(model, readings: pd.DataFrame, *, alpha: float = 0.01) -> pd.DataFrame:
-    """Residuals and input drift of a trained predictor on every visit.
-
-    Parameters
-    ----------
-    model : object with ``predict(X)``, ``feature_names_``, ``validation_rmse_`` [um],
-        ``input_ranges_`` {feature: (lo, hi)}, ``training_inputs_`` (DataFrame or None) and
-        optionally ``target_kind``
-    readings : validated readings table
-    alpha : level of the residual band (quantile 1 - alpha) and of the KS tests
-        (Bonferroni over the inputs)
-
-    Returns
-    -------
-    DataFrame, one row per (machine_id, axis, visit): ``n_points``, ``rmse_um``, ``bias_um``,
-    ``band_um``, ``retrain`` (rmse above the band), ``out_of_range`` (inputs with values outside
-    the training range), ``ks_p`` {input: p}, ``drifted`` (inputs whose KS p < alpha/k).
-    """
-    from features.table import feature_table
-
-    features = list(model.feature_names_)
-    table = feature_table(readings, target=getattr(model, "target_kind", "auto"),
-                          features=features)
-    residual = table.y.to_numpy(float) - np.asarray(model.predict(table.X), float)
-    keys = [*SERIES_KEYS, "visit"]
-    meta = table.meta[keys].reset_index(drop=True)
-    frame = meta.assign(r=residual, r2=residual ** 2)
-    g = frame.groupby(keys, sort=True)
-    out = pd.DataFrame({"n_points": g.size(), "rmse_um": np.sqrt(g["r2"].mean()),
-                        "bias_um": g["r"].mean()})
-    out["band_um"] = residual_band_um(float(model.validation_rmse_), out["n_points"],
-                                      1 - alpha)
-    out["retrain"] = out["rmse_um"] > out["band_um"]
-    X = table.X.reset_index(drop=True)
-    ranges = getattr(model, "input_ranges_", {}) or {}
-    training = getattr(model, "training_inputs_", None)
-    ranged = [f for f in features if f in ranges]
-    tested = [f for f in features if training is not None and f in training.columns]
-    outside, ks_p, drifted = [], [], []
-    for key in out.index:  # one entry per visit, not per reading
-        rows = X.iloc[g.indices[key]]
-        outside.append([f for f in ranged
-                        if ((rows[f] < ranges[f][0]) | (rows[f] > ranges[f][1])).any()])
-        p = {f: float(stats.ks_2samp(training[f].dropna(), rows[f].dropna()).pvalue)
-             for f in tested if rows[f].nunique() > 0}
-        ks_p.append(p)
-        drifted.append([f for f, pv in p.items() if pv < alpha / max(len(p), 1)])
-    out["out_of_range"], out["ks_p"], out["drifted"] = outside, ks_p, drifted
-    return out.reset_index()
-
-
+# --------------------------------------------------------------------------- model alerts
 def attach_model(series: list[DriftSeries], monitoring: pd.DataFrame) -> None:
-    """Add per-visit model figures to each series and alert on its latest visit."""
+    """Add per-visit model figures (``models.monitoring.monitor_model``) to each series and
+    alert on its latest visit."""
     for s in series:
         mine = monitoring[(monitoring["machine_id"].astype(str) == s.machine_id)
                           & (monitoring["axis"].astype(str) == s.axis)]
