@@ -8,7 +8,14 @@ import pandas as pd
 
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path
-from features.readings.formats import FORMATS, detect_format, paper_to_long, read_ecmc, read_table
+from features.readings.formats import (
+    FORMATS,
+    detect_format,
+    paper_to_long,
+    read_ecmc,
+    read_table,
+    read_text,
+)
 from features.readings.validation import validate
 
 
@@ -18,14 +25,17 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
     if format not in FORMATS:
         raise InputError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}",
                          file=path)
+    if path.is_dir():
+        raise InputError("is a folder; expected a readings file", file=path)
     if not path.is_file():
         raise InputError("cannot read file: no such file", file=path)
+    text = None if path.suffix.lower() == ".parquet" else read_text(path)
     if format == "auto":
-        format = detect_format(path)
+        format = detect_format(path, text)
     if format == "ecmc":
-        raw, row_base = read_ecmc(path), None
+        raw, row_base = read_ecmc(path, text), None
     else:
-        raw, row_base = read_table(path)
+        raw, row_base = read_table(path, text)
         if format == "paper":
             raw = paper_to_long(raw, path, row_base)
             row_base = None

@@ -55,6 +55,7 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     frame = raw.copy()
     if "row" not in frame:
         frame["row"] = np.arange(len(frame)) + (row_base or 1)
+    check_header([c for c in frame.columns if c != "row"], path)
     frame = _rename_case_insensitive(frame)
     missing = [c for c in schema.REQUIRED if c not in frame]
     if missing:
@@ -74,9 +75,9 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     frame["direction"] = _map_labels(frame, "direction", schema.DIRECTION_ALIASES, path,
                                      "'+' or '-' (aliases fwd/up/1/+1, bwd/down/-1)")
     frame["target"] = to_float(frame["target"], path, "target", frame["row"])
-    frame["cycle"] = _to_int(frame["cycle"], path, "cycle", frame["row"])
+    frame["cycle"] = to_int(frame["cycle"], path, "cycle", frame["row"])
     frame["visit"] = _to_label(frame["visit"], path, "visit", frame["row"]) if "visit" in frame else "1"
-    frame["repeat"] = _to_int(frame["repeat"], path, "repeat", frame["row"]) \
+    frame["repeat"] = to_int(frame["repeat"], path, "repeat", frame["row"]) \
         if "repeat" in frame else 1
     for col in schema.NUMERIC_OPTIONAL:
         if col in frame:
@@ -94,6 +95,19 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
     return out
+
+
+def check_header(names: list[str], path: Path) -> None:
+    """Refuse column names that differ only in case or surrounding spaces (``target`` and
+    ``Target``): which one holds the readings cannot be known."""
+    seen: dict[str, str] = {}
+    for name in names:
+        key = str(name).strip().lower()
+        if key in seen:
+            raise InputError(f"columns {seen[key]!r} and {name!r} differ only in case or "
+                             "spaces; expected each column once", file=path, row=1,
+                             column=str(name))
+        seen[key] = str(name)
 
 
 def _rename_case_insensitive(frame: pd.DataFrame) -> pd.DataFrame:
@@ -123,6 +137,10 @@ def _to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
 
 
 def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = False):
+    if pd.api.types.is_bool_dtype(series) or _holds_bools(series):
+        i = _first_bad(series.map(lambda v: isinstance(v, (bool, np.bool_))))
+        raise InputError(f"{bool(series.iloc[i])} is a boolean; expected a number", file=path,
+                         row=_row_of(rows, i), column=col)
     if pd.api.types.is_numeric_dtype(series):
         values = series.astype(float)
         bad_text = pd.Series(False, index=series.index)
@@ -131,6 +149,11 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
         values = pd.to_numeric(text, errors="coerce")
         empty = text.eq("") | text.str.lower().isin(["nan", "na", "none"])
         bad_text = values.isna() & ~empty
+        boolean = text.str.lower().isin(["true", "false"])
+        if boolean.any():
+            i = _first_bad(boolean)
+            raise InputError(f"{text.iloc[i]!r} is a boolean; expected a number", file=path,
+                             row=_row_of(rows, i), column=col)
         if bad_text.any():
             i = _first_bad(bad_text)
             raise InputError(f"{text.iloc[i]!r} is not a number", file=path,
@@ -147,13 +170,24 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
     return values.astype(float)
 
 
-def _to_int(series, path, col, rows) -> pd.Series:
+def _holds_bools(series: pd.Series) -> bool:
+    """An object column (Parquet, a frame built in code) holding Python/numpy booleans."""
+    return series.dtype == object and series.map(
+        lambda v: isinstance(v, (bool, np.bool_))).any()
+
+
+# Cycle and repeat indices beyond this are typos (and would overflow an int64 on the way).
+MAX_INDEX = 1_000_000
+
+
+def to_int(series, path, col, rows) -> pd.Series:
+    """Whole numbers 1..MAX_INDEX; a fractional value is refused, never truncated."""
     values = to_float(series, path, col, rows)
-    fractional = values != np.round(values)
-    if fractional.any() or (values < 1).any():
-        i = _first_bad(fractional | (values < 1))
-        raise InputError(f"{values.iloc[i]!r} is not a whole number >= 1", file=path,
-                         row=_row_of(rows, i), column=col)
+    bad = (values != np.round(values)) | (values < 1) | (values > MAX_INDEX)
+    if bad.any():
+        i = _first_bad(bad)
+        raise InputError(f"{values.iloc[i]:g} is not a whole number from 1 to {MAX_INDEX}",
+                         file=path, row=_row_of(rows, i), column=col)
     return values.astype(int)
 
 
@@ -219,14 +253,37 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
     if measured is not None:
         deviation = deviation.fillna((measured - frame["target"]) * scale)
     # Absolute positions in mm: only when a whole test reads like positions, so that a real
-    # deviation of, say, 15 um at the 15 mm target is never mistaken for one.
-    looks = looks_absolute(deviation, frame["target"]) | (frame["target"].abs() < 1.0)
+    # deviation of, say, 15 um at the 15 mm target is never mistaken for one. Such a test is
+    # converted as a whole: its readings near target 0 (where a position in mm and a
+    # deviation in mm look alike) are in mm too and get the same conversion.
+    near_zero = frame["target"].abs() < 1.0
+    looks = looks_absolute(deviation, frame["target"]) | (
+        near_zero & ((deviation - frame["target"]).abs() < MAX_DEVIATION_POS_UNITS))
     tests = [frame[k] for k in schema.TEST_KEYS]
-    absolute = looks.groupby(tests, sort=False).transform("all") & (frame["target"].abs() >= 1.0)
+    absolute = (looks.groupby(tests, sort=False).transform("all")
+                & (~near_zero).groupby(tests, sort=False).transform("any"))
+    # Every reading at a target reading like a position while the test is not all positions:
+    # deviations and positions are mixed (e.g. um at target 0, mm elsewhere); refuse.
+    whole_target = looks.groupby([*tests, frame["target"]], sort=False).transform("all")
+    mixed = whole_target & ~near_zero & ~absolute
+    if mixed.any():
+        i = _first_bad(mixed)
+        raise InputError(
+            f"the readings at target {frame['target'].iloc[i]:g} hold absolute positions in mm "
+            f"while other readings of test {frame['test_id'].iloc[i]!r} hold deviations; "
+            "expected one or the other in a test", file=path, row=_row_of(frame["row"], i),
+            column="deviation_um")
     if absolute.any():
         warn(f"{path}: {int(absolute.sum())} deviation_um values hold absolute positions in mm; "
              "converted to deviations ((value - target) x 1000)")
         deviation = deviation.where(~absolute, (deviation - frame["target"]) * scale)
+    too_large = deviation.abs() > MAX_DEVIATION_POS_UNITS * scale
+    if too_large.any():
+        i = _first_bad(too_large)
+        raise InputError(
+            f"deviation {deviation.iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm (deg); "
+            "expected a deviation in um (arcsec), positions belong in 'measured'", file=path,
+            row=_row_of(frame["row"], i), column="deviation_um")
     _check_deviation_units(frame.assign(deviation_um=deviation), path, measured, scale)
     return deviation
 
