@@ -441,3 +441,12 @@ def test_ecmc_valid_small_file_converts(tmp_path):
 def test_deviation_beyond_1_mm_is_refused(tmp_path, capsys):
     _refused(tmp_path, capsys, _edit(tmp_path, _set(7, "deviation_um", 4200.0)),
              "deviation 4200 is beyond 1 mm", row=9, column="deviation_um")
+
+
+def test_mixed_units_with_two_cycles_are_refused(tmp_path, capsys):
+    # The median of a pair is its mean, which the mm value drags halfway down.
+    table = valid_table(cycles=2)
+    row = table.index[(table["target"] == 100.0) & (table["direction"] == "-")][0]
+    table.loc[row, "deviation_um"] /= 1000.0
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "mixed units", row=row + 2,
+             column="deviation_um")

@@ -301,8 +301,11 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
                              column="deviation_um")
     # A reading 1000x smaller than its siblings at the same target and direction: mm among um.
     keys = [*schema.TEST_KEYS, "target", "direction"]
-    sibling = frame.groupby(keys, sort=False)["deviation_um"].transform("median")
-    mm_like = ((sibling.abs() >= 1.0) & (dev.abs() < sibling.abs() / 100)
+    groups = frame.groupby(keys, sort=False)["deviation_um"]
+    # The median of a pair is its mean, which one mm value drags halfway: use the other one.
+    pair = groups.transform("size") == 2
+    sibling = groups.transform("median").where(~pair, groups.transform("sum") - dev)
+    mm_like = ((sibling.abs() >= 0.5) & (dev.abs() < sibling.abs() / 100)
                & ((dev * 1000 - sibling).abs() < 0.3 * sibling.abs()))
     if mm_like.any():
         i = _first_bad(mm_like)
