@@ -450,3 +450,25 @@ def test_mixed_units_with_two_cycles_are_refused(tmp_path, capsys):
     table.loc[row, "deviation_um"] /= 1000.0
     _refused(tmp_path, capsys, write_csv(tmp_path, table), "mixed units", row=row + 2,
              column="deviation_um")
+
+
+def test_blank_lines_are_skipped_and_rows_keep_their_line_numbers(tmp_path, capsys):
+    lines = valid_table().to_csv(index=False).splitlines()
+    lines[6] = lines[6].replace("500.0", "fast")
+    text = "\n".join(lines[:4] + ["", " , ,", *lines[4:]]) + "\n"
+    _refused(tmp_path, capsys, _csv_text(tmp_path, text), "'fast' is not a number", row=9,
+             column="feed_mm_min")
+
+
+def test_a_user_column_named_row_is_kept(tmp_path):
+    table = valid_table().assign(row=[f"r{i}" for i in range(18)])
+    frame = read_readings(write_csv(tmp_path, table))
+    assert frame["row"].tolist() == table["row"].tolist()
+
+
+def test_measured_disagreeing_with_deviation_is_refused(tmp_path, capsys):
+    table = valid_table()
+    table["measured"] = table["target"] + table["deviation_um"] / 1000.0
+    table.loc[4, "measured"] += 0.005  # 5 um apart
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "disagrees with measured - target",
+             row=6, column="deviation_um")

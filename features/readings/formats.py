@@ -20,6 +20,7 @@ import pandas as pd
 from features.readings.errors import InputError
 from features.readings.validation import (
     MAX_DEVIATION_POS_UNITS,
+    ROW,
     check_header,
     looks_absolute,
     to_float,
@@ -131,7 +132,7 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
         header = next(csv.reader(io.StringIO(text)), [])
         try:
             frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
-                                skipinitialspace=True)
+                                skipinitialspace=True, skip_blank_lines=False)
         except pd.errors.ParserError as err:
             raise InputError(f"malformed CSV: {err}", file=path) from None
         except pd.errors.EmptyDataError:
@@ -142,6 +143,9 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
         frame = _drop_blank_columns(frame, header, path)
         check_header([str(c) for c in frame.columns], path)
         row_base = 2
+        # Blank lines are skipped, but every reading keeps the row number of its line.
+        blank = frame.fillna("").apply(lambda col: col.str.strip().eq("")).all(axis=1)
+        frame = frame.assign(**{ROW: np.arange(len(frame)) + row_base}).loc[~blank]
     frame.columns = [str(c).strip() for c in frame.columns]
     if frame.empty:
         raise InputError("no readings: the file has a header but no data rows", file=path)
@@ -228,7 +232,7 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
         "machine_id": stem, "axis": "A" if rotary else "X", "test_id": path.stem,
         "method": "linear", "target": ref["target"],
         "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
-        "deviation_um": ref["deviation_um"], "measured": ref["measured"], "row": ref["row"],
+        "deviation_um": ref["deviation_um"], "measured": ref["measured"], ROW: ref["row"],
     })
 
 
@@ -257,14 +261,15 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
     """
     cols = _paper_columns(wide, path)
     frame = pd.DataFrame({name: wide[src] for name, src in cols.items()})
-    numeric = [c for c in frame.columns if c not in ("visit", "machine_id", "axis", "repeat")]
+    frame[ROW] = wide[ROW] if ROW in wide else np.arange(len(frame)) + row_base
+    numeric = [c for c in frame.columns if c not in ("visit", "machine_id", "axis", "repeat",
+                                                      ROW)]
     for col in numeric:
-        frame[col] = to_float(frame[col], path, cols[col], row_base)
-    frame["row"] = np.arange(len(frame)) + row_base
+        frame[col] = to_float(frame[col], path, cols[col], frame[ROW])
     frame["machine_id"] = frame.get("machine_id", path.stem)
     frame["axis"] = frame.get("axis", "X")
     frame["visit"] = frame.get("visit", "1")
-    frame["repeat"] = (to_int(frame["repeat"], path, cols["repeat"], row_base)
+    frame["repeat"] = (to_int(frame["repeat"], path, cols["repeat"], frame[ROW])
                        if "repeat" in frame else 1)
     if "dwell_s" not in frame:
         frame["dwell_s"] = np.nan
@@ -284,7 +289,7 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
     long["test_id"] = (long["method"].str[:3] + "-F" + long["speed_mm_min"].map("{:g}".format)
                        + dwell + "-R" + long["repeat"].astype(str))
     long = long.rename(columns={"position_mm": "target", **PAPER_TO_SCHEMA})
-    return long.sort_values(["row", "method", "direction"], kind="stable")
+    return long.sort_values([ROW, "method", "direction"], kind="stable")
 
 
 def _paper_columns(wide: pd.DataFrame, path: Path) -> dict[str, str]:
@@ -320,7 +325,7 @@ def _absolute_rows_to_deviations(frame: pd.DataFrame, dev_cols: list[str], cols:
         raise InputError(
             f"{frame[col].iloc[i]:g} is a deviation while other cells of this row are absolute "
             f"positions near {frame['position_mm'].iloc[i]:g} mm; expected one or the other "
-            "in a row", file=path, row=int(frame["row"].iloc[i]), column=cols[col])
+            "in a row", file=path, row=int(frame[ROW].iloc[i]), column=cols[col])
     absolute = looks.all(axis=1)
     for col in dev_cols:
         frame.loc[absolute, col] = frame.loc[absolute, col] - frame.loc[absolute, "position_mm"]
@@ -331,7 +336,7 @@ def _absolute_rows_to_deviations(frame: pd.DataFrame, dev_cols: list[str], cols:
                 f"deviation {frame[col].iloc[i]:g} mm at position "
                 f"{frame['position_mm'].iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm; "
                 "expected mm (micrometres here would be 1000x too large)", file=path,
-                row=int(frame["row"].iloc[i]), column=cols[col])
+                row=int(frame[ROW].iloc[i]), column=cols[col])
     if absolute.any():
         warn(f"{path}: {4 * int(absolute.sum())} cells of the deviation columns hold absolute "
              "positions; converted to deviations (value - position)")
