@@ -90,9 +90,7 @@ def _check_outputs(args) -> list[Path]:
     created = []
     for dest, kind in OUTPUTS.get(args.command, {}).items():
         value = getattr(args, dest, None)
-        if value in (None, ""):
-            if value == "":
-                raise InputError(f"--{dest.replace('_', '-')} is empty; expected a {kind} name")
+        if value is None:
             continue
         root = check_output(value, kind, f"--{dest.replace('_', '-')}")
         if root is not None:

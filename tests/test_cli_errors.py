@@ -104,9 +104,16 @@ def test_folder_without_write_permission(tmp_path, capsys):
     assert "permission denied" in line
 
 
-def test_empty_out(tmp_path, capsys):
-    line = refused(capsys, ["convert", str(small_table(tmp_path)), "--out", ""])
-    assert "--out is empty" in line
+@pytest.mark.parametrize("argv", [
+    ["convert", "{data}", "--out", ""],
+    ["convert", "", "--out", "{tmp}/x.csv"],
+    ["discover", "{data}", "--out", "{tmp}/d", "--baseline", " "],
+])
+def test_empty_text_option_or_argument(tmp_path, capsys, argv):
+    data = small_table(tmp_path)
+    line = refused(capsys, [a.format(data=data, tmp=tmp_path / "o") for a in argv])
+    assert "expected a value, got an empty string" in line
+    assert not (tmp_path / "o").exists()
 
 
 def test_output_file_follows_the_umask(tmp_path):

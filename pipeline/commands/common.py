@@ -108,11 +108,21 @@ def _whole(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
 
 
+def non_empty(text: str) -> str:
+    """A text option or argument: an empty string is refused (it names no file, no model)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a value, got an empty string")
+    return text
+
+
 def checked_types(parser: argparse.ArgumentParser) -> None:
     """Give every plain ``float`` option ``finite_float``, every plain ``int`` option ``count``
-    (or ``seed`` when its name ends in ``seed``); options with their own type keep it."""
+    (or ``seed`` when its name ends in ``seed``) and every text option ``non_empty``; options
+    with their own type keep it."""
     for action in parser._actions:
         if action.type is float:
             action.type = finite_float
         elif action.type is int:
             action.type = seed if action.dest.endswith("seed") else count
+        elif action.type is None and isinstance(action, argparse._StoreAction):
+            action.type = non_empty
