@@ -472,3 +472,22 @@ def test_measured_disagreeing_with_deviation_is_refused(tmp_path, capsys):
     table.loc[4, "measured"] += 0.005  # 5 um apart
     _refused(tmp_path, capsys, write_csv(tmp_path, table), "disagrees with measured - target",
              row=6, column="deviation_um")
+
+
+def test_ecmc_unit_given_twice_is_refused(tmp_path, capsys):
+    path = _ecmc(tmp_path, [])
+    path.write_text(path.read_text() + "UNIT=um\n")
+    _refused(tmp_path, capsys, path, "UNIT is given twice (mm and um)", row=12)
+
+
+@pytest.mark.parametrize("header, drop, words", [
+    ("CYCLES=2", "REF_DATA_BWD[2,2]", "CYCLES=2 but position 2 BWD has 1 cycles"),
+    ("CYCLES=3", None, "CYCLES=3 but position 1 BWD has 2 cycles"),
+    ("POSITIONS=3", None, "POSITIONS=3 but the file has 2 TGT_DATA lines"),
+])
+def test_ecmc_file_shorter_than_it_declares_is_refused(tmp_path, capsys, header, drop, words):
+    path = _ecmc(tmp_path, [])
+    lines = [line for line in path.read_text().splitlines()
+             if drop is None or not line.startswith(drop)]
+    path.write_text("\n".join([header, *lines]) + "\n")
+    _refused(tmp_path, capsys, path, words, row=1)

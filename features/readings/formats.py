@@ -183,6 +183,7 @@ _ECMC_NUMBER = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
 _ECMC_TARGET = re.compile(r"TGT_DATA\[(\d+)\]\s*=\s*(.*)")
 _ECMC_REF = re.compile(r"REF_DATA_(FWD|BWD)\[(\d+),\s*(\d+)\]\s*=\s*(.*)")
 _ECMC_UNIT = re.compile(r"UNIT\s*=\s*(.*)")
+_ECMC_COUNT = re.compile(r"(CYCLES|POSITIONS)\s*=\s*(\d+)")
 
 
 def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
@@ -192,7 +193,7 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
     after it); the ``row`` of each reading is its line in the file.
     """
     text = read_text(path) if text is None else text
-    targets, refs, unit = {}, [], "mm"
+    targets, refs, unit, declared = {}, [], None, {}
     for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if m := _ECMC_TARGET.fullmatch(line):
@@ -205,12 +206,18 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
         elif m := _ECMC_REF.fullmatch(line):
             refs.append((m[1], int(m[2]), int(m[3]), _ecmc_number(m[4], path, lineno), lineno))
         elif m := _ECMC_UNIT.fullmatch(line):
+            if unit is not None and unit != m[1].strip().lower():
+                raise InputError(f"UNIT is given twice ({unit} and {m[1].strip()}); expected "
+                                 "one unit for the file", file=path, row=lineno)
             unit = m[1].strip().lower()
+        elif m := _ECMC_COUNT.fullmatch(line):
+            declared[m[1]] = (int(m[2]), lineno)
         elif line.startswith(("TGT_DATA", "REF_DATA")):
             raise InputError(f"cannot read {line[:40]!r}; expected TGT_DATA[i]=number or "
                              "REF_DATA_FWD/BWD[i,j]=number", file=path, row=lineno)
     if not targets or not refs:
         raise InputError("no TGT_DATA/REF_DATA lines: not an ecmc ISO230 file", file=path)
+    unit = unit or "mm"
     scale = {"mm": 1000.0, "um": 1.0, "deg": 3600.0}.get(unit)
     if scale is None:
         raise InputError(f"UNIT={unit}: expected mm, um or deg", file=path)
@@ -220,6 +227,7 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
         pos_id = int(missing["pos_id"].iloc[0])
         raise InputError(f"REF_DATA for position {pos_id} has no TGT_DATA[{pos_id}]",
                          file=path, row=int(missing["row"].iloc[0]))
+    _check_declared_counts(ref, targets, declared, path)
     ref["target"] = ref["pos_id"].map(targets)
     stem = path.stem.removesuffix("_ISO230")
     rotary = unit == "deg"
@@ -234,6 +242,27 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
         "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
         "deviation_um": ref["deviation_um"], "measured": ref["measured"], ROW: ref["row"],
     })
+
+
+def _check_declared_counts(ref: pd.DataFrame, targets: dict, declared: dict,
+                           path: Path) -> None:
+    """A file that declares POSITIONS or CYCLES must hold exactly that many: fewer means a
+    truncated or edited file, whose figures would silently rest on fewer readings."""
+    if "POSITIONS" in declared:
+        count, lineno = declared["POSITIONS"]
+        if len(targets) != count:
+            raise InputError(f"POSITIONS={count} but the file has {len(targets)} TGT_DATA "
+                             "lines; the file looks truncated or edited", file=path, row=lineno)
+    if "CYCLES" in declared:
+        count, lineno = declared["CYCLES"]
+        per_point = ref.groupby(["pos_id", "dir"], sort=True)["cycle"].nunique()
+        wrong = per_point[per_point != count]
+        missing = [(p, d) for p in targets for d in ("FWD", "BWD") if (p, d) not in per_point]
+        if missing or len(wrong):
+            pos_id, way = missing[0] if missing else wrong.index[0]
+            found = 0 if missing else int(wrong.iloc[0])
+            raise InputError(f"CYCLES={count} but position {pos_id} {way} has {found} cycles; "
+                             "the file looks truncated or edited", file=path, row=lineno)
 
 
 def _ecmc_number(text: str, path: Path, lineno: int) -> float:
