@@ -288,3 +288,11 @@ def test_orphans_of_live_or_recent_writers_are_kept(tmp_path):
     assert removed == [files["dead_old"]]
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         files[k].name for k in ("alive_old", "dead_new", "not_ours"))
+
+
+def test_convert_refuses_to_overwrite_its_input(tmp_path, capsys):
+    data = small_table(tmp_path)
+    before = data.read_bytes()
+    line = refused(capsys, ["convert", str(data), "--out", str(tmp_path / "." / data.name)])
+    assert "--out is the input file" in line
+    assert data.read_bytes() == before
