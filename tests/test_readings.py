@@ -491,3 +491,10 @@ def test_ecmc_file_shorter_than_it_declares_is_refused(tmp_path, capsys, header,
              if drop is None or not line.startswith(drop)]
     path.write_text("\n".join([header, *lines]) + "\n")
     _refused(tmp_path, capsys, path, words, row=1)
+
+
+@pytest.mark.parametrize("label", ["M1\nX", "M\t1", "M1\x1b[31m"])
+def test_label_with_a_control_character_is_refused(tmp_path, capsys, label):
+    line = _refused(tmp_path, capsys, _edit(tmp_path, _set(2, "machine_id", label)),
+                    "holds a control character", row=4, column="machine_id")
+    assert "\n" not in line

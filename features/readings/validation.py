@@ -138,6 +138,13 @@ def _to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
     if blank.any():
         raise InputError(f"empty {col}; expected a name", file=path,
                          row=_row_of(rows, _first_bad(blank)), column=col)
+    # Control characters (a newline, a tab, NUL) would break every line and file name that
+    # shows the label.
+    control = labels.str.contains(r"[\x00-\x1f\x7f]", regex=True)
+    if control.any():
+        i = _first_bad(control)
+        raise InputError(f"{col} {labels.iloc[i]!r} holds a control character; expected "
+                         "printable text", file=path, row=_row_of(rows, i), column=col)
     return labels
 
 
