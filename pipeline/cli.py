@@ -28,7 +28,8 @@ OUTPUTS = {
     "convert": {"out": FILE}, "iso": {"plot": FILE}, "predict": {"out": FILE},
     "simulate": {"out": FOLDER}, "train": {"out": FOLDER}, "compare": {"out": FOLDER},
     "rank": {"out": FOLDER}, "drift": {"out": FOLDER}, "discover": {"out": FOLDER},
-    "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER},
+    "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER}, "compensate": {"out": FOLDER},
+    "replicate": {"out": FOLDER},
 }
 
 

@@ -8,14 +8,7 @@ import pandas as pd
 
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path
-from features.readings.formats import (
-    FORMATS,
-    detect_format,
-    paper_to_long,
-    read_ecmc,
-    read_table,
-    read_text,
-)
+from features.readings.formats import FORMATS, detect_format, paper_to_long, read_ecmc, read_table
 from features.readings.validation import validate
 
 
@@ -29,13 +22,12 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
         raise InputError("is a folder; expected a readings file", file=path)
     if not path.is_file():
         raise InputError("cannot read file: no such file", file=path)
-    text = None if path.suffix.lower() == ".parquet" else read_text(path)
     if format == "auto":
-        format = detect_format(path, text)
+        format = detect_format(path)
     if format == "ecmc":
-        raw, row_base = read_ecmc(path, text), None
+        raw, row_base = read_ecmc(path), None
     else:
-        raw, row_base = read_table(path, text)
+        raw, row_base = read_table(path)
         if format == "paper":
             raw = paper_to_long(raw, path, row_base)
             row_base = None
