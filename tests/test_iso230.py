@@ -183,14 +183,18 @@ def test_plot_writes_a_png(ess_file, tmp_path, capsys):
 @pytest.mark.parametrize("content, words", [
     ("machine_id,axis,test_id\nM,X,T\n", "unknown format"),
     ("", "empty"),
+    ("UNIT=mm\nTGT_DATA[1]=0\nREF_DATA_FWD[1,1]=25.21 mm\n", "'25.21 mm' is not a number"),
+    ("UNIT=mm\nTGT_DATA[1]=0\nREF_DATA_FWD[1,1]=NaN\n", "'NaN' is not a number"),
 ])
-def test_bad_input_writes_no_chart(tmp_path, capsys, content, words):
-    path, out = tmp_path / "bad.csv", tmp_path / "chart.png"
+def test_bad_input_writes_no_chart_and_no_json(tmp_path, capsys, content, words):
+    path, out = tmp_path / "bad.csv", tmp_path / "charts" / "chart.png"
     path.write_text(content)
-    assert main(["iso", str(path), "--plot", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["iso", str(path), "--json", "--plot", str(out)]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "bad.csv" in err[0]
-    assert not out.exists()
+    assert captured.out == ""  # no partial JSON for a reading program
+    assert not out.parent.exists()
 
 
 def test_plot_needs_png_name_and_few_tests(tmp_path, capsys, ess_file):

@@ -250,3 +250,251 @@ def test_paper_table_missing_column(tmp_path, capsys):
     path = _csv_text(tmp_path, "Pos. [mm],Dev_lin_f [mm],Dev_lin_r [mm]\n0,0.001,0.002\n")
     code, err, _ = convert(tmp_path, path, capsys, "--format", "paper")
     assert code == 2 and "missing paper Table-2 column 'dev_pend_f_mm'" in err[0]
+
+
+# ------------------------------------------------------------ hostile and careless input
+
+
+def _refused(tmp_path, capsys, path, *words, row=None, column=None, extra=()):
+    """convert refuses ``path``: exit 2, one line naming the file and ``words``, no output."""
+    code, err, out = convert(tmp_path, path, capsys, *extra)
+    assert code == 2, err
+    assert len(err) == 1, err
+    assert err[0].startswith("backlash convert: error: ") and str(path) in err[0], err
+    for word in words:
+        assert word in err[0], err
+    if row is not None:
+        assert f"row {row}" in err[0], err
+    if column is not None:
+        assert f"column {column!r}" in err[0], err
+    assert not out.exists() and not out.parent.exists()
+    return err[0]
+
+
+def _ecmc(tmp_path, lines: list[str], name: str = "m_ISO230.dat"):
+    """A small ecmc file: 2 targets x 2 directions x 2 cycles, then ``lines`` replace/add."""
+    base = {"UNIT": "UNIT=mm", "TGT_DATA[1]": "TGT_DATA[1]=0", "TGT_DATA[2]": "TGT_DATA[2]=10"}
+    for pos, target in ((1, 0.0), (2, 10.0)):
+        for way, sign in (("FWD", -1), ("BWD", 1)):
+            for cycle in (1, 2):
+                key = f"REF_DATA_{way}[{pos},{cycle}]"
+                base[key] = f"{key}={target + sign * 0.002 + cycle * 1e-4:.6f}"
+    for line in lines:
+        base[line.split("=")[0].strip()] = line
+    return _csv_text(tmp_path, "\n".join(base.values()) + "\n", name)
+
+
+def test_latin1_byte_after_the_first_8_kb_names_its_row(tmp_path, capsys):
+    table = pd.concat([valid_table().assign(test_id=f"T{i}") for i in range(40)])
+    text = table.to_csv(index=False)
+    assert len(text) > 8192
+    lines = text.splitlines()
+    lines[500] = lines[500].replace("M1", "Mé", 1)
+    path = tmp_path / "latin1.csv"
+    path.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
+    _refused(tmp_path, capsys, path, "byte 0xe9", "not UTF-8", "save the file as UTF-8",
+             row=501)
+
+
+def test_utf16_with_byte_order_mark_is_read(tmp_path):
+    path = tmp_path / "utf16.csv"
+    path.write_bytes(valid_table().to_csv(index=False).encode("utf-16"))
+    frame = read_readings(path)
+    np.testing.assert_allclose(frame["deviation_um"], valid_table()["deviation_um"])
+
+
+def test_headers_differing_only_in_case_are_refused(tmp_path, capsys):
+    table = valid_table()
+    table["Target"] = table["target"] + 1.0
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "'target' and 'Target'",
+             "differ only in case", row=1)
+
+
+def test_exact_duplicate_header_is_refused(tmp_path, capsys):
+    text = valid_table().to_csv(index=False).replace("pressure_hpa", "target", 1)
+    _refused(tmp_path, capsys, _csv_text(tmp_path, text), "'target' appears twice", row=1)
+
+
+def test_boolean_text_in_a_numeric_column_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _edit(tmp_path, _set(3, "deviation_um", "true")),
+             "'true' is a boolean", row=5, column="deviation_um")
+
+
+def test_boolean_parquet_column_is_not_read_as_0_1_um(tmp_path, capsys):
+    table = valid_table()
+    table["deviation_um"] = [True, False] * 9
+    path = tmp_path / "bools.parquet"
+    table.to_parquet(path)
+    _refused(tmp_path, capsys, path, "True is a boolean", column="deviation_um")
+
+
+def test_fractional_repeat_is_refused_not_truncated(tmp_path, capsys):
+    _refused(tmp_path, capsys, _edit(tmp_path, lambda t: t.assign(repeat=1.5)),
+             "1.5 is not a whole number", row=2, column="repeat")
+
+
+def test_huge_cycle_index_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _edit(tmp_path, _set(2, "cycle", "1e30")),
+             "not a whole number from 1 to", row=4, column="cycle")
+
+
+PAPER_ROWS = {
+    "Pos. [mm]": [0, 0, 100, 100], "Dev_lin_f [mm]": [-0.0012, -0.0010, 0.0031, 0.0033],
+    "Dev_lin_r [mm]": [0.0011, 0.0012, 0.0052, 0.0050],
+    "Dev_pend_f [mm]": [0.0008, 0.0009, 0.0040, 0.0041],
+    "Dev_pend_r [mm]": [0.0021, 0.0022, 0.0060, 0.0062], "Speed [mm/min]": [500] * 4,
+}
+
+
+def _paper(tmp_path, **changes):
+    wide = pd.DataFrame(PAPER_ROWS)
+    for col, values in changes.items():
+        wide[col] = values
+    return write_csv(tmp_path, wide, "table2.csv")
+
+
+def test_paper_fractional_repeat_is_refused_not_truncated(tmp_path, capsys):
+    _refused(tmp_path, capsys, _paper(tmp_path, repeat=[1, 1, 1.5, 1.5]),
+             "1.5 is not a whole number", row=4, column="repeat")
+
+
+def test_paper_deviations_in_um_in_the_mm_columns_are_refused(tmp_path, capsys):
+    in_um = {c: [v * 1000 for v in PAPER_ROWS[c]] for c in PAPER_ROWS if c.startswith("Dev")}
+    _refused(tmp_path, capsys, _paper(tmp_path, **in_um), "beyond 1 mm", "1000x",
+             row=2, column="Dev_lin_f [mm]")
+
+
+def test_paper_row_mixing_positions_and_deviations_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _paper(tmp_path, **{"Dev_lin_f [mm]": [-0.0012, -0.0010,
+                                                                      100.0031, 0.0033]}),
+             "other cells of this row are absolute positions", row=4, column="Dev_lin_r [mm]")
+
+
+def test_paper_column_given_twice_under_two_spellings_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _paper(tmp_path, position_mm=[0, 0, 50, 50]),
+             "'Pos. [mm]' and 'position_mm' both give 'position_mm'", row=1)
+
+
+def test_absolute_positions_convert_the_whole_test_including_target_0(tmp_path, capsys):
+    table = valid_table()
+    absolute = table.assign(deviation_um=table["target"] + table["deviation_um"] / 1000.0)
+    frame = read_readings(write_csv(tmp_path, absolute))
+    assert "18 deviation_um values hold absolute positions" in capsys.readouterr().err
+    np.testing.assert_allclose(frame["deviation_um"], table["deviation_um"], atol=1e-6)
+
+
+def test_positions_mixed_with_um_deviations_are_refused(tmp_path, capsys):
+    # target 0 holds a deviation in um, the other targets positions in mm: no consistent reading
+    table = valid_table()
+    far = table["target"] > 0
+    table.loc[far, "deviation_um"] = table.loc[far, "target"] + table.loc[far, "deviation_um"] / 1e3
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "at target 50 hold absolute",
+             "expected one or the other", row=3, column="deviation_um")
+
+
+def test_unnamed_column_with_values_is_refused_and_empty_one_dropped(tmp_path, capsys):
+    text = valid_table().to_csv(index=False)
+    trailing = "\n".join(line + "," for line in text.splitlines()) + "\n"
+    frame = read_readings(_csv_text(tmp_path, trailing, "trailing.csv"))
+    assert not any(c.startswith("Unnamed") for c in frame.columns)
+    lines = trailing.splitlines()
+    lines[4] += "7"
+    _refused(tmp_path, capsys, _csv_text(tmp_path, "\n".join(lines) + "\n"),
+             "column 11 has values but no name", row=5)
+
+
+def test_folder_given_as_input_is_refused(tmp_path, capsys):
+    (tmp_path / "data.csv").mkdir()
+    _refused(tmp_path, capsys, tmp_path / "data.csv", "is a folder; expected a readings file")
+
+
+@pytest.mark.parametrize("value", ["nan", "NaN", "25.21 mm", "25,21", "", "0x1A"])
+def test_ecmc_value_that_is_not_a_plain_number_is_refused_with_its_line(tmp_path, capsys,
+                                                                          value):
+    path = _ecmc(tmp_path, [f"REF_DATA_FWD[2,1]={value}"])
+    _refused(tmp_path, capsys, path, "is not a number", row=8)
+
+
+def test_ecmc_overflowing_value_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _ecmc(tmp_path, ["TGT_DATA[2]=1e999"]), "too large", row=3)
+
+
+def test_ecmc_target_given_twice_is_refused(tmp_path, capsys):
+    path = _ecmc(tmp_path, [])
+    path.write_text(path.read_text() + "TGT_DATA[2]=11\n")
+    _refused(tmp_path, capsys, path, "TGT_DATA[2] is given twice", row=12)
+
+
+def test_ecmc_duplicate_reading_names_its_line(tmp_path, capsys):
+    path = _ecmc(tmp_path, [])
+    path.write_text(path.read_text() + "REF_DATA_BWD[1,2]=0.0021\n")
+    _refused(tmp_path, capsys, path, "duplicate reading", row=12)
+
+
+def test_ecmc_valid_small_file_converts(tmp_path):
+    frame = read_readings(_ecmc(tmp_path, []))
+    assert len(frame) == 8
+    plus = frame[(frame["direction"] == "+") & (frame["target"] == 10.0)]
+    np.testing.assert_allclose(plus["deviation_um"], [-1.9, -1.8], atol=1e-6)
+
+
+def test_deviation_beyond_1_mm_is_refused(tmp_path, capsys):
+    _refused(tmp_path, capsys, _edit(tmp_path, _set(7, "deviation_um", 4200.0)),
+             "deviation 4200 is beyond 1 mm", row=9, column="deviation_um")
+
+
+def test_mixed_units_with_two_cycles_are_refused(tmp_path, capsys):
+    # The median of a pair is its mean, which the mm value drags halfway down.
+    table = valid_table(cycles=2)
+    row = table.index[(table["target"] == 100.0) & (table["direction"] == "-")][0]
+    table.loc[row, "deviation_um"] /= 1000.0
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "mixed units", row=row + 2,
+             column="deviation_um")
+
+
+def test_blank_lines_are_skipped_and_rows_keep_their_line_numbers(tmp_path, capsys):
+    lines = valid_table().to_csv(index=False).splitlines()
+    lines[6] = lines[6].replace("500.0", "fast")
+    text = "\n".join(lines[:4] + ["", " , ,", *lines[4:]]) + "\n"
+    _refused(tmp_path, capsys, _csv_text(tmp_path, text), "'fast' is not a number", row=9,
+             column="feed_mm_min")
+
+
+def test_a_user_column_named_row_is_kept(tmp_path):
+    table = valid_table().assign(row=[f"r{i}" for i in range(18)])
+    frame = read_readings(write_csv(tmp_path, table))
+    assert frame["row"].tolist() == table["row"].tolist()
+
+
+def test_measured_disagreeing_with_deviation_is_refused(tmp_path, capsys):
+    table = valid_table()
+    table["measured"] = table["target"] + table["deviation_um"] / 1000.0
+    table.loc[4, "measured"] += 0.005  # 5 um apart
+    _refused(tmp_path, capsys, write_csv(tmp_path, table), "disagrees with measured - target",
+             row=6, column="deviation_um")
+
+
+def test_ecmc_unit_given_twice_is_refused(tmp_path, capsys):
+    path = _ecmc(tmp_path, [])
+    path.write_text(path.read_text() + "UNIT=um\n")
+    _refused(tmp_path, capsys, path, "UNIT is given twice (mm and um)", row=12)
+
+
+@pytest.mark.parametrize("header, drop, words", [
+    ("CYCLES=2", "REF_DATA_BWD[2,2]", "CYCLES=2 but position 2 BWD has 1 cycles"),
+    ("CYCLES=3", None, "CYCLES=3 but position 1 BWD has 2 cycles"),
+    ("POSITIONS=3", None, "POSITIONS=3 but the file has 2 TGT_DATA lines"),
+])
+def test_ecmc_file_shorter_than_it_declares_is_refused(tmp_path, capsys, header, drop, words):
+    path = _ecmc(tmp_path, [])
+    lines = [line for line in path.read_text().splitlines()
+             if drop is None or not line.startswith(drop)]
+    path.write_text("\n".join([header, *lines]) + "\n")
+    _refused(tmp_path, capsys, path, words, row=1)
+
+
+@pytest.mark.parametrize("label", ["M1\nX", "M\t1", "M1\x1b[31m"])
+def test_label_with_a_control_character_is_refused(tmp_path, capsys, label):
+    line = _refused(tmp_path, capsys, _edit(tmp_path, _set(2, "machine_id", label)),
+                    "holds a control character", row=4, column="machine_id")
+    assert "\n" not in line

@@ -1,27 +1,204 @@
-"""Atomic output: a user error half-way through never leaves a half-written file behind."""
+"""Atomic output: a user error half-way through never leaves a half-written file behind.
+
+Every output is written to a temporary file beside its destination and renamed into place
+only on success. Temporary files are named ``.<name>.<random>.backlash-tmp-<pid><suffix>``:
+
+- on a Python exception they are removed by ``atomic_path`` itself;
+- on SIGTERM a handler removes every temporary file the process still has open, then the
+  process exits with 143 (128 + SIGTERM);
+- a SIGKILL cannot be caught, so the next run that writes into the same folder (or names it
+  with ``--out``) removes the temporary files of processes that are no longer alive.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import re
+import shutil
+import signal
 import tempfile
+import threading
+import time
 from pathlib import Path
+
+from features.readings.errors import InputError
+
+TEMP_MARK = ".backlash-tmp-"
+_TEMP_NAME = re.compile(r"^\..+\.backlash-tmp-(\d+)(\.[^.]*)?$")
+# Errors the user can fix (full disk, read-only or forbidden place): one line, not a traceback.
+_USER_ERRNOS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT,
+                errno.ENOTDIR, errno.EISDIR, errno.EEXIST, errno.ENAMETOOLONG}
+_STARTED = time.time()
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+_open_temps: set[str] = set()
+_swept: set[str] = set()
+_lock = threading.Lock()
+_handler: dict = {}
 
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike):
     """Yield a temporary path beside ``path``; rename it into place only on success."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    if path.is_dir():
+        raise InputError("is a folder; expected a file name", file=path)
+    _make_folder(path.parent)
+    sweep_orphans(path.parent)
+    _install_sigterm_handler()
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
+                                   suffix=f"{TEMP_MARK}{os.getpid()}{path.suffix}",
+                                   dir=path.parent)
+    except OSError as err:
+        raise _user_error(err, path) from None
     os.close(fd)
+    with _lock:
+        _open_temps.add(tmp)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs follow the umask
         os.replace(tmp, path)
+    except OSError as err:
+        if err.errno in _USER_ERRNOS:
+            raise _user_error(err, path) from None
+        raise
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        with _lock:
+            _open_temps.discard(tmp)
+
+
+def temp_folder(beside: str | os.PathLike) -> Path:
+    """A new hidden temporary folder next to ``beside`` for outputs written together and
+    renamed into place at the end; removed on SIGTERM and swept after a SIGKILL like the
+    temporary files of ``atomic_path``. The caller removes it when done."""
+    beside = Path(beside)
+    _make_folder(beside.parent)
+    sweep_orphans(beside.parent)
+    _install_sigterm_handler()
+    try:
+        tmp = tempfile.mkdtemp(prefix=f".{beside.name}.", suffix=f"{TEMP_MARK}{os.getpid()}",
+                               dir=beside.parent)
+    except OSError as err:
+        raise _user_error(err, beside) from None
+    with _lock:
+        _open_temps.add(tmp)
+    return Path(tmp)
+
+
+def check_output(path: str | os.PathLike, kind: str, option: str = "--out") -> Path | None:
+    """Refuse an output path that cannot be written, before any work is done.
+
+    ``kind`` is ``"file"`` or ``"folder"``. Refused: a folder where a file is expected and
+    the reverse, a file in the way of a folder to create, a place without write permission.
+    Orphaned temporary files of killed runs in the output folder are removed. Returns the
+    outermost folder that does not exist yet (the run will create it), or None.
+    """
+    path = Path(path)
+    if kind == "file" and path.is_dir():
+        raise InputError(f"{option} is a folder; expected a file name", file=path)
+    if kind == "folder" and path.exists() and not path.is_dir():
+        raise InputError(f"{option} is a file; expected a folder", file=path)
+    folder = path if kind == "folder" else path.parent
+    missing = None
+    existing = folder.absolute()
+    while not existing.exists():
+        missing, existing = existing, existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{option}: {existing} is a file; expected a folder on the way",
+                         file=path)
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{option}: cannot write into {existing} (permission denied)",
+                         file=path)
+    if missing is None:
+        sweep_orphans(folder)
+    return missing
+
+
+def sweep_orphans(folder: str | os.PathLike) -> list[Path]:
+    """Remove temporary files left in ``folder`` by killed processes; return what was removed.
+
+    A temporary file is an orphan when its writer (the pid in its name) is no longer alive
+    and it is older than this process, so files of concurrent runs are never touched.
+    """
+    removed = []
+    with _lock:
+        key = os.path.abspath(folder)
+        if key in _swept:
+            return removed
+        _swept.add(key)
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _TEMP_NAME.match(entry.name)
+        if not match or int(match[1]) == os.getpid() or _alive(int(match[1])):
+            continue
+        with contextlib.suppress(OSError):
+            if entry.stat(follow_symlinks=False).st_mtime < _STARTED:
+                _remove(entry.path)
+                removed.append(Path(entry.path))
+    return removed
+
+
+def _remove(path: str) -> None:
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, owned by someone else
+        return True
+    return True
+
+
+def _make_folder(folder: Path, option: str | None = None) -> None:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InputError(f"{option + ': ' if option else ''}cannot create folder: a file is "
+                         "in the way", file=folder) from None
+    except OSError as err:  # /proc, a read-only mount, no permission: the place is wrong
+        raise InputError(f"{option + ': ' if option else ''}cannot create folder: "
+                         f"{err.strerror}", file=folder) from None
+
+
+def _user_error(err: OSError, path: Path) -> InputError:
+    return InputError(f"cannot write file: {err.strerror}", file=path)
+
+
+def _install_sigterm_handler() -> None:
+    """Remove this process's temporary files on SIGTERM, then exit 143 (once per process)."""
+    if "previous" in _handler or threading.current_thread() is not threading.main_thread():
+        return
+    _handler["previous"] = signal.getsignal(signal.SIGTERM)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+
+
+def _on_sigterm(signum, frame) -> None:
+    with _lock:
+        temps = list(_open_temps)
+    for tmp in temps:
+        with contextlib.suppress(OSError):
+            _remove(tmp)
+    if callable(_handler["previous"]):
+        _handler["previous"](signum, frame)
+    # A second SIGTERM while unwinding ends the process at once.
+    signal.signal(signal.SIGTERM, lambda *_: os._exit(128 + signal.SIGTERM))
+    raise SystemExit(128 + signal.SIGTERM)
 
 
 def write_text(path, text: str) -> Path:

@@ -9,6 +9,9 @@
 
 from __future__ import annotations
 
+import codecs
+import csv
+import io
 import re
 from pathlib import Path
 
@@ -17,7 +20,15 @@ import pandas as pd
 
 from features.readings.errors import InputError
 from features.readings.rtl import looks_like_rtl
-from features.readings.validation import looks_absolute, to_float, warn
+from features.readings.validation import (
+    MAX_DEVIATION_POS_UNITS,
+    ROW,
+    check_header,
+    looks_absolute,
+    to_float,
+    to_int,
+    warn,
+)
 
 FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
 
@@ -46,12 +57,12 @@ PAPER_TO_SCHEMA = {"speed_mm_min": "feed_mm_min", "t_machine_c": "machine_temp_c
 
 
 
-def detect_format(path: Path) -> str:
+def detect_format(path: Path, text: str | None = None) -> str:
     if path.suffix.lower() == ".parquet":
         return "canonical"
     if looks_like_rtl(path):  # before the UTF-8 check: .rtl files may be Latin-1
         return "rtl"
-    head = _head(path)
+    head = (read_text(path) if text is None else text)[:8192]
     if not head.strip():
         raise InputError("empty file; expected a header row and readings", file=path)
     if "TGT_DATA[" in head or "REF_DATA_" in head:
@@ -69,18 +80,36 @@ def detect_format(path: Path) -> str:
         "or an ecmc *_ISO230.dat file", file=path, row=1)
 
 
-def _head(path: Path, size: int = 8192) -> str:
+# Byte-order marks of the Unicode encodings a spreadsheet may save; UTF-8 is the default.
+_BOMS = ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+         (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
+         (codecs.BOM_UTF16_BE, "utf-16"))
+
+
+def read_text(path: Path) -> str:
+    """The whole file as text: UTF-8, or UTF-16/32 when it starts with a byte-order mark.
+
+    Every byte is decoded, so a stray Latin-1 byte anywhere is refused with its row; an
+    encoding without a mark (Latin-1, Windows-1252, ...) is never guessed, since a guess
+    can silently turn one machine or test name into another.
+    """
     try:
-        with open(path, "rb") as fh:
-            data = fh.read(size)
+        data = path.read_bytes()
+    except IsADirectoryError:
+        raise InputError("is a folder; expected a readings file", file=path) from None
     except OSError as err:
         raise InputError(f"cannot read file: {err.strerror}", file=path) from None
-    if b"\x00" in data:
+    encoding = next((enc for bom, enc in _BOMS if data.startswith(bom)), "utf-8-sig")
+    if encoding == "utf-8-sig" and b"\x00" in data:
         raise InputError("cannot read file: binary content, expected CSV text", file=path)
     try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError("cannot read file: not UTF-8 text", file=path) from None
+        return data.decode(encoding)
+    except UnicodeDecodeError as err:
+        row = data.count(b"\n", 0, err.start) + 1
+        raise InputError(
+            f"byte 0x{data[err.start]:02x} at offset {err.start} is not {encoding.removesuffix('-sig').upper()} "
+            "text; save the file as UTF-8 (Latin-1 or Windows-1252 are not guessed)",
+            file=path, row=row) from None
 
 
 def _check_delimiter(header: str, path: Path) -> None:
@@ -90,7 +119,7 @@ def _check_delimiter(header: str, path: Path) -> None:
                              row=1)
 
 
-def read_table(path: Path) -> tuple[pd.DataFrame, int]:
+def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
     """Read CSV or Parquet as strings/objects; returns the frame and the row number of its
     first data row (2 for CSV, whose header is row 1; 1 for Parquet)."""
     if path.suffix.lower() == ".parquet":
@@ -98,14 +127,16 @@ def read_table(path: Path) -> tuple[pd.DataFrame, int]:
             frame = pd.read_parquet(path)
         except Exception as err:  # noqa: BLE001 - pyarrow raises many types for a broken file
             raise InputError(f"cannot read Parquet file: {err}", file=path) from None
+        check_header([str(c) for c in frame.columns], path)
         row_base = 1
     else:
-        head = _head(path)
-        if not head.strip():
+        text = read_text(path) if text is None else text
+        if not text.strip():
             raise InputError("empty file; expected a header row and readings", file=path)
+        header = next(csv.reader(io.StringIO(text)), [])
         try:
-            frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True,
-                                encoding="utf-8-sig")
+            frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
+                                skipinitialspace=True, skip_blank_lines=False)
         except pd.errors.ParserError as err:
             raise InputError(f"malformed CSV: {err}", file=path) from None
         except pd.errors.EmptyDataError:
@@ -113,35 +144,94 @@ def read_table(path: Path) -> tuple[pd.DataFrame, int]:
                              file=path) from None
         if frame.shape[1] == 1:
             _check_delimiter(frame.columns[0], path)
+        frame = _drop_blank_columns(frame, header, path)
+        check_header([str(c) for c in frame.columns], path)
         row_base = 2
+        # Blank lines are skipped, but every reading keeps the row number of its line.
+        blank = frame.fillna("").apply(lambda col: col.str.strip().eq("")).all(axis=1)
+        frame = frame.assign(**{ROW: np.arange(len(frame)) + row_base}).loc[~blank]
     frame.columns = [str(c).strip() for c in frame.columns]
     if frame.empty:
         raise InputError("no readings: the file has a header but no data rows", file=path)
     return frame, row_base
 
 
-def read_ecmc(path: Path) -> pd.DataFrame:
-    """Parse an ecmc ``*_ISO230.dat`` file. FWD readings are the ``+`` direction."""
-    text = _head(path, size=50_000_000)
-    targets, refs, unit = {}, [], "mm"
+def _drop_blank_columns(frame: pd.DataFrame, header: list[str], path: Path) -> pd.DataFrame:
+    """Columns without a name (a spreadsheet's trailing commas) are dropped when empty and
+    refused when they hold values; duplicate names are refused (pandas would rename them)."""
+    names = [h.strip() for h in header]
+    if len(names) != frame.shape[1]:
+        return frame
+    seen: dict[str, int] = {}
+    for number, name in enumerate(names, start=1):
+        if name and name in seen:
+            raise InputError(f"column {name!r} appears twice (columns {seen[name]} and "
+                             f"{number}); expected each column once", file=path, row=1,
+                             column=name)
+        seen.setdefault(name, number)
+    keep = []
+    for number, (name, col) in enumerate(zip(names, frame.columns), start=1):
+        if name:
+            keep.append(col)
+            continue
+        filled = frame[col].astype(str).str.strip().ne("")
+        if filled.any():
+            raise InputError(f"column {number} has values but no name in the header; expected "
+                             "a column name", file=path, row=int(np.flatnonzero(filled)[0]) + 2)
+    frame = frame[keep]
+    frame.columns = [n for n in names if n]
+    return frame
+
+
+_ECMC_NUMBER = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
+_ECMC_TARGET = re.compile(r"TGT_DATA\[(\d+)\]\s*=\s*(.*)")
+_ECMC_REF = re.compile(r"REF_DATA_(FWD|BWD)\[(\d+),\s*(\d+)\]\s*=\s*(.*)")
+_ECMC_UNIT = re.compile(r"UNIT\s*=\s*(.*)")
+_ECMC_COUNT = re.compile(r"(CYCLES|POSITIONS)\s*=\s*(\d+)")
+
+
+def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
+    """Parse an ecmc ``*_ISO230.dat`` file. FWD readings are the ``+`` direction.
+
+    Every ``TGT_DATA``/``REF_DATA`` line must hold one finite plain number (no NaN, no unit
+    after it); the ``row`` of each reading is its line in the file.
+    """
+    text = read_text(path) if text is None else text
+    targets, refs, unit, declared = {}, [], None, {}
     for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
-        if m := re.fullmatch(r"TGT_DATA\[(\d+)\]\s*=\s*(\S+)", line):
-            targets[int(m[1])] = _ecmc_number(m[2], path, lineno)
-        elif m := re.fullmatch(r"REF_DATA_(FWD|BWD)\[(\d+),(\d+)\]\s*=\s*(\S+)", line):
-            refs.append((m[1], int(m[2]), int(m[3]), _ecmc_number(m[4], path, lineno)))
-        elif m := re.fullmatch(r"UNIT\s*=\s*(\S+)", line):
-            unit = m[1].lower()
+        if m := _ECMC_TARGET.fullmatch(line):
+            value = _ecmc_number(m[2], path, lineno)
+            pos_id = int(m[1])
+            if pos_id in targets and targets[pos_id] != value:
+                raise InputError(f"TGT_DATA[{pos_id}] is given twice with different values "
+                                 f"({targets[pos_id]:g} and {value:g})", file=path, row=lineno)
+            targets[pos_id] = value
+        elif m := _ECMC_REF.fullmatch(line):
+            refs.append((m[1], int(m[2]), int(m[3]), _ecmc_number(m[4], path, lineno), lineno))
+        elif m := _ECMC_UNIT.fullmatch(line):
+            if unit is not None and unit != m[1].strip().lower():
+                raise InputError(f"UNIT is given twice ({unit} and {m[1].strip()}); expected "
+                                 "one unit for the file", file=path, row=lineno)
+            unit = m[1].strip().lower()
+        elif m := _ECMC_COUNT.fullmatch(line):
+            declared[m[1]] = (int(m[2]), lineno)
+        elif line.startswith(("TGT_DATA", "REF_DATA")):
+            raise InputError(f"cannot read {line[:40]!r}; expected TGT_DATA[i]=number or "
+                             "REF_DATA_FWD/BWD[i,j]=number", file=path, row=lineno)
     if not targets or not refs:
         raise InputError("no TGT_DATA/REF_DATA lines: not an ecmc ISO230 file", file=path)
+    unit = unit or "mm"
     scale = {"mm": 1000.0, "um": 1.0, "deg": 3600.0}.get(unit)
     if scale is None:
         raise InputError(f"UNIT={unit}: expected mm, um or deg", file=path)
-    ref = pd.DataFrame(refs, columns=["dir", "pos_id", "cycle", "measured"])
-    missing = sorted(set(ref["pos_id"]) - set(targets))
-    if missing:
-        raise InputError(f"REF_DATA for position {missing[0]} has no TGT_DATA[{missing[0]}]",
-                         file=path)
+    ref = pd.DataFrame(refs, columns=["dir", "pos_id", "cycle", "measured", "row"])
+    missing = ref.loc[~ref["pos_id"].isin(list(targets))]
+    if len(missing):
+        pos_id = int(missing["pos_id"].iloc[0])
+        raise InputError(f"REF_DATA for position {pos_id} has no TGT_DATA[{pos_id}]",
+                         file=path, row=int(missing["row"].iloc[0]))
+    _check_declared_counts(ref, targets, declared, path)
     ref["target"] = ref["pos_id"].map(targets)
     stem = path.stem.removesuffix("_ISO230")
     rotary = unit == "deg"
@@ -154,15 +244,41 @@ def read_ecmc(path: Path) -> pd.DataFrame:
         "machine_id": stem, "axis": "A" if rotary else "X", "test_id": path.stem,
         "method": "linear", "target": ref["target"],
         "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
-        "deviation_um": ref["deviation_um"], "measured": ref["measured"],
+        "deviation_um": ref["deviation_um"], "measured": ref["measured"], ROW: ref["row"],
     })
 
 
+def _check_declared_counts(ref: pd.DataFrame, targets: dict, declared: dict,
+                           path: Path) -> None:
+    """A file that declares POSITIONS or CYCLES must hold exactly that many: fewer means a
+    truncated or edited file, whose figures would silently rest on fewer readings."""
+    if "POSITIONS" in declared:
+        count, lineno = declared["POSITIONS"]
+        if len(targets) != count:
+            raise InputError(f"POSITIONS={count} but the file has {len(targets)} TGT_DATA "
+                             "lines; the file looks truncated or edited", file=path, row=lineno)
+    if "CYCLES" in declared:
+        count, lineno = declared["CYCLES"]
+        per_point = ref.groupby(["pos_id", "dir"], sort=True)["cycle"].nunique()
+        wrong = per_point[per_point != count]
+        missing = [(p, d) for p in targets for d in ("FWD", "BWD") if (p, d) not in per_point]
+        if missing or len(wrong):
+            pos_id, way = missing[0] if missing else wrong.index[0]
+            found = 0 if missing else int(wrong.iloc[0])
+            raise InputError(f"CYCLES={count} but position {pos_id} {way} has {found} cycles; "
+                             "the file looks truncated or edited", file=path, row=lineno)
+
+
 def _ecmc_number(text: str, path: Path, lineno: int) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"{text!r} is not a number", file=path, row=lineno) from None
+    text = text.strip()
+    if not re.fullmatch(_ECMC_NUMBER, text):
+        raise InputError(f"{text!r} is not a number; expected a plain finite number in the "
+                         "file's UNIT (no NaN, no unit after it)", file=path, row=lineno)
+    value = float(text)
+    if not np.isfinite(value):
+        raise InputError(f"{text!r} is too large; expected a finite number", file=path,
+                         row=lineno)
+    return value
 
 
 # --------------------------------------------------------------------------- paper layout
@@ -176,37 +292,22 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
     occurrence count of the position within that test. Deviations are in mm; cells that
     hold absolute positions (Table 2 has such rows) are converted to deviations.
     """
-    lookup = {c.lower(): c for c in wide.columns}
-    cols = {}
-    for name, aliases in PAPER_COLUMNS.items():
-        found = next((lookup[a] for a in aliases if a in lookup), None)
-        if found is not None:
-            cols[name] = found
-    for name in PAPER_REQUIRED:
-        if name not in cols:
-            raise InputError(f"missing paper Table-2 column {name!r}", file=path, row=1,
-                             column=name)
+    cols = _paper_columns(wide, path)
     frame = pd.DataFrame({name: wide[src] for name, src in cols.items()})
-    numeric = [c for c in frame.columns if c not in ("visit", "machine_id", "axis")]
+    frame[ROW] = wide[ROW] if ROW in wide else np.arange(len(frame)) + row_base
+    numeric = [c for c in frame.columns if c not in ("visit", "machine_id", "axis", "repeat",
+                                                      ROW)]
     for col in numeric:
-        frame[col] = to_float(frame[col], path, cols[col], row_base)
-    frame["row"] = np.arange(len(frame)) + row_base
+        frame[col] = to_float(frame[col], path, cols[col], frame[ROW])
     frame["machine_id"] = frame.get("machine_id", path.stem)
     frame["axis"] = frame.get("axis", "X")
     frame["visit"] = frame.get("visit", "1")
-    frame["repeat"] = frame["repeat"].astype(int) if "repeat" in frame else 1
+    frame["repeat"] = (to_int(frame["repeat"], path, cols["repeat"], frame[ROW])
+                       if "repeat" in frame else 1)
     if "dwell_s" not in frame:
         frame["dwell_s"] = np.nan
-
     dev_cols = ["dev_lin_f_mm", "dev_lin_r_mm", "dev_pend_f_mm", "dev_pend_r_mm"]
-    n_absolute = 0
-    for col in dev_cols:
-        absolute = looks_absolute(frame[col], frame["position_mm"])
-        n_absolute += int(absolute.sum())
-        frame.loc[absolute, col] = frame.loc[absolute, col] - frame.loc[absolute, "position_mm"]
-    if n_absolute:
-        warn(f"{path}: {n_absolute} cells of the deviation columns hold absolute positions; "
-             "converted to deviations (value - position)")
+    _absolute_rows_to_deviations(frame, dev_cols, cols, path)
 
     conditions = ["machine_id", "axis", "visit", "speed_mm_min", "dwell_s", "repeat"]
     frame["cycle"] = frame.groupby(conditions + ["position_mm"], dropna=False).cumcount() + 1
@@ -221,4 +322,54 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
     long["test_id"] = (long["method"].str[:3] + "-F" + long["speed_mm_min"].map("{:g}".format)
                        + dwell + "-R" + long["repeat"].astype(str))
     long = long.rename(columns={"position_mm": "target", **PAPER_TO_SCHEMA})
-    return long.sort_values(["row", "method", "direction"], kind="stable")
+    return long.sort_values([ROW, "method", "direction"], kind="stable")
+
+
+def _paper_columns(wide: pd.DataFrame, path: Path) -> dict[str, str]:
+    """Canonical wide name -> the file's column; two spellings of one column are refused."""
+    cols: dict[str, str] = {}
+    for name, aliases in PAPER_COLUMNS.items():
+        found = [c for c in wide.columns if c.lower() in aliases]
+        if len(found) > 1:
+            raise InputError(f"columns {found[0]!r} and {found[1]!r} both give {name!r}; "
+                             "expected one of them", file=path, row=1, column=found[1])
+        if found:
+            cols[name] = found[0]
+    for name in PAPER_REQUIRED:
+        if name not in cols:
+            raise InputError(f"missing paper Table-2 column {name!r}", file=path, row=1,
+                             column=name)
+    return cols
+
+
+def _absolute_rows_to_deviations(frame: pd.DataFrame, dev_cols: list[str], cols: dict,
+                                 path: Path) -> None:
+    """Convert rows holding absolute positions (all four cells) to deviations, in place.
+
+    Table 2 holds whole rows of positions; a row where only some cells read like positions,
+    or a deviation beyond MAX_DEVIATION_POS_UNITS mm (typically micrometres written in the
+    mm columns, 1000x too large), cannot be interpreted and is refused.
+    """
+    looks = pd.DataFrame({c: looks_absolute(frame[c], frame["position_mm"]) for c in dev_cols})
+    partly = looks.any(axis=1) & ~looks.all(axis=1)
+    if partly.any():
+        i = int(np.flatnonzero(partly)[0])
+        col = dev_cols[int(np.flatnonzero(~looks.iloc[i].to_numpy())[0])]
+        raise InputError(
+            f"{frame[col].iloc[i]:g} is a deviation while other cells of this row are absolute "
+            f"positions near {frame['position_mm'].iloc[i]:g} mm; expected one or the other "
+            "in a row", file=path, row=int(frame[ROW].iloc[i]), column=cols[col])
+    absolute = looks.all(axis=1)
+    for col in dev_cols:
+        frame.loc[absolute, col] = frame.loc[absolute, col] - frame.loc[absolute, "position_mm"]
+        too_large = frame[col].abs() > MAX_DEVIATION_POS_UNITS
+        if too_large.any():
+            i = int(np.flatnonzero(too_large)[0])
+            raise InputError(
+                f"deviation {frame[col].iloc[i]:g} mm at position "
+                f"{frame['position_mm'].iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm; "
+                "expected mm (micrometres here would be 1000x too large)", file=path,
+                row=int(frame[ROW].iloc[i]), column=cols[col])
+    if absolute.any():
+        warn(f"{path}: {4 * int(absolute.sum())} cells of the deviation columns hold absolute "
+             "positions; converted to deviations (value - position)")

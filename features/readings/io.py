@@ -19,6 +19,8 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
     if format not in FORMATS:
         raise InputError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}",
                          file=path)
+    if path.is_dir():
+        raise InputError("is a folder; expected a readings file", file=path)
     if not path.is_file():
         raise InputError("cannot read file: no such file", file=path)
     if format == "auto":

@@ -24,6 +24,8 @@ PLAUSIBLE = {
     "humidity_pct": (0.0, 100.0, "a relative humidity in % (0-100)"),
     "operating_hours": (0.0, 1e7, "operating hours >= 0"),
 }
+# File row of each reading, carried through validation (a name no input may use).
+ROW = "__row__"
 # Largest believable positioning deviation: beyond it `measured` is not in mm (deg).
 MAX_DEVIATION_POS_UNITS = 1.0
 # Below this everywhere in a test, deviation_um was almost surely written in mm.
@@ -50,11 +52,12 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     """Check and normalise a long readings frame; raise InputError on the first problem.
 
     ``row_base`` is the file row of the first data row (None when rows do not map to file
-    rows one to one; then the frame carries a ``row`` column with file rows).
+    rows one to one; then the frame carries a ``ROW`` column with file rows).
     """
     frame = raw.copy()
-    if "row" not in frame:
-        frame["row"] = np.arange(len(frame)) + (row_base or 1)
+    if ROW not in frame:
+        frame[ROW] = np.arange(len(frame)) + (row_base or 1)
+    check_header([c for c in frame.columns if c != ROW], path)
     frame = _rename_case_insensitive(frame)
     missing = [c for c in schema.REQUIRED if c not in frame]
     if missing:
@@ -65,7 +68,7 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
                          file=path, row=1, column="deviation_um")
 
     for col in ("machine_id", "axis", "test_id"):
-        frame[col] = _to_label(frame[col], path, col, frame["row"])
+        frame[col] = _to_label(frame[col], path, col, frame[ROW])
     frame["axis"] = frame["axis"].str.upper()
     _check_allowed(frame, "axis", schema.LINEAR_AXES + schema.ROTARY_AXES, path,
                    "an axis name X, Y, Z, A, B or C")
@@ -73,27 +76,43 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
                                   "'linear' or 'pendulum' (aliases lin, pend)")
     frame["direction"] = _map_labels(frame, "direction", schema.DIRECTION_ALIASES, path,
                                      "'+' or '-' (aliases fwd/up/1/+1, bwd/down/-1)")
-    frame["target"] = to_float(frame["target"], path, "target", frame["row"])
-    frame["cycle"] = _to_int(frame["cycle"], path, "cycle", frame["row"])
-    frame["visit"] = _to_label(frame["visit"], path, "visit", frame["row"]) if "visit" in frame else "1"
-    frame["repeat"] = _to_int(frame["repeat"], path, "repeat", frame["row"]) \
+    frame["target"] = to_float(frame["target"], path, "target", frame[ROW])
+    frame["cycle"] = to_int(frame["cycle"], path, "cycle", frame[ROW])
+    frame["visit"] = _to_label(frame["visit"], path, "visit", frame[ROW]) if "visit" in frame else "1"
+    frame["repeat"] = to_int(frame["repeat"], path, "repeat", frame[ROW]) \
         if "repeat" in frame else 1
     for col in schema.NUMERIC_OPTIONAL:
         if col in frame:
-            frame[col] = to_float(frame[col], path, col, frame["row"], allow_nan=True)
+            frame[col] = to_float(frame[col], path, col, frame[ROW], allow_nan=True)
             _check_plausible(frame, col, path)
     for col in schema.DATETIME_OPTIONAL:
         if col in frame:
-            frame[col] = _to_datetime(frame[col], path, col, frame["row"])
+            frame[col] = _to_datetime(frame[col], path, col, frame[ROW])
 
     frame["deviation_um"] = _deviation_um(frame, path)
     _check_structure(frame, path)
     ordered = [c for c in (*schema.REQUIRED, "deviation_um", "measured", *schema.OPTIONAL)
                if c in frame]
-    extra = [c for c in frame.columns if c not in ordered and c != "row"]
+    extra = [c for c in frame.columns if c not in ordered and c != ROW]
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
     return out
+
+
+def check_header(names: list[str], path: Path) -> None:
+    """Refuse column names that differ only in case or surrounding spaces (``target`` and
+    ``Target``): which one holds the readings cannot be known."""
+    seen: dict[str, str] = {}
+    for name in names:
+        key = str(name).strip().lower()
+        if key == ROW:
+            raise InputError(f"column name {ROW!r} is reserved; rename the column", file=path,
+                             row=1, column=str(name))
+        if key in seen:
+            raise InputError(f"columns {seen[key]!r} and {name!r} differ only in case or "
+                             "spaces; expected each column once", file=path, row=1,
+                             column=str(name))
+        seen[key] = str(name)
 
 
 def _rename_case_insensitive(frame: pd.DataFrame) -> pd.DataFrame:
@@ -119,10 +138,21 @@ def _to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
     if blank.any():
         raise InputError(f"empty {col}; expected a name", file=path,
                          row=_row_of(rows, _first_bad(blank)), column=col)
+    # Control characters (a newline, a tab, NUL) would break every line and file name that
+    # shows the label.
+    control = labels.str.contains(r"[\x00-\x1f\x7f]", regex=True)
+    if control.any():
+        i = _first_bad(control)
+        raise InputError(f"{col} {labels.iloc[i]!r} holds a control character; expected "
+                         "printable text", file=path, row=_row_of(rows, i), column=col)
     return labels
 
 
 def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = False):
+    if pd.api.types.is_bool_dtype(series) or _holds_bools(series):
+        i = _first_bad(series.map(lambda v: isinstance(v, (bool, np.bool_))))
+        raise InputError(f"{bool(series.iloc[i])} is a boolean; expected a number", file=path,
+                         row=_row_of(rows, i), column=col)
     if pd.api.types.is_numeric_dtype(series):
         values = series.astype(float)
         bad_text = pd.Series(False, index=series.index)
@@ -131,6 +161,11 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
         values = pd.to_numeric(text, errors="coerce")
         empty = text.eq("") | text.str.lower().isin(["nan", "na", "none"])
         bad_text = values.isna() & ~empty
+        boolean = text.str.lower().isin(["true", "false"])
+        if boolean.any():
+            i = _first_bad(boolean)
+            raise InputError(f"{text.iloc[i]!r} is a boolean; expected a number", file=path,
+                             row=_row_of(rows, i), column=col)
         if bad_text.any():
             i = _first_bad(bad_text)
             raise InputError(f"{text.iloc[i]!r} is not a number", file=path,
@@ -147,13 +182,24 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
     return values.astype(float)
 
 
-def _to_int(series, path, col, rows) -> pd.Series:
+def _holds_bools(series: pd.Series) -> bool:
+    """An object column (Parquet, a frame built in code) holding Python/numpy booleans."""
+    return series.dtype == object and series.map(
+        lambda v: isinstance(v, (bool, np.bool_))).any()
+
+
+# Cycle and repeat indices beyond this are typos (and would overflow an int64 on the way).
+MAX_INDEX = 1_000_000
+
+
+def to_int(series, path, col, rows) -> pd.Series:
+    """Whole numbers 1..MAX_INDEX; a fractional value is refused, never truncated."""
     values = to_float(series, path, col, rows)
-    fractional = values != np.round(values)
-    if fractional.any() or (values < 1).any():
-        i = _first_bad(fractional | (values < 1))
-        raise InputError(f"{values.iloc[i]!r} is not a whole number >= 1", file=path,
-                         row=_row_of(rows, i), column=col)
+    bad = (values != np.round(values)) | (values < 1) | (values > MAX_INDEX)
+    if bad.any():
+        i = _first_bad(bad)
+        raise InputError(f"{values.iloc[i]:g} is not a whole number from 1 to {MAX_INDEX}",
+                         file=path, row=_row_of(rows, i), column=col)
     return values.astype(int)
 
 
@@ -174,7 +220,7 @@ def _map_labels(frame, col, aliases, path, expected) -> pd.Series:
     if mapped.isna().any():
         i = _first_bad(mapped.isna())
         raise InputError(f"unknown {col} {frame[col].iloc[i]!r}; expected {expected}",
-                         file=path, row=_row_of(frame["row"], i), column=col)
+                         file=path, row=_row_of(frame[ROW], i), column=col)
     return mapped
 
 
@@ -183,7 +229,7 @@ def _check_allowed(frame, col, allowed, path, expected) -> None:
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"unknown {col} {frame[col].iloc[i]!r}; expected {expected}",
-                         file=path, row=_row_of(frame["row"], i), column=col)
+                         file=path, row=_row_of(frame[ROW], i), column=col)
 
 
 def _check_plausible(frame, col, path) -> None:
@@ -193,7 +239,7 @@ def _check_plausible(frame, col, path) -> None:
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"{values.iloc[i]:g} is not {expected}", file=path,
-                         row=_row_of(frame["row"], i), column=col)
+                         row=_row_of(frame[ROW], i), column=col)
 
 
 def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
@@ -202,31 +248,54 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
     measured = None
     if schema.MEASURED in frame:
         allow_nan = schema.DEVIATION in frame
-        measured = to_float(frame["measured"], path, "measured", frame["row"], allow_nan)
+        measured = to_float(frame["measured"], path, "measured", frame[ROW], allow_nan)
         off = (measured - frame["target"]).abs() > MAX_DEVIATION_POS_UNITS
         if off.any():
             i = _first_bad(off)
             raise InputError(
                 f"measured {measured.iloc[i]:g} is {measured.iloc[i] - frame['target'].iloc[i]:+g} "
                 "away from its target; expected a position in mm (deg) like the target",
-                file=path, row=_row_of(frame["row"], i), column="measured")
+                file=path, row=_row_of(frame[ROW], i), column="measured")
         frame["measured"] = measured
     if schema.DEVIATION not in frame:
         return (measured - frame["target"]) * scale
 
-    deviation = to_float(frame["deviation_um"], path, "deviation_um", frame["row"],
+    deviation = to_float(frame["deviation_um"], path, "deviation_um", frame[ROW],
                           allow_nan=measured is not None)
     if measured is not None:
         deviation = deviation.fillna((measured - frame["target"]) * scale)
     # Absolute positions in mm: only when a whole test reads like positions, so that a real
-    # deviation of, say, 15 um at the 15 mm target is never mistaken for one.
-    looks = looks_absolute(deviation, frame["target"]) | (frame["target"].abs() < 1.0)
+    # deviation of, say, 15 um at the 15 mm target is never mistaken for one. Such a test is
+    # converted as a whole: its readings near target 0 (where a position in mm and a
+    # deviation in mm look alike) are in mm too and get the same conversion.
+    near_zero = frame["target"].abs() < 1.0
+    looks = looks_absolute(deviation, frame["target"]) | (
+        near_zero & ((deviation - frame["target"]).abs() < MAX_DEVIATION_POS_UNITS))
     tests = [frame[k] for k in schema.TEST_KEYS]
-    absolute = looks.groupby(tests, sort=False).transform("all") & (frame["target"].abs() >= 1.0)
+    absolute = (looks.groupby(tests, sort=False).transform("all")
+                & (~near_zero).groupby(tests, sort=False).transform("any"))
+    # Every reading at a target reading like a position while the test is not all positions:
+    # deviations and positions are mixed (e.g. um at target 0, mm elsewhere); refuse.
+    whole_target = looks.groupby([*tests, frame["target"]], sort=False).transform("all")
+    mixed = whole_target & ~near_zero & ~absolute
+    if mixed.any():
+        i = _first_bad(mixed)
+        raise InputError(
+            f"the readings at target {frame['target'].iloc[i]:g} hold absolute positions in mm "
+            f"while other readings of test {frame['test_id'].iloc[i]!r} hold deviations; "
+            "expected one or the other in a test", file=path, row=_row_of(frame[ROW], i),
+            column="deviation_um")
     if absolute.any():
         warn(f"{path}: {int(absolute.sum())} deviation_um values hold absolute positions in mm; "
              "converted to deviations ((value - target) x 1000)")
         deviation = deviation.where(~absolute, (deviation - frame["target"]) * scale)
+    too_large = deviation.abs() > MAX_DEVIATION_POS_UNITS * scale
+    if too_large.any():
+        i = _first_bad(too_large)
+        raise InputError(
+            f"deviation {deviation.iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm (deg); "
+            "expected a deviation in um (arcsec), positions belong in 'measured'", file=path,
+            row=_row_of(frame[ROW], i), column="deviation_um")
     _check_deviation_units(frame.assign(deviation_um=deviation), path, measured, scale)
     return deviation
 
@@ -240,19 +309,31 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
         if as_mm.any():
             i = _first_bad(as_mm)
             raise InputError("deviation_um equals measured - target in mm; expected um "
-                             "(x1000)", file=path, row=_row_of(frame["row"], i),
+                             "(x1000)", file=path, row=_row_of(frame[ROW], i),
                              column="deviation_um")
+        # Both columns given: they must tell the same reading (rounding aside), or which
+        # one is right cannot be known.
+        differs = (dev - expected).abs() > np.maximum(0.5, 0.01 * expected.abs())
+        if differs.any():
+            i = _first_bad(differs)
+            raise InputError(
+                f"deviation_um {dev.iloc[i]:g} disagrees with measured - target = "
+                f"{expected.iloc[i]:g}; expected the same reading in both columns (or only one "
+                "of them)", file=path, row=_row_of(frame[ROW], i), column="deviation_um")
     # A reading 1000x smaller than its siblings at the same target and direction: mm among um.
     keys = [*schema.TEST_KEYS, "target", "direction"]
-    sibling = frame.groupby(keys, sort=False)["deviation_um"].transform("median")
-    mm_like = ((sibling.abs() >= 1.0) & (dev.abs() < sibling.abs() / 100)
+    groups = frame.groupby(keys, sort=False)["deviation_um"]
+    # The median of a pair is its mean, which one mm value drags halfway: use the other one.
+    pair = groups.transform("size") == 2
+    sibling = groups.transform("median").where(~pair, groups.transform("sum") - dev)
+    mm_like = ((sibling.abs() >= 0.5) & (dev.abs() < sibling.abs() / 100)
                & ((dev * 1000 - sibling).abs() < 0.3 * sibling.abs()))
     if mm_like.any():
         i = _first_bad(mm_like)
         raise InputError(
             f"mixed units: {dev.iloc[i]:g} looks like mm while the other readings at this "
             f"target are about {sibling.iloc[i]:.3g} um", file=path,
-            row=_row_of(frame["row"], i), column="deviation_um")
+            row=_row_of(frame[ROW], i), column="deviation_um")
     largest = dev.abs().groupby([frame[k] for k in schema.TEST_KEYS], sort=False).transform("max")
     tiny = largest < MIN_PLAUSIBLE_MAX_DEVIATION_UM
     if tiny.any() and measured is None:
@@ -260,7 +341,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
         raise InputError(
             f"every |deviation_um| of test {frame['test_id'].iloc[i]!r} is below "
             f"{MIN_PLAUSIBLE_MAX_DEVIATION_UM} um: the values look like mm; expected um "
-            "(or give the 'measured' column)", file=path, row=_row_of(frame["row"], i),
+            "(or give the 'measured' column)", file=path, row=_row_of(frame[ROW], i),
             column="deviation_um")
 
 
@@ -273,24 +354,24 @@ def _check_structure(frame: pd.DataFrame, path: Path) -> None:
         i = _first_bad(methods > 1)
         raise InputError(f"test {frame['test_id'].iloc[i]!r} mixes linear and pendulum "
                          "readings; expected one method per test_id", file=path,
-                         row=_row_of(frame["row"], i), column="method")
+                         row=_row_of(frame[ROW], i), column="method")
     reading = [*test, "target", "direction", "cycle"]
     dup = frame.duplicated(reading, keep="first")
     if dup.any():
         i = _first_bad(dup)
         raise InputError("duplicate reading: same test, target, direction and cycle as an "
-                         "earlier row", file=path, row=_row_of(frame["row"], i), column="cycle")
+                         "earlier row", file=path, row=_row_of(frame[ROW], i), column="cycle")
     dirs = frame.groupby([*test, "target"], sort=False)["direction"].transform("nunique")
     if (dirs < 2).any():
         i = _first_bad(dirs < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} of test "
                          f"{frame['test_id'].iloc[i]!r} is measured in direction "
                          f"{frame['direction'].iloc[i]!r} only; expected both + and -",
-                         file=path, row=_row_of(frame["row"], i), column="direction")
+                         file=path, row=_row_of(frame[ROW], i), column="direction")
     cycles = frame.groupby([*test, "target", "direction"], sort=False)["cycle"].transform("size")
     if (cycles < 2).any():
         i = _first_bad(cycles < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} direction "
                          f"{frame['direction'].iloc[i]!r} of test {frame['test_id'].iloc[i]!r} "
                          "has 1 reading; expected at least 2 cycles", file=path,
-                         row=_row_of(frame["row"], i), column="cycle")
+                         row=_row_of(frame[ROW], i), column="cycle")

@@ -16,9 +16,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import sys
+    from pathlib import Path
 
     from features.readings import read_readings, write_readings
+    from features.readings.errors import InputError
 
+    if Path(args.out).resolve() == Path(args.file).resolve():
+        raise InputError("--out is the input file; expected a new file name (the original "
+                         "is kept)", file=args.out)
     frame = read_readings(args.file, args.format)
     write_readings(frame, args.out)
     tests = frame.groupby(["machine_id", "axis", "visit", "test_id"]).ngroups

@@ -38,15 +38,14 @@ def write(sim, out_dir) -> None:
     """All four files into a temporary folder, then renamed into place together."""
     import os
     import shutil
-    import tempfile
     from pathlib import Path
 
     from features.readings import write_readings
-    from features.readings.fileio import write_json
+    from features.readings.fileio import temp_folder, write_json
 
     out = Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    tmp = temp_folder(out)
     try:
         write_readings(sim.readings, tmp / "readings.csv")
         sim.truth.to_csv(tmp / "truth.csv", index=False)
