@@ -13,25 +13,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
-import shutil
 import sys
-from pathlib import Path
 
 from features.readings.errors import InputError
+from pipeline.commands.common import check_outputs, remove_created
 
 # Order is the order shown in --help.
 COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "drift", "discover", "hidden-effects", "compensate", "run")
-
-# Outputs each command writes, by argparse dest: a folder, or a file.
-FOLDER, FILE = "folder", "file"
-OUTPUTS = {
-    "convert": {"out": FILE}, "iso": {"plot": FILE}, "predict": {"out": FILE},
-    "simulate": {"out": FOLDER}, "train": {"out": FOLDER}, "compare": {"out": FOLDER},
-    "rank": {"out": FOLDER}, "drift": {"out": FOLDER}, "discover": {"out": FOLDER},
-    "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER}, "compensate": {"out": FOLDER},
-    "replicate": {"out": FOLDER},
-}
-
 
 class Parser(argparse.ArgumentParser):
     """argparse with a one-line error (no usage block) and exit code 2."""
@@ -67,41 +55,20 @@ def main(argv: list[str] | None = None) -> int:
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     created = []
     try:
-        created = _check_outputs(args)
+        created = check_outputs(args.command, args)
         code = args._run(args)
     except (InputError, ValueError) as err:
-        _remove_created(created)
+        remove_created(created)
         line = err.line() if isinstance(err, InputError) else str(err)
         print(f"backlash {args.command}: error: {_one_line(line)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        _remove_created(created)
+        remove_created(created)
         return 130
     except BrokenPipeError:  # `backlash iso --json | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     return int(code or 0)
-
-
-def _check_outputs(args) -> list[Path]:
-    """Refuse output paths that cannot work before any work is done; return the folders
-    this run will create (removed again if the run ends in a user error)."""
-    from features.readings.fileio import check_output
-
-    created = []
-    for dest, kind in OUTPUTS.get(args.command, {}).items():
-        value = getattr(args, dest, None)
-        if value is None:
-            continue
-        root = check_output(value, kind, f"--{dest.replace('_', '-')}")
-        if root is not None:
-            created.append(root)
-    return created
-
-
-def _remove_created(folders: list[Path]) -> None:
-    for folder in folders:
-        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _one_line(text: str) -> str:

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from features.readings.errors import InputError
+from pipeline.commands.common import check_outputs, remove_created
 
 TOP_KEYS = ("name", "description", "out", "steps")
 STEP_KEYS = ("title", "command", "with")
@@ -91,8 +92,11 @@ def commands() -> dict[str, object]:
 
 def options(module) -> dict[str, argparse.Action]:
     """The command's argparse actions by dest, from its own ``add_arguments``."""
+    from pipeline.commands.common import checked_types
+
     parser = argparse.ArgumentParser(add_help=False)
     module.add_arguments(parser)
+    checked_types(parser)  # the same finite/count/seed checks as on the command line
     return {a.dest: a for a in parser._actions}
 
 
@@ -369,7 +373,12 @@ def run_step(step: Step, module, total: int) -> int:
         if missing:
             raise InputError(f"step {step.index} ({step.command}): no such file or folder "
                              f"{str(missing[0])!r} (no earlier step wrote it)")
-        return int(module.run(step.args) or 0)
+        created = check_outputs(step.command, step.args)
+        try:
+            return int(module.run(step.args) or 0)
+        except (InputError, ValueError):
+            remove_created(created)
+            raise
     except (InputError, ValueError) as err:  # a user error, as the command line treats it
         line = err.line() if isinstance(err, InputError) else " ".join(str(err).split())
         print(f"backlash {step.command}: error: {line}", file=sys.stderr)

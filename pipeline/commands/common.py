@@ -3,10 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import shutil
+from pathlib import Path
 
 from features.readings.errors import InputError
 
-FORMATS = ("auto", "canonical", "paper", "ecmc")
+# Outputs each command writes, by argparse dest: a folder, or a file.
+FOLDER, FILE = "folder", "file"
+OUTPUTS = {
+    "convert": {"out": FILE}, "iso": {"plot": FILE}, "predict": {"out": FILE},
+    "simulate": {"out": FOLDER}, "train": {"out": FOLDER}, "compare": {"out": FOLDER},
+    "rank": {"out": FOLDER}, "drift": {"out": FOLDER}, "discover": {"out": FOLDER},
+    "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER}, "compensate": {"out": FOLDER},
+    "replicate": {"out": FOLDER},
+}
+
+
+FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")  # features.readings.formats.FORMATS
 
 
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:
@@ -126,3 +139,24 @@ def checked_types(parser: argparse.ArgumentParser) -> None:
             action.type = seed if action.dest.endswith("seed") else count
         elif action.type is None and isinstance(action, argparse._StoreAction):
             action.type = non_empty
+
+
+def check_outputs(command: str, args) -> list[Path]:
+    """Refuse output paths that cannot work before any work is done; return the folders
+    this run will create (removed again if the run ends in a user error)."""
+    from features.readings.fileio import check_output
+
+    created = []
+    for dest, kind in OUTPUTS.get(command, {}).items():
+        value = getattr(args, dest, None)
+        if value is None:
+            continue
+        root = check_output(value, kind, f"--{dest.replace('_', '-')}")
+        if root is not None:
+            created.append(root)
+    return created
+
+
+def remove_created(folders: list[Path]) -> None:
+    for folder in folders:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from pipeline.commands.common import FORMATS
+
 HELP = ("Write controller compensation files (LinuxCNC, SINUMERIK, Fanuc, Heidenhain, M425, "
         "grblHAL, CSV) from ISO tests or a predictor; --verify re-measures the twin with them.")
 CONTROLLER_NAMES = ("linuxcnc", "siemens", "fanuc", "heidenhain", "marlin", "reprap", "grblhal",
@@ -20,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "or all")
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--format", default="auto",
-                        choices=("auto", "canonical", "paper", "ecmc", "rtl"),
+                        choices=FORMATS,
                         help="input layout of DATA (default: detect)")
     parser.add_argument("--conditions", metavar="NAME=VALUE,...",
                         help="conditions for a predictor, e.g. feed_mm_min=500,machine_temp_c=21")

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.common import FORMATS
+
 HELP = "Read a readings file (canonical, paper Table 2 or ecmc), validate it, write CSV/Parquet."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
-    parser.add_argument("--format", default="auto", choices=("auto", "canonical", "paper", "ecmc"),
+    parser.add_argument("--format", default="auto", choices=FORMATS,
                         help="input layout (default: detect)")
     parser.add_argument("--out", required=True, help="output file, .csv or .parquet")
 

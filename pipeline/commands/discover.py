@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.commands.common import FORMATS
+
 HELP = ("Find where simulation and measurement disagree, name the missing physical effect, "
         "add it and show the gap shrink.")
 
@@ -18,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    parser.add_argument("--format", default="auto", choices=("auto", "canonical", "paper", "ecmc"),
+    parser.add_argument("--format", default="auto", choices=FORMATS,
                         help="input layout (default: detect)")
 
 

@@ -8,6 +8,7 @@ import os
 import re
 
 from features.readings.errors import InputError
+from pipeline.commands.common import FORMATS
 
 HELP = ("Follow backlash across maintenance visits: robust trend, change points, the date it "
         "crosses a threshold, and (with --model) residual and input drift of a trained model. "
@@ -32,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "errors (default 3)")
     parser.add_argument("--json", action="store_true", help="print the series as JSON")
     parser.add_argument("--format", default="auto",
-                        choices=("auto", "canonical", "paper", "ecmc"),
+                        choices=FORMATS,
                         help="input layout (default: detect)")
 
 

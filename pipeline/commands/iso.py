@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.commands.common import FORMATS
+
 HELP = "ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test."
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
              "E_up", "E_down", "M", "R", "R_up", "R_down", "B", "B_mean")
@@ -13,7 +15,7 @@ PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
-    parser.add_argument("--format", default="auto", choices=("auto", "canonical", "paper", "ecmc"),
+    parser.add_argument("--format", default="auto", choices=FORMATS,
                         help="input layout (default: detect)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object per test on stdout")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.commands.common import FORMATS
+
 HELP = "Predict backlash per interior target with a trained model directory; write a CSV."
 COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target",
            "backlash_um")
@@ -14,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="DIR", help="model directory written by backlash train")
     parser.add_argument("data", help="readings file (linear tests suffice)")
     parser.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    parser.add_argument("--format", default="auto", choices=("auto", "canonical", "paper", "ecmc"),
+    parser.add_argument("--format", default="auto", choices=FORMATS,
                         help="input layout (default: detect)")
 
 

@@ -6,7 +6,7 @@ import argparse
 import os
 
 from features.readings.errors import InputError
-from pipeline.commands.common import parse_features
+from pipeline.commands.common import FORMATS, parse_features
 
 HELP = ("Rank the inputs by how much they drive backlash (weighted k-NN, ANOVA -ln(p), "
         "permutation importance, mutual information) and write an HTML report.")
@@ -34,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "information (default), or the ANOVA score as in the paper")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--format", default="auto",
-                        choices=("auto", "canonical", "paper", "ecmc"),
+                        choices=FORMATS,
                         help="input layout (default: detect)")
 
 
