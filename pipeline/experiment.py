@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from features.readings.errors import InputError
+from pipeline.commands import common
 from pipeline.commands.common import check_outputs, remove_created
 
 TOP_KEYS = ("name", "description", "out", "steps")
@@ -251,7 +252,8 @@ def convert(value, action: argparse.Action, path: Path, label: str):
 
 def _one(value, action, path, label):
     if isinstance(value, (bool, dict, list)):
-        wanted = "number" if action.type in (int, float) else "string"
+        numeric = (int, float, common.finite_float, common.count, common.seed)
+        wanted = "number" if action.type in numeric else "string"
         raise InputError(f"{label}: expected a {wanted}, got {_kind(value)}", file=path)
     text = value if isinstance(value, str) else str(value)
     try:

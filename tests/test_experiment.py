@@ -150,7 +150,7 @@ STEP = '[[steps]]\ncommand = "convert"\n'
     ('[[steps]]\ncommand = "iso"\n[steps.with]\nfile = "{here}/exp.toml"\njson = "yes"\n',
      "option 'json': expected true or false, got a string"),
     ('[[steps]]\ncommand = "iso"\n[steps.with]\nfile = "{here}/exp.toml"\nformat = "xml"\n',
-     "option 'format': expected one of auto, canonical, paper, ecmc, got 'xml'"),
+     "option 'format': expected one of auto, canonical, paper, ecmc, rtl, got 'xml'"),
     (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{outdir}/a.csv"\n',
      "unknown placeholder {outdir} in '{outdir}/a.csv'; expected {data}, {out}, {here}"),
     (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{out!r}/a.csv"\n',
