@@ -25,10 +25,14 @@ Conditions are arrays aligned with the positions: ``feed_mm_min``, ``dwell_s``,
 
 Nuisance grids (``Effect.nuisance``, parameter -> grid) are either a tuple of values to try or
 a word for a value the data fix: ``"targets"`` (each measured target position), ``"travel"``
-(the measured travel), ``"middle"``, ``"start"``, ``"stop"`` (of the measured travel),
-``"quadrature"`` (a phase fitted in closed form as a sine and a cosine column) and
+(the measured travel), ``"middle"``, ``"start"``, ``"stop"`` (of the measured travel), ``"ends"`` (either end of
+the measured travel, e.g. where a fixed bearing can sit),
+``"quadrature"`` (a phase fitted in closed form as a sine and a cosine column, with the
+record's amplitude; ``("quadrature", amplitude_parameter)`` for another harmonic),
 ``"per_target"`` (a number of control points from 3 up to one per measured target, chosen by
-the information criterion).
+the information criterion) and ``("period", low, high)`` (a period between low and high,
+searched in frequency steps of a quarter cycle over the measured travel, so that no period in
+the range falls between two grid values).
 """
 
 from __future__ import annotations
@@ -197,31 +201,33 @@ def lead_error_linear(position_mm, direction, conditions, k_um_per_m=8.0):
 
 
 def lead_error_periodic(position_mm, direction, conditions, amplitude_um=1.0, pitch_mm=10.0,
-                        phase_rad=0.0):
-    """Periodic lead error of the screw with its pitch as period.
+                        phase_rad=0.0, amplitude2_um=0.0, phase2_rad=0.0):
+    """Periodic lead error of the screw with its pitch as period, with its second harmonic
+    (eccentric screw, wobbling nut).
 
     Parameters
     ----------
     position_mm : array-like
         Target position x [mm].
-    amplitude_um : float
-        Amplitude A [um].
+    amplitude_um, amplitude2_um : float
+        Amplitudes of the first and second harmonic A, A2 [um].
     pitch_mm : float
         Screw pitch p [mm].
-    phase_rad : float
-        Phase phi [rad].
+    phase_rad, phase2_rad : float
+        Phases phi, phi2 [rad].
 
     Returns
     -------
     e : ndarray
-        e = A sin(2 pi x / p + phi) [um]. Invisible when the targets are spaced at multiples of
-        the pitch, hence ISO 230-2's irregular spacing.
+        e = A sin(2 pi x / p + phi) + A2 sin(4 pi x / p + phi2) [um]. Invisible when the
+        targets are spaced at multiples of the pitch, hence ISO 230-2's irregular spacing.
 
     References
     ----------
     ISO 230-2:2014, section 4.3 (target positions with irregular spacing).
     """
-    return amplitude_um * np.sin(2 * np.pi * np.asarray(position_mm) / pitch_mm + phase_rad)
+    turns = 2 * np.pi * np.asarray(position_mm) / pitch_mm
+    return amplitude_um * np.sin(turns + phase_rad) + amplitude2_um * np.sin(2 * turns + phase2_rad)
 
 
 def lead_error_profile(position_mm, direction, conditions, p0_um=0.0, p1_um=2.0, p2_um=-1.5,
@@ -430,7 +436,6 @@ def _record(function, **fields) -> Effect:
                   **fields)
 
 
-_PITCHES_MM = tuple(np.r_[np.arange(4.0, 12.0, 0.5), np.arange(12.0, 20.5, 1.0)].tolist())
 
 RECORDS: dict[str, Effect] = {r.name: r for r in (
     _record(backlash, kind="lost_motion", unit="um", amplitude="b0_um", plausible=(0.0, 50.0),
@@ -461,7 +466,8 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
             reading="the screw's lead (or the scale) is off by a constant ratio, so the error "
                     "grows in proportion to position"),
     _record(lead_error_periodic, kind="position", unit="um", amplitude="amplitude_um",
-            plausible=(0.05, 10.0), nuisance={"pitch_mm": _PITCHES_MM, "phase_rad": "quadrature"},
+            plausible=(0.05, 10.0), nuisance={"pitch_mm": ("period", 4.0, 20.0),
+                                              "phase_rad": "quadrature"},
             inputs=("target",), reference="ISO 230-2:2014, section 4.3",
             separating_test="use ISO irregular target spacing, or targets finer than half the "
                             "pitch",
@@ -476,7 +482,8 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
             reading="a smooth non-linear positioning error along the axis, what a pitch-error "
                     "compensation table corrects (backlash compensate)"),
     _record(thermal_expansion, kind="position", unit="um/(m K)", amplitude="alpha_um_per_m_k",
-            plausible=(5.0, 25.0), inputs=("target", "machine_temp_c"),
+            plausible=(5.0, 25.0), nuisance={"x_fixed_mm": "ends"},
+            inputs=("target", "machine_temp_c"),
             reference="ISO 230-3; ISO 1",
             separating_test="repeat the test at a different machine temperature",
             reading="the screw expands from its fixed bearing as it warms"),
