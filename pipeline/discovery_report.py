@@ -1,24 +1,21 @@
 """Report of the missing-effect workflow: residual maps before and after, the gap per step next
-to the repeatability, and each step's evidence (HTML + PNG)."""
+to the repeatability, each step's evidence, the unexplained gap and the notes (HTML + PNG)."""
 
 from __future__ import annotations
 
 import html
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-from features.readings.fileio import atomic_path, write_text
+from pipeline.report_page import new_figure, save_figure, write_page
 
 
 def plot(result, readings, path: Path) -> Path:
-    x = readings["target"].to_numpy(float)
-    up = readings["direction"].to_numpy() == "+"
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    used = np.ones(len(readings), bool) if result.used is None else result.used
+    x = readings["target"].to_numpy(float)[used]
+    up = readings["direction"].to_numpy()[used] == "+"
+    fig, axes = new_figure(14, 4, ncols=3)
     for ax, resid, title in ((axes[0], result.residual_before, "residual, baseline"),
                              (axes[1], result.residual_after, "residual, final model")):
         ax.plot(x[up], resid[up], ".", ms=3, alpha=0.5, label="+ approach")
@@ -28,7 +25,7 @@ def plot(result, readings, path: Path) -> Path:
         ax.set_ylabel("measured - simulated [um]")
         ax.set_title(title)
         ax.legend(fontsize=7)
-    lim = max(np.abs(result.residual_before).max(), 1e-9)
+    lim = max(float(np.abs(result.residual_before).max()), 1e-9)
     axes[0].set_ylim(-lim, lim)
     axes[1].set_ylim(-lim, lim)
     labels = ["baseline", *[f"+ {s.effect}" for s in result.steps]]
@@ -38,11 +35,21 @@ def plot(result, readings, path: Path) -> Path:
     axes[2].set_xticks(range(len(gaps)), labels, rotation=20, ha="right", fontsize=8)
     axes[2].set_ylabel("gap: RMSE simulation vs measurement [um]")
     axes[2].legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
+
+
+def _unexplained(gap: dict | None) -> str:
+    if not gap:
+        return ""
+    rows = "".join(
+        f"<tr><td>{html.escape(s['against'])}</td><td class='num'>{100 * s['share']:.1f} %</td>"
+        f"<td class='num'>{s['rms_um']:.3g}</td><td class='num'>{s['p_value']:.2g}</td></tr>"
+        for s in gap["structure"])
+    hint = (f"<p>Effects that act along it: {html.escape(', '.join(gap['candidates']))}.</p>"
+            if gap.get("candidates") else "")
+    return (f"<h2>Unexplained gap</h2><div class='alert'>{html.escape(gap['reason'])}</div>"
+            f"{hint}<table><tr><th>residual against</th><th>share</th><th>rms [um]</th>"
+            f"<th>p (F-test)</th></tr>{rows}</table>")
 
 
 def write(result, readings, out_dir, source: str = "") -> dict:
@@ -50,24 +57,26 @@ def write(result, readings, out_dir, source: str = "") -> dict:
     png = plot(result, readings, out / "discovery.png")
     steps = "".join(
         f"<tr><td>{i}</td><td>{s.effect}</td><td>{html.escape(str(s.parameters))}</td>"
-        f"<td>{html.escape(str(s.interval))}</td><td>{s.delta_bic:.1f}</td>"
-        f"<td>{100 * s.cv_gain:.1f} %</td><td>{s.rmse_before_um:.3f}</td>"
-        f"<td>{s.rmse_after_um:.3f}</td></tr>" for i, s in enumerate(result.steps, 1))
+        f"<td>{html.escape(str(s.interval))}</td><td class='num'>{s.delta_bic:.1f}</td>"
+        f"<td class='num'>{100 * s.cv_gain:.1f} %</td><td class='num'>{s.rmse_before_um:.3f}"
+        f"</td><td class='num'>{s.rmse_after_um:.3f}</td>"
+        f"<td>{html.escape(', '.join(s.not_identified)) or '-'}</td></tr>"
+        for i, s in enumerate(result.steps, 1))
     evidence = "".join(
         f"<h3>Candidates at step {i}</h3>"
         + table.drop(columns=["sse"], errors="ignore").to_html(index=False, float_format="%.3g")
         for i, table in enumerate(result.evidence, 1))
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in result.notes)
-    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Missing-effect report</title>
-<style>body{{font-family:sans-serif;max-width:1200px;margin:auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 6px}}</style></head><body>
-<h1>Missing effects: {html.escape(source)}</h1>
-<p>Named: <b>{', '.join(result.named) or 'none'}</b>; ambiguous:
-{html.escape('; '.join(', '.join(g) for g in result.ambiguous) or 'none')}.
-Gap {result.rmse_before_um:.3f} um → {result.rmse_after_um:.3f} um; repeatability
-{result.repeatability_um:.3f} um.</p>
-<img src="{png.name}" style="width:100%">
+    ambiguous = '; '.join(', '.join(g) for g in result.ambiguous) or 'none'
+    body = f"""<div class="summary"><p>{html.escape(source)}: named
+<b>{', '.join(result.named) or 'none'}</b>; ambiguous: {html.escape(ambiguous)}.
+Gap {result.rmse_before_um:.3f} um &rarr; {result.rmse_after_um:.3f} um; repeatability
+{result.repeatability_um:.3f} um.</p></div>
+<img src="{png.name}" alt="residuals and gap per step">
 <h2>Steps</h2><table><tr><th>#</th><th>effect</th><th>parameters</th><th>95 % interval</th>
-<th>ΔBIC</th><th>CV gain</th><th>gap before [um]</th><th>gap after [um]</th></tr>{steps}</table>
-<h2>Evidence</h2>{evidence}<h2>Notes</h2><ul>{notes}</ul></body></html>"""
-    return {"html": write_text(out / "discovery.html", page), "png": png}
+<th>&Delta;BIC</th><th>CV gain</th><th>gap before [um]</th><th>gap after [um]</th>
+<th>not identified</th></tr>{steps}</table>
+{_unexplained(result.unexplained)}
+<h2>Notes</h2><ul>{notes}</ul><h2>Evidence</h2>{evidence}"""
+    return {"html": write_page(out / "discovery.html", "Missing physical effects", body),
+            "png": png}

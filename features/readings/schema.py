@@ -43,10 +43,12 @@ DIRECTION_ALIASES = {
 }
 METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "pend": "pendulum"}
 
+# Named physical effects (SCHEMA.md section 4); models.physics.effects.RECORDS has one record
+# per name (a test checks they agree).
 EFFECTS = (
     "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
-    "lead_error_linear", "lead_error_periodic", "thermal_expansion", "thermal_drift",
-    "air_refraction", "abbe", "dwell_settling",
+    "lead_error_linear", "lead_error_periodic", "lead_error_profile", "thermal_expansion",
+    "thermal_drift", "air_refraction", "abbe", "dwell_settling",
 )
 NO_EFFECT = "none"
 
