@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 
 from features.readings.errors import InputError
@@ -51,11 +50,11 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings import read_readings
     from features.readings.fileio import clean_nan, dumps
-    from pipeline import drift
+    from pipeline import drift, tracking
     from pipeline.drift_report import write_drift_report
 
-    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     check_options(args)
+    tracking.check_uri()
     model = None
     if args.model is not None:
         from models.registry import load_model
@@ -85,25 +84,23 @@ def run(args: argparse.Namespace) -> int:
 
 def log_to_mlflow(series, paths, args, readings) -> None:
     """One MLflow run in experiment ``drift``: options, per-series figures, the report files."""
-    import mlflow
-
     from pipeline import tracking
 
     with tracking.run("drift", f"drift {os.path.basename(str(args.data))}"):
-        mlflow.log_params({
+        mlflow = tracking.mlflow_module()
+        mlflow.log_params(tracking.params({
             "data": str(args.data), "data_sha256": tracking.data_hash(readings),
             "threshold_um": args.threshold_um, "model": args.model or "",
             "alpha": args.alpha, "min_jump_sigma": args.min_jump_sigma,
             "warn_months": args.warn_months, "n_series": len(series),
-        })
+        }))
         metrics = {"n_alerts": float(sum(len(s.alerts) for s in series))}
         for s in series:
-            key = f"{s.machine_id}_{s.axis}".replace(" ", "_")
+            key = f"{s.machine_id}_{s.axis}"  # any id: tracking.metrics makes valid names
             metrics[f"backlash_um_{key}"] = float(s.visits["backlash_um"].iloc[-1])
             metrics[f"slope_um_per_month_{key}"] = s.trend.get("slope", float("nan"))
             metrics[f"n_change_points_{key}"] = float(len(s.change_points))
-        mlflow.log_metrics({k: float(v) for k, v in metrics.items()
-                            if v is not None and math.isfinite(float(v))})
+        mlflow.log_metrics(tracking.metrics(metrics))
         for path in paths.values():
             mlflow.log_artifact(str(path), artifact_path="drift")
 
