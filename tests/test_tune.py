@@ -147,3 +147,17 @@ def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
     assert [p for p, _ in runs["a"]] == [p for p, _ in runs["b"]]
     assert [v for _, v in runs["a"]] == pytest.approx([v for _, v in runs["b"]], rel=1e-6)
     assert runs["a"][0][0] != runs["c"][0][0]
+
+
+def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path):
+    storage = f"sqlite:///{tmp_path / 'optuna.db'}"
+    proc = backlash("tune", str(readings_csv), "--trials", "200", "--folds", "2",
+                    "--storage", storage, cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    while states(storage)[-1:] != ["RUNNING"]:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 130
+    after = states(storage)
+    assert after[-1] == "FAIL" and "RUNNING" not in after
