@@ -45,8 +45,13 @@ def cv_rmse(X, y, params: dict, folds: int = 5, random_state: int = 0) -> np.nda
     return -cross_val_score(estimator, X, y, cv=split, scoring="neg_root_mean_squared_error")
 
 
-def objective(X, y, folds: int, random_state: int, tag: str):
-    def run_trial(trial) -> float:
+def objective(X, y, folds: int, random_state: int, tag: str, stop=None):
+    """Optuna objective: CV RMSE [um] of the drawn network. ``stop`` (a ``threading.Event``):
+    once set, a trial that starts fails at once, as if interrupted."""
+
+    def run_trial(trial) -> float:  # name known to `backlash tune`'s SIGTERM handler
+        if stop is not None and stop.is_set():
+            raise KeyboardInterrupt
         trial.set_user_attr("tag", tag)  # first, so a trial killed while running is traceable
         trial.set_user_attr("worker_pid", os.getpid())
         params = suggest(trial)
@@ -120,12 +125,13 @@ def counts(study) -> dict[str, int]:
 
 def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag: str,
          worker: int = 0, start: int = 0, threads: int | None = None, progress: bool = False,
-         callbacks: tuple = (), heartbeat_s: int = HEARTBEAT_S) -> None:
+         callbacks: tuple = (), heartbeat_s: int = HEARTBEAT_S, stop=None) -> None:
     """One worker: run ``trials`` trials of the shared study.
 
     The sampler seed comes from ``seed``, the worker's index and ``start`` (trials in the study
     when the invocation began), never from the process, so one ``seed`` gives one study.
-    ``callbacks`` run after each finished trial (Optuna's ``callback(study, trial)``).
+    ``callbacks`` run after each finished trial (Optuna's ``callback(study, trial)``); ``stop``
+    is passed to the objective.
     """
     import optuna
     import torch
@@ -134,5 +140,5 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
         torch.set_num_threads(threads)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s)
-    study.optimize(objective(X, y, folds, seed, tag), n_trials=trials,
+    study.optimize(objective(X, y, folds, seed, tag, stop), n_trials=trials,
                    callbacks=list(callbacks), show_progress_bar=progress)

@@ -126,6 +126,11 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     assert result["trials"] == {"complete": complete, "fail": 1}
     assert f"best of {complete} complete trials in the study (1 fail)" in out.err
     assert len(nested_trial_runs()) == complete
+    # the killed invocation's own run is ended as KILLED, not left RUNNING
+    tune_runs = mlflow.search_runs(experiment_names=["tune"], output_format="list")
+    parents = sorted((r.info.start_time, r.info.status) for r in tune_runs
+                     if not r.info.run_name.startswith("trial "))
+    assert [status for _, status in parents] == ["KILLED", "FINISHED"]
 
 
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):

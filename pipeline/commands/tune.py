@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 
 from pipeline.commands.common import add_data_arguments
 
 HELP = ("Tune the network (hidden sizes, activation, trainer, regularisation) by "
         "cross-validation with Optuna.")
 STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
+_STOP = threading.Event()  # set by a SIGTERM that must wait for the current trial's storage
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -80,7 +82,9 @@ def run(args: argparse.Namespace) -> int:
           f"{len(table.y)} points; study {args.study!r} in {_safe(storage)} "
           f"({start} trials before)", file=sys.stderr)
     if stale:
-        print(f"trials {stale} had no heartbeat (their worker was killed): marked failed",
+        killed = _close_killed_runs(study, stale)
+        note = f"; MLflow run(s) {', '.join(killed)} ended as KILLED" if killed else ""
+        print(f"trials {stale} had no heartbeat (their worker was killed): marked failed{note}",
               file=sys.stderr)
     with tracking.run("tune", f"tune {args.study}") as parent:
         tracking.mlflow_module().log_params(tracking.params({
@@ -94,10 +98,31 @@ def run(args: argparse.Namespace) -> int:
                 "callbacks": (logger,), "heartbeat_s": args.heartbeat_s}
         with _terminate_as_interrupt():
             if args.workers == 1:
-                tuning.work(trials=args.trials, worker=0, progress=sys.stderr.isatty(), **work)
+                tuning.work(trials=args.trials, worker=0, progress=sys.stderr.isatty(),
+                            stop=_STOP, **work)
             else:
                 _run_workers(work, shares)
         return _summary(tuning, study, tag, args, stale)
+
+
+def _close_killed_runs(study, stale: list[int]) -> list[str]:
+    """The MLflow runs of the invocations whose trials went stale, still RUNNING because their
+    process was killed, are ended as KILLED."""
+    from pipeline import tracking
+
+    tags = {t.user_attrs.get("tag") for t in study.trials if t.number in stale} - {None}
+    if not tags:
+        return []
+    client = tracking.client()
+    found = client.get_experiment_by_name("tune")
+    if found is None:
+        return []
+    closed = []
+    for run in client.search_runs([found.experiment_id], "attributes.status = 'RUNNING'"):
+        if run.data.params.get("tag") in tags and "mlflow.parentRunId" not in run.data.tags:
+            client.set_terminated(run.info.run_id, "KILLED")
+            closed.append(run.info.run_id)
+    return closed
 
 
 class TrialLogger:
@@ -130,6 +155,8 @@ class TrialLogger:
         done = trial.state.name == "COMPLETE"
         client.set_terminated(run.info.run_id, RunStatus.to_string(
             RunStatus.FINISHED if done else RunStatus.FAILED))
+        if _STOP.is_set():  # a SIGTERM arrived while this trial was being stored
+            raise KeyboardInterrupt
 
 
 def _open_study(tuning, name, storage, seed, heartbeat_s):
@@ -144,16 +171,20 @@ def _open_study(tuning, name, storage, seed, heartbeat_s):
 
 
 class _terminate_as_interrupt:
-    """SIGTERM raises KeyboardInterrupt, so Optuna marks the running trial FAIL on the way out
-    instead of leaving it RUNNING."""
+    """SIGTERM stops the search the way Ctrl-C does, so the running trial is marked FAIL on the
+    way out instead of being left RUNNING. A signal that arrives while Optuna stores a finished
+    trial or draws the next one takes effect once that is done (interrupting a storage write
+    would leave the trial RUNNING): the drawn trial fails at its start, the stored one is
+    logged first."""
 
     def __enter__(self):
         import signal
         import threading
 
         self._old = None
+        _STOP.clear()
         if threading.current_thread() is threading.main_thread():
-            self._old = signal.signal(signal.SIGTERM, _raise_interrupt)
+            self._old = signal.signal(signal.SIGTERM, _on_terminate)
         return self
 
     def __exit__(self, *exc):
@@ -164,8 +195,14 @@ class _terminate_as_interrupt:
         return False
 
 
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
+def _on_terminate(signum, frame):
+    names = set()
+    while frame is not None:
+        names.add(frame.f_code.co_name)
+        frame = frame.f_back
+    if "run_trial" in names or "_optimize_sequential" not in names:
+        raise KeyboardInterrupt  # inside the objective, or not optimising: stop now
+    _STOP.set()  # inside Optuna's bookkeeping: the objective or TrialLogger stops next
 
 
 def _worker(work: dict, trials: int, worker: int) -> None:
@@ -178,7 +215,7 @@ def _worker(work: dict, trials: int, worker: int) -> None:
     _die_with_parent(os.getppid())
     with _terminate_as_interrupt():
         try:
-            tuning.work(trials=trials, worker=worker, threads=1, **work)
+            tuning.work(trials=trials, worker=worker, threads=1, stop=_STOP, **work)
         except KeyboardInterrupt:
             sys.exit(130)
 
