@@ -6,9 +6,9 @@ directory): a local SQLite file, a database URL, or ``http://HOST:PORT`` of a sh
 a server without ``BACKLASH_ARTIFACTS`` they go where the server stores them. ``configure()``
 applies this once per store; every other function here calls it, so commands never set URIs.
 
-Concurrency: the first use of a fresh SQLite store (schema creation and migration) happens
-under a file lock beside the database, so several processes may start on an empty store at
-once; experiments created concurrently resolve to one; ``exclusive()`` is a mutex held in the
+Concurrency: the first use of a fresh store (schema creation and migration) happens under a
+file lock beside a SQLite database, or an advisory lock in PostgreSQL, so several processes may
+start on an empty store at once; experiments created concurrently resolve to one; ``exclusive()`` is a mutex held in the
 model registry itself (a unique registered-model name), so it works against any store,
 including a remote server, and is used for compare-and-set decisions such as the champion.
 
@@ -33,6 +33,7 @@ MAX_KEY = 250  # MLflow's limit on metric and parameter names
 MAX_VALUE = 6000  # MLflow's limit on parameter values
 _BAD_KEY_CHARS = re.compile(r"[^\w.\- /]")
 _ready: set[str] = set()
+_LOCK_KEY = 0x6261636B6C617368  # "backlash": the advisory lock guarding schema creation
 
 
 def tracking_uri() -> str:
@@ -110,7 +111,12 @@ def _create_store(mlflow, uri: str) -> None:
     """Open the tracking and registry stores once; their first opening creates and migrates
     the schema, which two processes must not do at the same time on one SQLite file."""
     path = _sqlite_path(uri) if uri.startswith("sqlite:") else None
-    lock = _file_lock(path.with_name(path.name + ".lock")) if path else contextlib.nullcontext()
+    if path is not None:
+        lock = _file_lock(path.with_name(path.name + ".lock"))
+    elif uri.startswith("postgresql"):
+        lock = _advisory_lock(uri)
+    else:  # a server creates its schema once at start; other databases are not locked
+        lock = contextlib.nullcontext()
     with lock:
         store = mlflow.MlflowClient(uri, uri)
         store.search_experiments(max_results=1)
@@ -121,6 +127,23 @@ def _file_lock(path: Path):
     from filelock import FileLock
 
     return FileLock(str(path), timeout=300)
+
+
+@contextlib.contextmanager
+def _advisory_lock(uri: str):
+    """PostgreSQL session-level advisory lock, held by a connection of its own."""
+    import sqlalchemy
+
+    engine = sqlalchemy.create_engine(uri, poolclass=sqlalchemy.pool.NullPool)
+    try:
+        with engine.connect() as conn:
+            conn.execute(sqlalchemy.text("SELECT pg_advisory_lock(:k)"), {"k": _LOCK_KEY})
+            try:
+                yield
+            finally:
+                conn.execute(sqlalchemy.text("SELECT pg_advisory_unlock(:k)"), {"k": _LOCK_KEY})
+    finally:
+        engine.dispose()
 
 
 def artifact_location(name: str) -> str | None:

@@ -67,6 +67,27 @@ def test_two_processes_create_a_fresh_store_at_once(tmp_path):
     assert len(runs) == 2 and all(r.data.metrics["x"] == 1.0 for r in runs)
 
 
+@pytest.mark.postgres
+def test_two_processes_create_a_fresh_postgres_store_at_once(postgres_url, tmp_path):
+    from pg_server import create_database
+
+    uri = create_database(postgres_url, "fresh_tracking")
+    body = """
+        import mlflow
+        from pipeline import tracking
+        # --- start
+        with tracking.run("train", "concurrent"):
+            mlflow.log_metric("x", 1.0)
+        """
+    done = start_together([body, body], tmp_path, {**os.environ, "MLFLOW_TRACKING_URI": uri})
+    assert [d.returncode for d in done] == [0, 0], [d.stderr[-1500:] for d in done]
+    import mlflow
+
+    runs = mlflow.MlflowClient(uri).search_runs(
+        [mlflow.MlflowClient(uri).get_experiment_by_name("train").experiment_id])
+    assert len(runs) == 2
+
+
 def registered_version(client, rmse: float, digest: str) -> str:
     """A finished run with ``test_rmse_um`` and a model version pointing at it."""
     import mlflow
