@@ -131,6 +131,10 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     parents = sorted((r.info.start_time, r.info.status) for r in tune_runs
                      if not r.info.run_name.startswith("trial "))
     assert [status for _, status in parents] == ["KILLED", "FINISHED"]
+    # a different heartbeat would judge live workers by the wrong grace period
+    capsys.readouterr()
+    assert main(["tune", str(readings_csv), *common[:-1], "5"]) == 2
+    assert "runs with --heartbeat-s 1" in capsys.readouterr().err
 
 
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):

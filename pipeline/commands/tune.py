@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
                          "cross-validation", file=args.data)
     tag = uuid.uuid4().hex[:12]
     study = _open_study(tuning, args.study, storage, args.seed, args.heartbeat_s)
+    _same_heartbeat(study, args.heartbeat_s)
     stale = tuning.fail_stale_trials(study)
     start = len(study.trials)
     shares = [args.trials // args.workers + (i < args.trials % args.workers)
@@ -103,6 +104,19 @@ def run(args: argparse.Namespace) -> int:
             else:
                 _run_workers(work, shares)
         return _summary(tuning, study, tag, args, stale)
+
+
+def _same_heartbeat(study, heartbeat_s: int) -> None:
+    """Every invocation on a study must use one heartbeat: the grace period is judged by the
+    process that looks, so a shorter one would fail trials whose workers are alive."""
+    from features.readings.errors import InputError
+
+    recorded = study.user_attrs.get("heartbeat_s")
+    if recorded is None:
+        study.set_user_attr("heartbeat_s", heartbeat_s)
+    elif recorded != heartbeat_s:
+        raise InputError(f"study {study.study_name!r} runs with --heartbeat-s {recorded}; give "
+                         f"the same (got {heartbeat_s})", column="--heartbeat-s")
 
 
 def _close_killed_runs(study, stale: list[int]) -> list[str]:
