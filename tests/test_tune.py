@@ -139,13 +139,14 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
 
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
     """The sampler's seed is the user's seed, not the process: a run in another process with
-    the same seed draws the same trials (and a different seed does not)."""
+    the same seed draws the same trials."""
+    from models.tuning import sampler_seed
+
     runs = {}
-    for name, seed, trials, where in (("a", 7, 2, "child"), ("b", 7, 2, "here"),
-                                      ("c", 8, 1, "here")):
+    for name, where in (("a", "child"), ("b", "here")):
         storage = f"sqlite:///{tmp_path / name}.db"
-        args = ["tune", str(readings_csv), "--trials", str(trials), "--folds", "2",
-                "--seed", str(seed), "--storage", storage]
+        args = ["tune", str(readings_csv), "--trials", "2", "--folds", "2", "--seed", "7",
+                "--storage", storage]
         if where == "child":
             proc = backlash(*args, cwd=tmp_path)
             assert proc.wait(timeout=300) == 0, proc.communicate()[1][-2000:]
@@ -155,7 +156,9 @@ def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
         runs[name] = [(t.params, t.value) for t in study.trials]
     assert [p for p, _ in runs["a"]] == [p for p, _ in runs["b"]]
     assert [v for _, v in runs["a"]] == pytest.approx([v for _, v in runs["b"]], rel=1e-6)
-    assert runs["a"][0][0] != runs["c"][0][0]
+    # another seed, another worker or a resumed study (trials before) draw differently
+    seeds = {sampler_seed(7), sampler_seed(8), sampler_seed(7, worker=1), sampler_seed(7, start=2)}
+    assert len(seeds) == 4
 
 
 def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path):
