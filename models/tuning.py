@@ -3,16 +3,20 @@
 Each trial draws hidden sizes (1-3 layers of 2-16 neurons), activation, trainer (LM or Adam)
 and L2 regularisation, and scores them by K-fold cross-validated RMSE [um] on the feature table.
 Several worker processes, or machines, share one study through its storage URL: a local
-SQLite file by default, PostgreSQL for many workers.
+SQLite file by default, PostgreSQL for many workers. Running trials send heartbeats, so a
+trial whose worker was killed is marked FAIL instead of staying RUNNING, and the sampler's
+seed depends only on the given seed, the worker index and the study's size at the start.
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
 DEFAULT_STORAGE = "sqlite:///optuna.db"
+HEARTBEAT_S = 10
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
 TRAINERS = ("lm", "adam")
 
@@ -41,35 +45,100 @@ def cv_rmse(X, y, params: dict, folds: int = 5, random_state: int = 0) -> np.nda
     return -cross_val_score(estimator, X, y, cv=split, scoring="neg_root_mean_squared_error")
 
 
-def objective(X, y, folds: int, random_state: int, tag: str):
-    def run_trial(trial) -> float:
+def objective(X, y, folds: int, random_state: int, tag: str, stop=None):
+    """Optuna objective: CV RMSE [um] of the drawn network. ``stop`` (a ``threading.Event``):
+    once set, a trial that starts fails at once, as if interrupted."""
+
+    def run_trial(trial) -> float:  # name known to `backlash tune`'s SIGTERM handler
+        if stop is not None and stop.is_set():
+            raise KeyboardInterrupt
+        trial.set_user_attr("tag", tag)  # first, so a trial killed while running is traceable
+        trial.set_user_attr("worker_pid", os.getpid())
         params = suggest(trial)
         rmse = cv_rmse(X, y, params, folds, random_state)
-        trial.set_user_attr("tag", tag)
-        trial.set_user_attr("worker_pid", os.getpid())
         trial.set_user_attr("cv_rmse_std_um", float(rmse.std()))
         return float(rmse.mean())
 
     return run_trial
 
 
-def create_study(name: str, storage: str, seed: int):
+def open_storage(url: str, heartbeat_s: int = HEARTBEAT_S):
+    """Optuna storage at ``url`` with heartbeats: each running trial's worker reports every
+    ``heartbeat_s`` seconds, and a trial silent for twice that is stale (its worker was
+    killed) and is marked FAIL by the next worker that opens the study."""
     import optuna
 
+    if heartbeat_s < 1:
+        raise ValueError(f"heartbeat_s must be at least 1 second, got {heartbeat_s}")
+    connect = {"timeout": 60} if url.startswith("sqlite") else {}  # workers wait for the lock
+    if url.startswith("postgresql"):
+        connect = {"connect_timeout": 10}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        return optuna.storages.RDBStorage(url, heartbeat_interval=heartbeat_s,
+                                          grace_period=2 * heartbeat_s,
+                                          engine_kwargs={"connect_args": connect})
+
+
+def sampler_seed(seed: int, worker: int = 0, start: int = 0) -> int:
+    """Seed of one worker's sampler, decided by ``seed`` alone: distinct per worker (so
+    workers do not draw alike) and per number of trials the study held when the invocation
+    started (so resuming a study does not repeat its first draws)."""
+    return int(np.random.SeedSequence([seed, worker, start]).generate_state(1)[0])
+
+
+def create_study(name: str, storage, seed: int, heartbeat_s: int = HEARTBEAT_S):
+    """The named study (created if new) with a TPE sampler seeded by ``seed``; ``storage`` is
+    a URL or an opened storage."""
+    import optuna
+
+    if isinstance(storage, str):
+        storage = open_storage(storage, heartbeat_s)
     sampler = optuna.samplers.TPESampler(seed=seed)
     return optuna.create_study(study_name=name, storage=storage, direction="minimize",
                                sampler=sampler, load_if_exists=True)
 
 
+def fail_stale_trials(study) -> list[int]:
+    """Mark the study's stale RUNNING trials (no heartbeat for the grace period) FAIL; returns
+    their numbers."""
+    import optuna
+
+    running = {t._trial_id: t.number for t in study.get_trials(
+        deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        optuna.storages.fail_stale_trials(study)
+    still = {t._trial_id for t in study.get_trials(
+        deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))}
+    return sorted(number for trial_id, number in running.items() if trial_id not in still)
+
+
+def counts(study) -> dict[str, int]:
+    """Trials of the study by state (``complete``, ``fail``, ``running``, ``pruned``, ...)."""
+    out: dict[str, int] = {}
+    for trial in study.get_trials(deepcopy=False):
+        name = trial.state.name.lower()
+        out[name] = out.get(name, 0) + 1
+    return out
+
+
 def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag: str,
-         threads: int | None = None, progress: bool = False) -> None:
-    """One worker: run ``trials`` trials of the shared study."""
+         worker: int = 0, start: int = 0, threads: int | None = None, progress: bool = False,
+         callbacks: tuple = (), heartbeat_s: int = HEARTBEAT_S, stop=None) -> None:
+    """One worker: run ``trials`` trials of the shared study.
+
+    The sampler seed comes from ``seed``, the worker's index and ``start`` (trials in the study
+    when the invocation began), never from the process, so one ``seed`` gives one study.
+    ``callbacks`` run after each finished trial (Optuna's ``callback(study, trial)``); ``stop``
+    is passed to the objective.
+    """
     import optuna
     import torch
 
     if threads:
         torch.set_num_threads(threads)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study = create_study(name, storage, seed + os.getpid())  # workers must not draw alike
-    study.optimize(objective(X, y, folds, seed, tag), n_trials=trials,
-                   show_progress_bar=progress)
+    study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s)
+    study.optimize(objective(X, y, folds, seed, tag, stop), n_trials=trials,
+                   callbacks=list(callbacks), show_progress_bar=progress)

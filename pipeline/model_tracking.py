@@ -9,26 +9,27 @@ from pathlib import Path
 
 REGISTERED_NAME = "backlash-predictor"
 CHAMPION = "champion"
+CHAMPION_LOCK = f"{REGISTERED_NAME}.champion-lock"
 REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "scikit-learn",
                 "skops", "pandas", "numpy", "scipy"]
 
 
 def log_fit(fit, model_dir: Path, figures: list[Path], params: dict) -> str:
     """Log one fitted model into the active run; returns the registered version."""
-    import mlflow
-
+    from pipeline import tracking
     from pipeline.model_report import training_history
 
-    mlflow.log_params({k: str(v)[:500] for k, v in params.items()})
-    mlflow.log_params({f"est_{k}": str(v)[:250] for k, v in
-                       _flat_params(fit.estimator).items()})
-    mlflow.log_metrics({k: v for k, v in fit.metrics.items() if _finite(v)})
+    mlflow = tracking.mlflow_module()
+    mlflow.log_params(tracking.params({k: str(v)[:500] for k, v in params.items()}))
+    mlflow.log_params(tracking.params({f"est_{k}": str(v)[:250] for k, v in
+                                       _flat_params(fit.estimator).items()}))
+    mlflow.log_metrics(tracking.metrics(fit.metrics))
     info = training_history(fit.estimator)
     if info:
-        for key, values in info["history"].items():
+        for name, values in info["history"].items():
             for epoch, value in enumerate(values):
                 if _finite(value):
-                    mlflow.log_metric(f"epoch_{key}", float(value), step=epoch)
+                    mlflow.log_metric(tracking.key(f"epoch_{name}"), float(value), step=epoch)
     for path in figures:
         mlflow.log_artifact(str(path), artifact_path="figures")
     mlflow.log_artifacts(str(model_dir), artifact_path="model_dir")
@@ -38,9 +39,11 @@ def log_fit(fit, model_dir: Path, figures: list[Path], params: dict) -> str:
 
 
 def _log_pyfunc(fit, model_dir: Path, example):
-    import mlflow
     from mlflow.models import infer_signature
 
+    from pipeline import tracking
+
+    mlflow = tracking.mlflow_module()
     return mlflow.pyfunc.log_model(
         name="model", python_model=str(Path(__file__).parents[1] / "models" / "pyfunc_model.py"),
         artifacts={"model_dir": str(model_dir)},
@@ -51,11 +54,20 @@ def _log_pyfunc(fit, model_dir: Path, example):
 
 def promote_if_best(version: str, data_hash: str, rmse_um: float) -> bool:
     """Give ``version`` the champion alias when it beats the champion on the same data set
-    (or there is none yet). A champion trained on other data is left alone."""
-    from mlflow import MlflowClient
+    (or there is none yet). A champion trained on other data is left alone.
+
+    Compare-and-set under a registry-wide lock, so two trainings finishing at once cannot
+    both read the old champion and both claim the alias.
+    """
+    from pipeline import tracking
+
+    with tracking.exclusive(CHAMPION_LOCK):
+        return _promote(tracking.client(), version, data_hash, rmse_um)
+
+
+def _promote(client, version: str, data_hash: str, rmse_um: float) -> bool:
     from mlflow.exceptions import MlflowException
 
-    client = MlflowClient()
     try:
         current = client.get_model_version_by_alias(REGISTERED_NAME, CHAMPION)
     except MlflowException:

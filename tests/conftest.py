@@ -26,11 +26,31 @@ def psi_file() -> Path:
     return ECMC / "psi_sls_stepper_ISO230.dat"
 
 
+@pytest.fixture(scope="session")
+def mlflow_template(tmp_path_factory) -> Path:
+    """An empty MLflow store with its schema created, built once per session: creating the
+    schema takes seconds, copying the file milliseconds."""
+    import subprocess
+    import sys
+
+    path = tmp_path_factory.mktemp("mlflow-template") / "mlflow.db"
+    code = ("import sys, mlflow; c = mlflow.MlflowClient(sys.argv[1], sys.argv[1]); "
+            "c.search_experiments(max_results=1); c.search_registered_models(max_results=1)")
+    subprocess.run([sys.executable, "-c", code, f"sqlite:///{path}"], check=True,
+                   capture_output=True, timeout=600)
+    return path
+
+
 @pytest.fixture(autouse=True)
-def _isolated_tracking(tmp_path, monkeypatch):
-    """Every test tracks into its own SQLite store, never into the working tree."""
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
-    monkeypatch.setenv("BACKLASH_ARTIFACTS", str(tmp_path / "mlartifacts"))
+def _isolated_tracking(tmp_path_factory, monkeypatch, mlflow_template):
+    """Every test tracks into its own SQLite store (a copy of the empty template) in a folder
+    of its own, never into the working tree or the test's ``tmp_path``."""
+    import shutil
+
+    store = tmp_path_factory.mktemp("tracking")
+    shutil.copyfile(mlflow_template, store / "mlflow.db")
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{store / 'mlflow.db'}")
+    monkeypatch.setenv("BACKLASH_ARTIFACTS", str(store / "mlartifacts"))
 
 
 @pytest.fixture(scope="session")

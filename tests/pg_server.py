@@ -1,4 +1,4 @@
-"""A real PostgreSQL server on loopback for the multi-worker Optuna tests.
+"""A real PostgreSQL server on loopback for the multi-worker Optuna and team-server tests.
 
 Installs Debian's ``postgresql`` package when the server binaries are missing (the tests run
 as root on a fresh machine), then runs a throw-away cluster on 127.0.0.1 on a free port as
@@ -80,3 +80,12 @@ def start():
         shutil.rmtree(root, ignore_errors=True)
 
     return f"postgresql://postgres@127.0.0.1:{port}/optuna", stop
+
+
+def create_database(url: str, name: str) -> str:
+    """Create database ``name`` on the server of ``url``; returns its URL."""
+    import psycopg
+
+    with psycopg.connect(url, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    return url.rsplit("/", 1)[0] + f"/{name}"

@@ -1,8 +1,15 @@
-"""Optuna tuning: local storage, and several worker processes sharing one PostgreSQL study."""
+"""Optuna tuning: local storage, several worker processes sharing one PostgreSQL study, a
+tune killed mid-study and resumed, one seed giving one study, bad storage URLs."""
 
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import mlflow
 import optuna
@@ -10,6 +17,8 @@ import pytest
 from test_targets import ideal_tests
 
 from pipeline.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -50,6 +59,117 @@ def test_two_workers_share_a_postgres_study(readings_csv, postgres_url, capsys):
     assert len(optuna.load_study(study_name="shared", storage=postgres_url).trials) == 6
 
 
-def test_bad_storage_url_is_one_line(readings_csv, capsys):
-    assert main(["tune", str(readings_csv), "--storage", "redis://x"]) == 2
-    assert "unsupported storage URL" in capsys.readouterr().err
+@pytest.mark.parametrize("url, words", [
+    ("redis://x", "unsupported storage URL"),
+    ("optuna.db", "unsupported storage URL"),
+    ("sqlite:///:memory:", "one process's memory"),
+    ("sqlite://", "one process's memory"),
+    ("sqlite:///{tmp}/no/such/folder/optuna.db", "must be an existing folder"),
+    ("sqlite:///{tmp}", "the file not a folder"),
+    ("postgresql://nobody@127.0.0.1:1/none", "cannot open Optuna storage"),
+])
+def test_bad_storage_url_is_one_line(readings_csv, tmp_path, capsys, url, words):
+    assert main(["tune", str(readings_csv), "--storage", url.format(tmp=tmp_path)]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("backlash")]
+    assert len(err) == 1 and words in err[0] and "--storage" in err[0], err
+    assert not (tmp_path / "no").exists()
+
+
+def backlash(*args: str, cwd: Path) -> subprocess.Popen:
+    """``backlash ARGS`` in its own process, tracking into the test's MLflow store."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *args], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def states(storage: str) -> list[str]:
+    try:
+        study = optuna.load_study(study_name="backlash-network", storage=storage)
+    except KeyError:  # not created yet
+        return []
+    return [t.state.name for t in study.trials]
+
+
+def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path, capsys):
+    storage = f"sqlite:///{tmp_path / 'optuna.db'}"
+    common = ["--folds", "2", "--storage", storage, "--heartbeat-s", "1"]
+    proc = backlash("tune", str(readings_csv), "--trials", "200", *common, cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # kill it inside a trial after one finished
+        now = states(storage)
+        if now.count("COMPLETE") >= 1 and now[-1:] == ["RUNNING"]:
+            break
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        time.sleep(0.1)
+    else:
+        pytest.fail("tune did not finish a trial in 120 s")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before = states(storage)
+    killed = len(before) - 1 - before[::-1].index("RUNNING")
+    assert before.count("RUNNING") == 1
+    # the finished trials of the killed invocation are in MLflow already
+    logged = {r.info.run_name: r for r in nested_trial_runs()}
+    assert len(logged) == before.count("COMPLETE")
+    assert all(r.info.status == "FINISHED" and "cv_rmse_um" in r.data.metrics
+               for r in logged.values())
+
+    time.sleep(2.5)  # longer than the grace period of 2 heartbeats
+    capsys.readouterr()
+    assert main(["tune", str(readings_csv), "--trials", "1", "--json", *common]) == 0
+    out = capsys.readouterr()
+    result = json.loads(out.out)
+    after = states(storage)
+    assert after[killed] == "FAIL" and "RUNNING" not in after
+    assert result["marked_failed"] == [killed]
+    complete = before.count("COMPLETE") + 1
+    assert result["trials"] == {"complete": complete, "fail": 1}
+    assert f"best of {complete} complete trials in the study (1 fail)" in out.err
+    assert len(nested_trial_runs()) == complete
+    # the killed invocation's own run is ended as KILLED, not left RUNNING
+    tune_runs = mlflow.search_runs(experiment_names=["tune"], output_format="list")
+    parents = sorted((r.info.start_time, r.info.status) for r in tune_runs
+                     if not r.info.run_name.startswith("trial "))
+    assert [status for _, status in parents] == ["KILLED", "FINISHED"]
+    # a different heartbeat would judge live workers by the wrong grace period
+    capsys.readouterr()
+    assert main(["tune", str(readings_csv), *common[:-1], "5"]) == 2
+    assert "runs with --heartbeat-s 1" in capsys.readouterr().err
+
+
+def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
+    """The sampler's seed is the user's seed, not the process: a run in another process with
+    the same seed draws the same trials."""
+    from models.tuning import sampler_seed
+
+    runs = {}
+    for name, where in (("a", "child"), ("b", "here")):
+        storage = f"sqlite:///{tmp_path / name}.db"
+        args = ["tune", str(readings_csv), "--trials", "2", "--folds", "2", "--seed", "7",
+                "--storage", storage]
+        if where == "child":
+            proc = backlash(*args, cwd=tmp_path)
+            assert proc.wait(timeout=300) == 0, proc.communicate()[1][-2000:]
+        else:
+            assert main(args) == 0
+        study = optuna.load_study(study_name="backlash-network", storage=storage)
+        runs[name] = [(t.params, t.value) for t in study.trials]
+    assert [p for p, _ in runs["a"]] == [p for p, _ in runs["b"]]
+    assert [v for _, v in runs["a"]] == pytest.approx([v for _, v in runs["b"]], rel=1e-6)
+    # another seed, another worker or a resumed study (trials before) draw differently
+    seeds = {sampler_seed(7), sampler_seed(8), sampler_seed(7, worker=1), sampler_seed(7, start=2)}
+    assert len(seeds) == 4
+
+
+def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path):
+    storage = f"sqlite:///{tmp_path / 'optuna.db'}"
+    proc = backlash("tune", str(readings_csv), "--trials", "200", "--folds", "2",
+                    "--storage", storage, cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    while states(storage)[-1:] != ["RUNNING"]:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 130
+    after = states(storage)
+    assert after[-1] == "FAIL" and "RUNNING" not in after

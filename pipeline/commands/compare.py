@@ -31,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.commands.common import load_table, parse_features
     from pipeline.model_report import write_figures
 
+    tracking.check_uri()
     names = parse_features(args.models) or registry.names()  # same list syntax as --features
     for name in names:
         registry.check_name(name)
@@ -39,11 +40,11 @@ def run(args: argparse.Namespace) -> int:
     rows, fits = [], {}
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="backlash-compare-"))
     with tracking.run("compare", f"compare {Path(args.data).name}") as parent:
-        import mlflow
-
-        mlflow.log_params({"data": str(args.data), "data_sha256": digest, "split": args.split,
-                           "target_kind": table.target_kind, "seed": args.seed,
-                           "models": ",".join(names), "noise_floor_um": floor})
+        mlflow = tracking.mlflow_module()
+        mlflow.log_params(tracking.params({
+            "data": str(args.data), "data_sha256": digest, "split": args.split,
+            "target_kind": table.target_kind, "seed": args.seed, "models": ",".join(names),
+            "noise_floor_um": floor}))
         for name in tqdm(names, desc="models", file=sys.stderr, leave=False):
             fit = fit_model(table, name, args.split, args.seed, truth, floor, str(args.data))
             fits[name] = fit
@@ -61,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
         with atomic_path(out / "comparison.csv") as tmp:
             result.to_csv(tmp, index=False)
         mlflow.log_artifact(str(out / "comparison.csv"))
-        mlflow.log_metrics({f"{r['model']}_test_rmse_um": r["test_rmse_um"] for r in rows})
+        mlflow.log_metrics(tracking.metrics({f"{r['model']}_test_rmse_um": r["test_rmse_um"]
+                                             for r in rows}))
     print_table(result, floor, table, file=sys.stderr)
     print(f"best: {best['model']}{' (now champion)' if champion else ''}; MLflow run "
           f"{parent.info.run_id}; table -> {out / 'comparison.csv'}", file=sys.stderr)

@@ -30,19 +30,19 @@ def run(args: argparse.Namespace) -> int:
     from models.discovery import check_baseline, discover
     from pipeline import discovery_report, tracking
 
+    tracking.check_uri()
     baseline = check_baseline(args.baseline)
     readings = read_readings(args.data, args.format)
     result = discover(readings, baseline, random_state=args.seed, source=str(args.data))
     paths = discovery_report.write(result, readings, args.out, str(args.data))
     with tracking.run("discover", f"discover {args.data}"):
-        import mlflow
-
-        mlflow.log_params({"data": str(args.data), "baseline": ",".join(baseline),
-                           "data_sha256": tracking.data_hash(readings),
-                           "named": ",".join(result.named) or "none"})
-        mlflow.log_metrics({"rmse_before_um": result.rmse_before_um,
-                            "rmse_after_um": result.rmse_after_um,
-                            "repeatability_um": result.repeatability_um})
+        mlflow = tracking.mlflow_module()
+        mlflow.log_params(tracking.params({"data": str(args.data), "baseline": ",".join(baseline),
+                                           "data_sha256": tracking.data_hash(readings),
+                                           "named": ",".join(result.named) or "none"}))
+        mlflow.log_metrics(tracking.metrics({"rmse_before_um": result.rmse_before_um,
+                                             "rmse_after_um": result.rmse_after_um,
+                                             "repeatability_um": result.repeatability_um}))
         for path in paths.values():
             mlflow.log_artifact(str(path), artifact_path="discover")
     for step in result.steps:

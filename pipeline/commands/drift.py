@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 
 from features.readings.errors import InputError
 from pipeline.commands.common import FORMATS
@@ -59,9 +58,11 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import clean_nan, dumps
     from features.visits import SERIES_KEYS, visit_backlash
     from models import drift, monitoring
+    from pipeline import tracking
     from pipeline.drift_report import write_drift_report
 
     check_options(args)
+    tracking.check_uri()
     model = None
     if args.model is not None:
         from models.registry import load_model
@@ -91,32 +92,26 @@ def run(args: argparse.Namespace) -> int:
 
 def log_to_mlflow(series, paths, args, readings) -> None:
     """One MLflow run in experiment ``drift``: options, per-series figures, the report files."""
-    import mlflow
-
     from pipeline import tracking
 
     with tracking.run("drift", f"drift {os.path.basename(str(args.data))}"):
-        mlflow.log_params({
+        mlflow = tracking.mlflow_module()
+        mlflow.log_params(tracking.params({
             "data": str(args.data), "data_sha256": tracking.data_hash(readings),
             "threshold_um": args.threshold_um, "model": args.model or "",
             "alpha": args.alpha, "min_jump_sigma": args.min_jump_sigma,
             "warn_months": args.warn_months, "n_series": len(series),
-        })
+        }))
         metrics = {"n_alerts": float(sum(len(s.alerts) for s in series))}
         for s in series:
-            key = metric_key(f"{s.machine_id}_{s.axis}")
+            key = f"{s.machine_id}_{s.axis}"  # any id: tracking.metrics makes valid names
             metrics[f"backlash_um_{key}"] = float(s.visits["backlash_um"].iloc[-1])
             metrics[f"slope_um_per_month_{key}"] = s.trend.get("slope", float("nan"))
             metrics[f"n_change_points_{key}"] = float(len(s.change_points))
-        mlflow.log_metrics({k: float(v) for k, v in metrics.items()
-                            if v is not None and math.isfinite(float(v))})
+        mlflow.log_metrics(tracking.metrics(metrics))
         for path in paths.values():
             mlflow.log_artifact(str(path), artifact_path="drift")
 
-
-def metric_key(text: str) -> str:
-    """An MLflow metric name from a machine id: characters MLflow refuses become ``_``."""
-    return re.sub(r"[^A-Za-z0-9_.-]", "_", text)
 
 
 def print_summary(series, html_path, file) -> None:

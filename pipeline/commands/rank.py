@@ -64,9 +64,10 @@ def run(args: argparse.Namespace) -> int:
     from features.readings import read_readings
     from features.readings.fileio import clean_nan, dumps
     from features.table import feature_table
+    from pipeline import tracking
     from pipeline.rank_report import write_rank_report
 
-    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
+    tracking.check_uri()
     if args.k < 1:
         raise InputError(f"--k must be at least 1, got {args.k}")
     bins = parse_bins(args.bins)
@@ -125,19 +126,18 @@ def _visits(meta):
 
 def log_to_mlflow(result, paths, args, table, readings) -> None:
     """One MLflow run in experiment ``rank``: parameters, every score as a metric, the files."""
-    import mlflow
-
     from pipeline import tracking
 
     t = result.table
     with tracking.run("rank", f"rank {os.path.basename(str(args.data))}"):
-        mlflow.log_params({
+        mlflow = tracking.mlflow_module()
+        mlflow.log_params(tracking.params({
             "data": str(args.data), "data_sha256": tracking.data_hash(readings),
             "n_points": result.n_points, "features": ",".join(t.index),
             "bins": args.bins, "k": args.k, "rank_by": result.rank_by, "seed": args.seed,
             "target_kind": table.target_kind, "model": args.model or "",
             "permutation_model": result.permutation_model[:500],
-        })
+        }))
         metrics = {"knn_accuracy": result.knn.accuracy,
                    "knn_accuracy_std": result.knn.accuracy_std}
         for name, row in t.iterrows():
@@ -147,8 +147,7 @@ def log_to_mlflow(result, paths, args, table, readings) -> None:
                             f"mutual_info_{name}": row["mutual_info"],
                             f"knn_drop_{name}": row["knn_drop"],
                             f"rank_{name}": float(row["rank"])})
-        mlflow.log_metrics({k: float(v) for k, v in metrics.items()
-                            if v is not None and abs(float(v)) != float("inf")})
+        mlflow.log_metrics(tracking.metrics(metrics))
         for path in paths.values():
             mlflow.log_artifact(str(path), artifact_path="rank")
 

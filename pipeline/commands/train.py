@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.commands.common import load_table
     from pipeline.model_report import write_figures
 
+    tracking.check_uri()
     name = args.model or registry.RECOMMENDED
     registry.check_name(name)
     readings, table, floor, truth = load_table(args)
