@@ -69,9 +69,14 @@ def _baselines():
     return baselines
 
 
+def _effect_model():
+    from models.effect_model import EffectModelBaseline
+
+    return EffectModelBaseline()
+
+
 def _hybrid(seed: int):
-    b = _baselines()
-    return b.PhysicsHybrid(physics=b.EffectModelBaseline(),
+    return _baselines().PhysicsHybrid(physics=_effect_model(),
                            residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed))
 
 
@@ -106,7 +111,7 @@ def _factories() -> dict:
         "hybrid": _hybrid,
         "shallow-lm": lambda seed: _network(trainer="lm", random_state=seed),
         "shallow-adam": lambda seed: _network(trainer="adam", random_state=seed),
-        "effect-model": lambda seed: _baselines().EffectModelBaseline(),
+        "effect-model": lambda seed: _effect_model(),
         "constant": lambda seed: _baselines().ConstantBacklash(),
         "linear-temperature": lambda seed: _baselines().LinearInTemperature(),
         "bezier": lambda seed: _baselines().BezierPosition(),
