@@ -49,9 +49,8 @@ SKOPS_SUFFIX = ".skops"
 # k-NN and ridge pipelines, gradient boosting), exactly; tests/test_model_safety.py checks that
 # this is all they need. No callables: a skops tree may name a function, never call one here.
 SKOPS_TYPES = frozenset({
-    "builtins.dict", "builtins.list", "builtins.tuple", "builtins.str", "builtins.int",
-    "builtins.float", "builtins.bool", "builtins.NoneType",
-    "numpy.ndarray", "numpy.float64", "numpy.int64", "numpy.intp",
+    "builtins.dict", "builtins.list", "builtins.tuple", "builtins.str",
+    "numpy.ndarray", "numpy.float64",
     "numpy.random.mtrand.RandomState",
     "sklearn.pipeline.Pipeline",
     "sklearn.preprocessing._data.StandardScaler",
