@@ -183,7 +183,7 @@ def confined(directory, relative: str, where=None) -> Path:
     directory = Path(directory)
     pure = PurePosixPath(relative)
     if (not relative or pure.is_absolute() or "\\" in relative or ":" in relative
-            or ".." in pure.parts or pure.parts[:1] == (".",)):
+            or ".." in pure.parts):
         raise InputError(f"part path {relative!r} must be a plain name inside the model "
                          "directory", file=where or directory)
     root = directory.resolve()
