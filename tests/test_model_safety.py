@@ -35,12 +35,12 @@ FITS = {}  # name -> the fit whose directory ``trained`` wrote
 @pytest.fixture(scope="module")
 def trained(readings_csv, tmp_path_factory) -> dict[str, Path]:
     """Model directories of each save format: skops (knn), plain JSON (bspline), the
-    estimator's own with parts (hybrid)."""
+    estimator's own (shallow-lm) and with parts (hybrid)."""
     from features.table import feature_table
 
     table = feature_table(read_readings(readings_csv, "auto"), target="auto")
     root = tmp_path_factory.mktemp("models")
-    fits = {name: fit_model(table, name) for name in ("knn", "bspline", "hybrid")}
+    fits = {name: fit_model(table, name) for name in ("knn", "bspline", "hybrid", "shallow-lm")}
     for name, fit in fits.items():
         registry.save_model(fit.trained_model(), root / name)
     FITS.update(fits)
@@ -212,6 +212,19 @@ def _flip_last_byte(path: Path) -> None:
     path.write_bytes(bytes(data))
 
 
+def _network_state(change):
+    """Rewrite the network's state dict (still tensors and plain values only), then rehash."""
+    def damage(model_dir: Path) -> None:
+        import torch
+
+        path = model_dir / "estimator" / "network.pt"
+        state = torch.load(path, weights_only=True)
+        change(state)
+        torch.save(state, path)
+        rehash(model_dir)
+    return damage
+
+
 BROKEN = {
     "not json": ("bspline", lambda d: (d / "model.json").write_text("{\"name\": "),
                  "not valid JSON"),
@@ -245,6 +258,13 @@ BROKEN = {
         rehash(d)), "cannot read model part"),
     "hybrid.json broken, hash updated": ("hybrid", lambda d: (
         (d / "estimator" / "hybrid.json").write_text("[]"), rehash(d)), "broken hybrid.json"),
+    "network activation unknown, hash updated": ("shallow-lm", _network_state(
+        lambda state: state["params"].update(activation="evil")), "unknown activation 'evil'"),
+    "network weights truncated, hash updated": ("shallow-lm", _network_state(
+        lambda state: state.update(weights=state["weights"][:-3])),
+        "the weights do not fit the layer sizes"),
+    "network parameter unknown, hash updated": ("shallow-lm", _network_state(
+        lambda state: state["params"].update(command="rm -rf /")), "cannot read model part"),
     "training inputs changed": ("bspline", lambda d: (d / "training_inputs.csv").write_text(
         "target\n1\n"), "training_inputs.csv' does not match its sha256"),
 }
@@ -300,4 +320,5 @@ def test_intact_directories_load_and_predict_as_saved(trained, readings_csv):
         original = FITS[name].estimator.predict(inputs[model.feature_names_])
         np.testing.assert_allclose(model.predict(inputs), original, rtol=0, atol=1e-12)
         spec = json.loads((model_dir / "model.json").read_text())["estimator"]
-        assert spec["format"] == {"knn": "skops", "bspline": "json", "hybrid": "self"}[name]
+        assert spec["format"] == {"knn": "skops", "bspline": "json", "hybrid": "self",
+                                  "shallow-lm": "self"}[name]
