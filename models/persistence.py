@@ -116,14 +116,17 @@ def digest(path: Path) -> str:
 
 
 def _plain_state(estimator) -> dict | None:
-    """Parameters and fitted attributes as JSON, or None when any is not plain data."""
+    """Parameters and fitted attributes as JSON, or None when any is not plain data or the
+    estimator keeps other state (private attributes) that JSON would lose."""
+    params = estimator.get_params(deep=False)
+    fitted = {k: v for k, v in vars(estimator).items() if k not in params}
+    if any(not k.endswith("_") or k.startswith("_") for k in fitted):
+        return None
     try:
-        params = {k: _encode(v) for k, v in estimator.get_params(deep=False).items()}
-        state = {k: _encode(v) for k, v in vars(estimator).items()
-                 if k.endswith("_") and not k.startswith("_")}
+        return {"params": {k: _encode(v) for k, v in params.items()},
+                "state": {k: _encode(v) for k, v in fitted.items()}}
     except TypeError:
         return None
-    return {"params": params, "state": state}
 
 
 def _encode(value):

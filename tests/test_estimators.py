@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
+from features.readings.errors import InputError
 from models import registry
 
 # few epochs and trees keep the checks fast; Adam then needs a larger step to fit at all
@@ -89,5 +90,5 @@ def test_feature_names_that_do_not_fit_the_columns_are_refused():
                                          ("bezier", "target"), ("bspline", "target")])
 def test_required_inputs_are_declared(name, needs):
     assert needs in registry.required_inputs(registry.make(name))
-    with pytest.raises(Exception, match=f"needs the input {needs!r}"):
+    with pytest.raises(InputError, match=f"needs the input {needs!r}"):
         registry.check_inputs(name, registry.make(name), ["feed_mm_min", "dwell_s"])
