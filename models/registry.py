@@ -216,6 +216,10 @@ def load_model(directory) -> TrainedModel:
     meta = _read_meta(meta_path)
     template = make(meta["name"])
     estimator = load_estimator(directory, meta["estimator"], template, where=meta_path)
+    fitted_on = getattr(estimator, "feature_names_in_", None)
+    if fitted_on is not None and list(fitted_on) != list(meta["features"]):
+        raise InputError("model.json key 'features' differs from the inputs the estimator was "
+                         f"fitted on ({', '.join(map(str, fitted_on))})", file=meta_path)
     training = None
     if "training_inputs_sha256" in meta:
         training = _read_training_inputs(directory, meta["training_inputs_sha256"], meta_path)

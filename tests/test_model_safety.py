@@ -234,6 +234,8 @@ BROKEN = {
     "features not a list": ("bspline", lambda d: edit_json(d / "model.json",
                                                            _set("features", "target")),
                             "'features' has the wrong type"),
+    "features reordered": ("bspline", lambda d: edit_json(
+        d / "model.json", lambda m: m["features"].reverse()), "'features' differs from"),
     "unknown predictor": ("bspline", lambda d: edit_json(d / "model.json",
                                                          _set("name", "transformer")),
                           "unknown predictor 'transformer'"),
