@@ -59,12 +59,13 @@ def _axis_points(seed=0, n=60):
     return X, y.to_numpy()
 
 
-@pytest.mark.parametrize("name", ["linear-temperature", "bezier", "bspline", "constant"])
+@pytest.mark.parametrize("name", ["linear-temperature", "bezier", "bspline", "constant",
+                                  "effect-model", "hybrid"])
 def test_numpy_with_features_equals_the_named_frame(name):
     """The ``features`` convention: a numpy array with names fits what the DataFrame fits."""
     X, y = _axis_points()
-    frame = registry.make(name).fit(X, y)
-    named = registry.make(name)
+    frame = fast(registry.make(name)).fit(X, y)
+    named = fast(registry.make(name))
     if "features" in named.get_params():
         named.set_params(features=tuple(X.columns))
     named.fit(X.to_numpy(), y)
