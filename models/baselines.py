@@ -1,7 +1,12 @@
 """Physics baselines for per-point backlash, as scikit-learn regressors on the feature table.
 
-Each takes the feature table ``X`` (a DataFrame with the ``features.table`` column names) and
-uses only the columns its physics names, so the same ``X`` feeds every model:
+Each uses only the inputs its physics names, so the same ``X`` feeds every model. Inputs are
+found by name: a DataFrame names its columns (``feature_names_in_``); a numpy array uses the
+``features`` constructor parameter when given, else its columns are unnamed and the terms that
+need a named input are left out (the model then reduces to its constant part, which is what
+scikit-learn's estimator checks on random unnamed arrays see — declared with the
+``poor_score`` tag). ``required_inputs()`` lists the named inputs a baseline exists for; the
+training step refuses a feature set without them.
 
 - ``ConstantBacklash``: one lost-motion value, the mean of the training targets — what a CNC
   control's scalar backlash compensation assumes (seed 004, section 2.2.2).
@@ -16,87 +21,160 @@ uses only the columns its physics names, so the same ``X`` feeds every model:
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 from scipy.interpolate import BSpline
 from scipy.special import comb
 from sklearn.base import BaseEstimator, RegressorMixin, clone
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import check_is_fitted, validate_data
 
+from features.readings.errors import InputError
+from features.readings.fileio import write_json
 from models.persistence import load_estimator, save_estimator
 from models.physics.effects import REFERENCE_TEMP_C
 
-
-def _column(X, name: str) -> np.ndarray:
-    if not isinstance(X, pd.DataFrame) or name not in X:
-        raise ValueError(f"this baseline needs the input column {name!r}")
-    return X[name].to_numpy(float)
+HYBRID_FILE = "hybrid.json"
 
 
 def _lstsq(design: np.ndarray, y) -> np.ndarray:
     return np.linalg.lstsq(design, np.asarray(y, float), rcond=None)[0]
 
 
-class ConstantBacklash(RegressorMixin, BaseEstimator):
+def input_names(estimator, n_columns: int) -> list[str | None]:
+    """Name of each input column: the fitted DataFrame's, else ``estimator.features``, else
+    None (unnamed)."""
+    if hasattr(estimator, "feature_names_in_"):
+        return [str(c) for c in estimator.feature_names_in_]
+    features = getattr(estimator, "features", None)
+    if features is None:
+        return [None] * n_columns
+    if isinstance(features, str) or len(features) != n_columns:
+        raise ValueError(f"features must name each of the {n_columns} input columns; "
+                         f"got {features!r}")
+    return [str(f) for f in features]
+
+
+def column_of(estimator, name: str, n_columns: int) -> int | None:
+    """Index of the input called ``name``, or None when the inputs do not name it."""
+    names = input_names(estimator, n_columns)
+    return names.index(name) if name in names else None
+
+
+class _BaselineTags:
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        # on unnamed inputs (scikit-learn's checks use random unnamed arrays) a baseline is
+        # its constant part, so the checks' score threshold does not apply, as for
+        # DummyRegressor
+        tags.regressor_tags.poor_score = True
+        return tags
+
+
+class ConstantBacklash(_BaselineTags, RegressorMixin, BaseEstimator):
     """Constant lost motion b [um]: the training mean."""
 
+    def required_inputs(self) -> tuple[str, ...]:
+        return ()
+
     def fit(self, X, y):
+        X, y = validate_data(self, X, y, y_numeric=True)
         self.backlash_um_ = float(np.mean(y))
-        self.n_features_in_ = np.shape(X)[1]
         return self
 
     def predict(self, X):
         check_is_fitted(self, "backlash_um_")
-        return np.full(len(X), self.backlash_um_)
+        X = validate_data(self, X, reset=False)
+        return np.full(X.shape[0], self.backlash_um_)
 
 
-class LinearInTemperature(RegressorMixin, BaseEstimator):
-    """b = b_20 + k_T (T - 20 degC) with b_20 [um], k_T [um/K] by least squares."""
+class LinearInTemperature(_BaselineTags, RegressorMixin, BaseEstimator):
+    """b = b_20 + k_T (T - 20 degC) with b_20 [um], k_T [um/K] by least squares.
 
-    def __init__(self, temperature: str = "machine_temp_c"):
+    Parameters
+    ----------
+    temperature : str
+        Name of the machine temperature input [degC].
+    features : tuple of str, optional
+        Names of a numpy input's columns.
+
+    Attributes
+    ----------
+    temperature_column_ : int or None
+        Column of the temperature input; None when the inputs do not name it (slope 0).
+    """
+
+    def __init__(self, temperature: str = "machine_temp_c", features=None):
         self.temperature = temperature
+        self.features = features
 
-    def _design(self, X):
-        return np.column_stack([np.ones(len(X)), _column(X, self.temperature) - REFERENCE_TEMP_C])
+    def required_inputs(self) -> tuple[str, ...]:
+        return (self.temperature,)
+
+    def _design(self, X: np.ndarray) -> np.ndarray:
+        if self.temperature_column_ is None:
+            return np.column_stack([np.ones(len(X)), np.zeros(len(X))])
+        return np.column_stack([np.ones(len(X)),
+                                X[:, self.temperature_column_] - REFERENCE_TEMP_C])
 
     def fit(self, X, y):
-        self.backlash_20_um_, self.slope_um_per_k_ = _lstsq(self._design(X), y)
-        self.n_features_in_ = np.shape(X)[1]
+        X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+        self.temperature_column_ = column_of(self, self.temperature, X.shape[1])
+        self.backlash_20_um_, self.slope_um_per_k_ = (float(c) for c in
+                                                      _lstsq(self._design(X), y))
         return self
 
     def predict(self, X):
         check_is_fitted(self, "slope_um_per_k_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
         return self._design(X) @ np.array([self.backlash_20_um_, self.slope_um_per_k_])
 
 
-class _PositionCurve(RegressorMixin, BaseEstimator):
-    """A parametric curve over position with control points fitted by least squares."""
+class _PositionCurve(_BaselineTags, RegressorMixin, BaseEstimator):
+    """A parametric curve over position with control points fitted by least squares.
+
+    Without a named ``target`` input every point sits at t = 0 and the curve is a constant.
+    """
 
     position = "target"
 
+    def required_inputs(self) -> tuple[str, ...]:
+        return (self.position,)
+
+    def _x(self, X: np.ndarray) -> np.ndarray:
+        if self.position_column_ is None:
+            return np.zeros(len(X))
+        return X[:, self.position_column_]
+
     def _t(self, X) -> np.ndarray:
-        x = _column(X, self.position)
+        x = self._x(X)
         return np.clip((x - self.range_[0]) / (self.range_[1] - self.range_[0]), 0.0, 1.0)
 
     def fit(self, X, y):
-        x = _column(X, self.position)
+        X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+        self.position_column_ = column_of(self, self.position, X.shape[1])
+        x = self._x(X)
         span = np.ptp(x)
         self.range_ = (float(x.min()), float(x.min() + (span if span > 0 else 1.0)))
         self.control_points_um_ = _lstsq(self.basis(self._t(X)), y)
-        self.n_features_in_ = np.shape(X)[1]
         return self
 
     def predict(self, X):
         check_is_fitted(self, "control_points_um_")
+        X = validate_data(self, X, reset=False, dtype=np.float64)
         return self.basis(self._t(X)) @ self.control_points_um_
 
 
 class BezierPosition(_PositionCurve):
     """Bezier curve of degree n over position (seed 000, eq. 3): B(t) = sum_i C(n,i) t^i
-    (1-t)^(n-i) P_i with n + 1 control points P_i [um]; default degree 4 (five points)."""
+    (1-t)^(n-i) P_i with n + 1 control points P_i [um]; default degree 4 (five points).
+    ``features`` names a numpy input's columns."""
 
-    def __init__(self, degree: int = 4):
+    def __init__(self, degree: int = 4, features=None):
         self.degree = degree
+        self.features = features
 
     def basis(self, t: np.ndarray) -> np.ndarray:
         i = np.arange(self.degree + 1)
@@ -105,11 +183,13 @@ class BezierPosition(_PositionCurve):
 
 class BSplinePosition(_PositionCurve):
     """B-spline of degree k over position (seed 000, eq. 4) on a uniform clamped knot vector
-    with ``n_control`` control points [um]; default degree 2, five points."""
+    with ``n_control`` control points [um]; default degree 2, five points. ``features`` names
+    a numpy input's columns."""
 
-    def __init__(self, degree: int = 2, n_control: int = 5):
+    def __init__(self, degree: int = 2, n_control: int = 5, features=None):
         self.degree = degree
         self.n_control = n_control
+        self.features = features
 
     def basis(self, t: np.ndarray) -> np.ndarray:
         inner = np.linspace(0, 1, self.n_control - self.degree + 1)
@@ -118,52 +198,73 @@ class BSplinePosition(_PositionCurve):
 
 
 class PhysicsHybrid(RegressorMixin, BaseEstimator):
-    """``physics`` fitted first, then ``residual`` fitted on what the physics leaves."""
+    """``physics`` fitted first, then ``residual`` fitted on what the physics leaves.
 
-    def __init__(self, physics=None, residual=None):
+    Both parts see the inputs with their names (a DataFrame's columns, or ``features`` for a
+    numpy input), so a physics part finds its named inputs either way. Saved as
+    ``hybrid.json`` plus one file or folder per part (``models.persistence``).
+    """
+
+    def __init__(self, physics=None, residual=None, features=None):
         self.physics = physics
         self.residual = residual
+        self.features = features
+
+    def required_inputs(self) -> tuple[str, ...]:
+        needed = []
+        for part in (self.physics, self.residual):
+            needed += [n for n in getattr(part, "required_inputs", tuple)() if n not in needed]
+        return tuple(needed)
+
+    def _named(self, X: np.ndarray):
+        names = input_names(self, X.shape[1])
+        return X if None in names else pd.DataFrame(X, columns=names)
 
     def fit(self, X, y):
-        y = np.asarray(y, float)
+        if self.physics is None or self.residual is None:
+            raise ValueError("physics and residual must both be estimators")
+        X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
+        X = self._named(X)
         self.physics_ = clone(self.physics).fit(X, y)
         self.residual_ = clone(self.residual).fit(X, y - self.physics_.predict(X))
-        self.n_features_in_ = np.shape(X)[1]
         return self
 
     def predict(self, X):
         check_is_fitted(self, "residual_")
+        X = self._named(validate_data(self, X, reset=False, dtype=np.float64))
         return self.physics_.predict(X) + self.residual_.predict(X)
 
-    def save(self, directory) -> None:
-        _hybrid_save(self, directory)
+    def save(self, directory) -> Path:
+        """Each part by ``save_estimator``, their specs and the input names in hybrid.json."""
+        check_is_fitted(self, "residual_")
+        directory = Path(directory)
+        parts = {"physics": save_estimator(self.physics_, directory, "physics"),
+                 "residual": save_estimator(self.residual_, directory, "residual")}
+        return write_json(directory / HYBRID_FILE, {
+            **parts, "features": None if self.features is None else list(self.features),
+            "n_features_in": int(self.n_features_in_),
+            "feature_names_in": [str(c) for c in getattr(self, "feature_names_in_", [])]})
 
     @classmethod
-    def load(cls, directory):
-        return _hybrid_load(cls, directory)
-
-
-def _hybrid_save(self, directory) -> None:
-    """Physics part (skops) and residual part (its own format) side by side."""
-    import json
-    from pathlib import Path
-
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    parts = {"physics": save_estimator(self.physics_, directory, "physics"),
-             "residual": save_estimator(self.residual_, directory, "residual")}
-    (directory / "hybrid.json").write_text(json.dumps(parts, indent=2))
-
-
-def _hybrid_load(cls, directory):
-    import json
-    from pathlib import Path
-
-    directory = Path(directory)
-    parts = json.loads((directory / "hybrid.json").read_text())
-    physics, residual = (load_estimator(directory, parts[k]) for k in ("physics", "residual"))
-    model = cls(physics=clone(physics), residual=clone(residual))
-    model.physics_, model.residual_ = physics, residual
-    model.n_features_in_ = getattr(physics, "n_features_in_", None)
-    return model
-
+    def load(cls, directory, template: PhysicsHybrid) -> PhysicsHybrid:
+        """Read ``save``'s folder; each part must be of the class ``template`` has there."""
+        path = Path(directory) / HYBRID_FILE
+        try:
+            saved = json.loads(path.read_text(encoding="utf-8"))
+            n_features = int(saved["n_features_in"])
+            names = [str(c) for c in saved["feature_names_in"]]
+            features = saved["features"]
+            parts = {k: saved[k] for k in ("physics", "residual")}
+        except FileNotFoundError:
+            raise InputError("hybrid model folder has no hybrid.json", file=path) from None
+        except (ValueError, KeyError, TypeError) as err:
+            raise InputError(f"broken hybrid.json: {err}", file=path) from None
+        fitted = {k: load_estimator(directory, parts[k], getattr(template, k), where=path)
+                  for k in parts}
+        model = cls(physics=clone(fitted["physics"]), residual=clone(fitted["residual"]),
+                    features=None if features is None else tuple(features))
+        model.physics_, model.residual_ = fitted["physics"], fitted["residual"]
+        model.n_features_in_ = n_features
+        if names:
+            model.feature_names_in_ = np.asarray(names, dtype=object)
+        return model

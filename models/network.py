@@ -430,7 +430,9 @@ class ShallowNetwork(RegressorMixin, BaseEstimator):
         """Rebuild a fitted network from ``save``'s file (``torch.load(weights_only=True)``)."""
         state = torch.load(Path(directory) / FILE_NAME, weights_only=True)
         params = dict(state["params"])
-        params["hidden_sizes"] = tuple(params["hidden_sizes"])
+        params["hidden_sizes"] = tuple(int(h) for h in params["hidden_sizes"])
+        if params.get("activation") not in _ACTIVATIONS:
+            raise ValueError(f"unknown activation {params.get('activation')!r}")
         model = cls(**params)
         model.weights_ = state["weights"].to(DTYPE)
         model.x_centre_ = state["x_centre"].numpy()
@@ -440,6 +442,11 @@ class ShallowNetwork(RegressorMixin, BaseEstimator):
         if state["feature_names_in"]:
             model.feature_names_in_ = np.asarray(state["feature_names_in"], dtype=object)
         model.shapes_ = layer_shapes(model.n_features_in_, params["hidden_sizes"])
+        if model.weights_.ndim != 1 or model.weights_.numel() != n_weights(model.shapes_):
+            raise ValueError("the weights do not fit the layer sizes")
+        if model.x_centre_.shape != (model.n_features_in_,) or model.x_gain_.shape != (
+                model.n_features_in_,):
+            raise ValueError("the input scaling does not fit the number of inputs")
         model.history_ = {k: list(v) for k, v in state["history"].items()}
         model.stop_reason_, model.best_epoch_ = state["stop_reason"], int(state["best_epoch"])
         for k, v in state["split"].items():

@@ -1,58 +1,307 @@
 """One save/load protocol for every fitted estimator and every part of a composite one.
 
-An estimator is stored either by its own ``save``/``load`` (torch state dicts, JSON
-coefficients) or as a skops file. Loading never unpickles: skops files are checked against
-the trusted types before anything is constructed, and classes that load themselves must
-live in this project's ``models`` package. The spec returned by ``save_estimator`` is what
-``load_estimator`` needs back; callers keep it in their own JSON.
+Three formats, chosen by ``save_estimator``:
+
+- ``self``: the estimator's own ``save(directory)`` / ``load(directory)`` (torch state dicts
+  read with ``weights_only=True``, JSON coefficients, composites writing their parts);
+- ``json``: constructor parameters and fitted attributes that are plain numbers, strings and
+  numeric arrays (the physics baselines) — read back without importing skops;
+- ``skops``: anything else (scikit-learn's own estimators).
+
+Loading never unpickles and never trusts a type because of the module it lives in:
+
+- the caller passes a *template*, the unfitted estimator the registry builds for the model's
+  name; a ``self`` or ``json`` part must be of the template's exact class (or, for a part of a
+  composite, of the class of the template's parameter), and the class object is taken from the
+  template, never imported by a name read from disk;
+- a skops file is read once into memory, its sha256 checked, and every node of its tree
+  checked against ``SKOPS_TYPES`` (exact type names) and ``SKOPS_LOADERS`` — plus
+  ``skops.io.get_untrusted_types`` — before anything is constructed;
+- part paths are relative, inside the model directory, free of ``..`` and of symlinks that
+  lead out;
+- each part's sha256 is stored in the spec and checked before the part is read.
+
+A spec (returned by ``save_estimator``, kept by the caller in its own JSON) is
+``{"format", "class", "path", "sha256"}``; ``check_spec`` validates one read from disk.
+Every problem is an ``InputError`` naming the file.
 """
 
 from __future__ import annotations
 
-import importlib
-from pathlib import Path
+import hashlib
+import inspect
+import io
+import json
+import re
+import zipfile
+from pathlib import Path, PurePosixPath
+
+import numpy as np
 
 from features.readings.errors import InputError
-from features.readings.fileio import atomic_path
+from features.readings.fileio import atomic_path, write_json
 
-TRUSTED_PREFIXES = ("sklearn.", "numpy.", "scipy.", "models.", "builtins.", "collections.")
+FORMATS = ("self", "json", "skops")
+JSON_SUFFIX = ".json"
+SKOPS_SUFFIX = ".skops"
 
+# Every type that appears in the skops trees of the registry's skops-saved predictors (the
+# k-NN and ridge pipelines, gradient boosting), exactly; tests/test_model_safety.py checks that
+# this is all they need. No callables: a skops tree may name a function, never call one here.
+SKOPS_TYPES = frozenset({
+    "builtins.dict", "builtins.list", "builtins.tuple", "builtins.str",
+    "numpy.ndarray", "numpy.float64",
+    "numpy.random.mtrand.RandomState",
+    "sklearn.pipeline.Pipeline",
+    "sklearn.preprocessing._data.StandardScaler",
+    "sklearn.neighbors._regression.KNeighborsRegressor",
+    "sklearn.neighbors._kd_tree.KDTree",
+    "sklearn.metrics._dist_metrics.EuclideanDistance64",
+    "sklearn.linear_model._ridge.RidgeCV",
+    "sklearn.ensemble._gb.GradientBoostingRegressor",
+    "sklearn.tree._classes.DecisionTreeRegressor",
+    "sklearn.tree._tree.Tree",
+    "sklearn.dummy.DummyRegressor",
+    "sklearn._loss.loss.HalfSquaredError",
+    "sklearn._loss._loss.CyHalfSquaredError",
+    "sklearn._loss.link.IdentityLink",
+    "sklearn._loss.link.Interval",
+})
+# skops node kinds that rebuild data or an allowed object; function, method, partial and
+# generic reduce nodes (the ones that can call something) are refused
+SKOPS_LOADERS = frozenset({"DictNode", "ListNode", "TupleNode", "JsonNode", "TypeNode",
+                           "NdArrayNode", "ObjectNode", "RandomStateNode", "TreeNode",
+                           "LossNode", "CachedNode"})
+_ARRAY_DTYPES = ("float64", "float32", "int64", "int32", "bool")
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+def class_name(cls: type) -> str:
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+# ----------------------------------------------------------------------------- saving
 
 def save_estimator(estimator, directory, name: str) -> dict:
-    """Write ``estimator`` into ``directory`` under ``name``; return its spec
-    (``format`` 'self' or 'skops', ``class``, ``path`` relative to ``directory``)."""
+    """Write ``estimator`` into ``directory`` under ``name``; return its spec."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    cls = f"{type(estimator).__module__}.{type(estimator).__qualname__}"
+    spec = {"class": class_name(type(estimator))}
     if hasattr(estimator, "save"):
         estimator.save(directory / name)
-        return {"format": "self", "class": cls, "path": name}
-    import skops.io
+        spec |= {"format": "self", "path": name}
+    elif (plain := _plain_state(estimator)) is not None:
+        write_json(directory / f"{name}{JSON_SUFFIX}", plain)
+        spec |= {"format": "json", "path": f"{name}{JSON_SUFFIX}"}
+    else:
+        import skops.io
 
-    with atomic_path(directory / f"{name}.skops") as tmp:
-        skops.io.dump(estimator, tmp)
-    return {"format": "skops", "class": cls, "path": f"{name}.skops"}
+        with atomic_path(directory / f"{name}{SKOPS_SUFFIX}") as tmp:
+            skops.io.dump(estimator, tmp)
+        spec |= {"format": "skops", "path": f"{name}{SKOPS_SUFFIX}"}
+    spec["sha256"] = digest(directory / spec["path"])
+    return spec
 
 
-def load_estimator(directory, spec: dict, where=None):
-    """Read back what ``save_estimator`` wrote; ``where`` names the file in errors."""
-    path = Path(directory) / spec["path"]
+def digest(path: Path) -> str:
+    """sha256 of a file, or of a folder: its files' relative paths and contents, in order."""
+    path = Path(path)
+    if path.is_file():
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    total = hashlib.sha256()
+    for item in sorted(p for p in path.rglob("*") if p.is_file()):
+        total.update(item.relative_to(path).as_posix().encode() + b"\0")
+        total.update(hashlib.sha256(item.read_bytes()).digest())
+    return total.hexdigest()
+
+
+def _plain_state(estimator) -> dict | None:
+    """Parameters and fitted attributes as JSON, or None when any is not plain data or the
+    estimator keeps other state (private attributes) that JSON would lose."""
+    params = estimator.get_params(deep=False)
+    fitted = {k: v for k, v in vars(estimator).items() if k not in params}
+    if any(not k.endswith("_") or k.startswith("_") for k in fitted):
+        return None
+    try:
+        return {"params": {k: _encode(v) for k, v in params.items()},
+                "state": {k: _encode(v) for k, v in fitted.items()}}
+    except TypeError:
+        return None
+
+
+def _encode(value):
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (np.bool_, np.integer, np.floating)):
+        return value.item()
+    if isinstance(value, (tuple, list)):
+        return {"tuple" if isinstance(value, tuple) else "list": [_encode(v) for v in value]}
+    if isinstance(value, np.ndarray):
+        if value.dtype == object and all(isinstance(v, str) for v in value.ravel()):
+            return {"strings": value.tolist()}
+        if value.dtype.name in _ARRAY_DTYPES:
+            return {"array": value.tolist(), "dtype": value.dtype.name}
+    raise TypeError(f"not plain data: {type(value).__name__}")
+
+
+def _decode(value):
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, dict) and len(value) == 1 and isinstance(
+            items := next(iter(value.values())), list):
+        kind = next(iter(value))
+        if kind == "tuple":
+            return tuple(_decode(v) for v in items)
+        if kind == "list":
+            return [_decode(v) for v in items]
+        if kind == "strings" and all(isinstance(v, str) for v in items):
+            return np.asarray(items, dtype=object)
+    if (isinstance(value, dict) and set(value) == {"array", "dtype"}
+            and value["dtype"] in _ARRAY_DTYPES):
+        return np.asarray(value["array"], dtype=value["dtype"])
+    raise ValueError(f"unexpected value {str(value)[:60]!r}")
+
+
+# ----------------------------------------------------------------------------- loading
+
+def check_spec(spec, where) -> dict:
+    """The spec of a part as read from JSON, validated (``where`` names the JSON file)."""
+    if not isinstance(spec, dict):
+        raise InputError("expected a part description (format, class, path, sha256)",
+                         file=where)
+    for key in ("format", "class", "path", "sha256"):
+        if not isinstance(spec.get(key), str):
+            raise InputError(f"part description lacks the text key {key!r}", file=where)
+    if spec["format"] not in FORMATS:
+        raise InputError(f"unknown part format {spec['format']!r}; expected one of "
+                         f"{', '.join(FORMATS)}", file=where)
+    if not _SHA256.fullmatch(spec["sha256"]):
+        raise InputError("part sha256 is not 64 hexadecimal digits", file=where)
+    return spec
+
+
+def confined(directory, relative: str, where=None) -> Path:
+    """``directory / relative``, refused unless it stays inside ``directory``: no absolute
+    path, no ``..``, no symlink on the way or inside a part folder that leads out."""
+    directory = Path(directory)
+    pure = PurePosixPath(relative)
+    if (not relative or pure.is_absolute() or "\\" in relative or ":" in relative
+            or ".." in pure.parts):
+        raise InputError(f"part path {relative!r} must be a plain name inside the model "
+                         "directory", file=where or directory)
+    root = directory.resolve()
+    path = directory.joinpath(*pure.parts)
+    inside = [path, *(path.rglob("*") if path.is_dir() and not path.is_symlink() else [])]
+    for item in inside:
+        if not item.resolve().is_relative_to(root):
+            raise InputError(f"part path {relative!r} leads outside the model directory",
+                             file=where or directory)
+    return path
+
+
+def load_estimator(directory, spec: dict, template, where=None):
+    """Read back a part written by ``save_estimator`` (see the module docstring).
+
+    ``template`` is the unfitted estimator the part must be an instance of;
+    ``where`` is the JSON file that holds ``spec`` (named in errors).
+    """
+    where = where or Path(directory)
+    spec = check_spec(spec, where)
+    path = confined(directory, spec["path"], where)
+    if not path.exists():
+        raise InputError(f"model part {spec['path']!r} is missing", file=where)
+    if spec["class"] != class_name(type(template)):
+        raise InputError(f"refusing estimator class {spec['class']!r}; this model's entry "
+                         f"builds {class_name(type(template))}", file=where)
     if spec["format"] == "skops":
-        return load_skops(path)
-    module, _, cls = spec["class"].rpartition(".")
-    if not module.startswith("models."):
-        raise InputError(f"refusing estimator class {spec['class']!r}", file=where or path)
-    return getattr(importlib.import_module(module), cls).load(path)
+        estimator = _load_skops(path, spec["sha256"], allowed=product_types(template))
+        if type(estimator) is not type(template):
+            raise InputError(f"the skops file holds a {type(estimator).__name__}, expected "
+                             f"{type(template).__name__}", file=path)
+        return estimator
+    if digest(path) != spec["sha256"]:
+        raise InputError(f"model part {spec['path']!r} does not match its sha256 "
+                         "(changed or damaged since it was saved)", file=where)
+    cls = type(template)
+    try:
+        if spec["format"] == "json":
+            return _from_plain(cls, json.loads(path.read_text(encoding="utf-8")))
+        if "template" in inspect.signature(cls.load).parameters:
+            return cls.load(path, template=template)
+        return cls.load(path)
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - any failure to read a part is a damaged part
+        raise InputError(f"cannot read model part {spec['path']!r}: {err}", file=path) from None
 
 
-def load_skops(path: Path):
+def product_types(template) -> set[str]:
+    """Exact class names of ``template`` and of the estimators among its parameters."""
+    found = {class_name(type(template))}
+    if hasattr(template, "get_params"):
+        for value in template.get_params(deep=True).values():
+            if hasattr(value, "fit"):
+                found.add(class_name(type(value)))
+    return found
+
+
+def _from_plain(cls, plain: dict):
+    if not isinstance(plain, dict) or set(plain) != {"params", "state"}:
+        raise ValueError("expected the keys params and state")
+    params = {k: _decode(v) for k, v in plain["params"].items()}
+    unknown = set(params) - set(inspect.signature(cls).parameters)
+    if unknown:
+        raise ValueError(f"unknown parameter {min(unknown)!r}")
+    estimator = cls(**params)
+    for key, value in plain["state"].items():
+        if not (key.endswith("_") and key.isidentifier() and not key.startswith("_")):
+            raise ValueError(f"unexpected attribute {key!r}")
+        setattr(estimator, key, _decode(value))
+    return estimator
+
+
+def _load_skops(path: Path, sha256: str, allowed: set[str]):
+    data = path.read_bytes()
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise InputError("model part does not match its sha256 (changed or damaged since it "
+                         "was saved)", file=path)
+    for kind, type_name in skops_nodes(data, path):
+        if kind not in SKOPS_LOADERS:
+            raise InputError(f"refusing skops node {kind} ({type_name}): the product never "
+                             "saves one", file=path)
+        if type_name not in SKOPS_TYPES and type_name not in allowed:
+            raise InputError(f"refusing to load type {type_name!r}: not among the types the "
+                             "product saves", file=path)
     import skops.io
 
-    if not path.is_file():
-        raise InputError("model directory has no estimator file", file=path)
-    untrusted = skops.io.get_untrusted_types(file=path)
-    refused = [t for t in untrusted if not t.startswith(TRUSTED_PREFIXES)]
-    if refused:
-        raise InputError(f"refusing to load type {refused[0]!r} from an untrusted model file",
-                         file=path)
-    return skops.io.load(path, trusted=untrusted)
+    try:
+        untrusted = skops.io.get_untrusted_types(data=data)
+        refused = [t for t in untrusted if t not in SKOPS_TYPES and t not in allowed]
+        if refused:
+            raise InputError(f"refusing to load type {refused[0]!r}: not among the types the "
+                             "product saves", file=path)
+        return skops.io.loads(data, trusted=untrusted)
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a damaged archive is a damaged part
+        raise InputError(f"cannot read skops file: {err}", file=path) from None
+
+
+def skops_nodes(data: bytes, path=None) -> list[tuple[str, str]]:
+    """(loader, type name) of every node of a skops file's tree, read from its schema."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            schema = json.loads(archive.read("schema.json"))
+    except (zipfile.BadZipFile, KeyError, ValueError) as err:
+        raise InputError(f"not a readable skops file: {err}", file=path) from None
+    found, stack = [], [schema]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, list):
+            stack.extend(node)
+        elif isinstance(node, dict):
+            if "__loader__" in node or "__class__" in node:
+                found.append((str(node.get("__loader__")),
+                              f"{node.get('__module__')}.{node.get('__class__')}"))
+            stack.extend(node.values())
+    return found

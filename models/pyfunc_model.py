@@ -1,6 +1,7 @@
 """MLflow "model from code": loads a trained model directory with ``models.registry.load_model``
-(torch state dicts with ``weights_only=True``, skops with trusted types only), so nothing is
-unpickled when MLflow serves or loads the model."""
+(exact types only, parts confined to the directory and checked against their sha256; see
+``models.persistence``), so nothing is unpickled and no code runs when MLflow serves or loads
+the model. A broken or tampered directory raises ``InputError`` with its one-line reason."""
 
 from __future__ import annotations
 

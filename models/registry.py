@@ -5,10 +5,10 @@ Every entry is a scikit-learn style estimator working on the feature table
 treat the network, the physics baselines and the comparators alike.
 
 A trained model directory holds ``model.json`` (name, features, target definition,
-validation error, training input ranges, data hash), ``training_inputs.csv`` (for input-drift
-tests) and the fitted estimator: a torch state dict (loaded with ``weights_only=True``) for
-estimators that save themselves, otherwise a skops file loaded with only the scikit-learn,
-numpy, scipy and project types trusted.
+validation error, training input ranges, data hash, and the spec and sha256 of every part),
+``training_inputs.csv`` (for input-drift tests) and the fitted estimator, written and read by
+``models.persistence`` (its own format, plain JSON or skops; the loader's checks are described
+there). ``load_model`` is the only reader of model directories.
 """
 
 from __future__ import annotations
@@ -19,6 +19,9 @@ from pathlib import Path
 
 from features.readings.errors import InputError
 from models.persistence import load_estimator, save_estimator
+
+MODEL_FILE = "model.json"
+TRAINING_INPUTS = "training_inputs.csv"
 
 # name: (one-line description, factory(random_state) -> unfitted estimator)
 RECOMMENDED = "effect-model"
@@ -60,32 +63,103 @@ def _network(**params):
     return ShallowNetwork(**params)
 
 
-def _factories() -> dict:
-    from sklearn.ensemble import GradientBoostingRegressor
-    from sklearn.linear_model import RidgeCV
-    from sklearn.neighbors import KNeighborsRegressor
+def _baselines():
+    from models import baselines
+
+    return baselines
+
+
+def _effect_model():
+    from models.effect_model import EffectModelBaseline
+
+    return EffectModelBaseline()
+
+
+def _hybrid(seed: int):
+    return _baselines().PhysicsHybrid(physics=_effect_model(),
+                           residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed))
+
+
+def _scaled(regressor):
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    from models import baselines
-    from models.effect_model import EffectModelBaseline
+    return make_pipeline(StandardScaler(), regressor)
 
+
+def _knn(seed: int):
+    from sklearn.neighbors import KNeighborsRegressor
+
+    return _scaled(KNeighborsRegressor(n_neighbors=5, weights="distance"))
+
+
+def _gbr(seed: int):
+    from sklearn.ensemble import GradientBoostingRegressor
+
+    return GradientBoostingRegressor(random_state=seed)
+
+
+def _ridge(seed: int):
+    from sklearn.linear_model import RidgeCV
+
+    return _scaled(RidgeCV(alphas=(0.01, 0.1, 1, 10)))
+
+
+def _factories() -> dict:
+    """name -> factory(random_state); each imports only what its estimator needs."""
     return {
-        "hybrid": lambda seed: baselines.PhysicsHybrid(
-            physics=EffectModelBaseline(),
-            residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),
+        "hybrid": _hybrid,
         "shallow-lm": lambda seed: _network(trainer="lm", random_state=seed),
         "shallow-adam": lambda seed: _network(trainer="adam", random_state=seed),
-        "effect-model": lambda seed: EffectModelBaseline(),
-        "constant": lambda seed: baselines.ConstantBacklash(),
-        "linear-temperature": lambda seed: baselines.LinearInTemperature(),
-        "bezier": lambda seed: baselines.BezierPosition(),
-        "bspline": lambda seed: baselines.BSplinePosition(),
-        "knn": lambda seed: make_pipeline(
-            StandardScaler(), KNeighborsRegressor(n_neighbors=5, weights="distance")),
-        "gbr": lambda seed: GradientBoostingRegressor(random_state=seed),
-        "ridge": lambda seed: make_pipeline(StandardScaler(), RidgeCV(alphas=(0.01, 0.1, 1, 10))),
+        "effect-model": lambda seed: _effect_model(),
+        "constant": lambda seed: _baselines().ConstantBacklash(),
+        "linear-temperature": lambda seed: _baselines().LinearInTemperature(),
+        "bezier": lambda seed: _baselines().BezierPosition(),
+        "bspline": lambda seed: _baselines().BSplinePosition(),
+        "knn": _knn,
+        "gbr": _gbr,
+        "ridge": _ridge,
     }
+
+
+def required_inputs(estimator) -> tuple[str, ...]:
+    """Named inputs without which ``estimator`` is not the model its name promises."""
+    needed = getattr(estimator, "required_inputs", None)
+    return tuple(needed()) if callable(needed) else ()
+
+
+def check_inputs(name: str, estimator, columns, source: str = "data") -> None:
+    """Refuse a feature set that lacks an input the predictor ``name`` needs."""
+    missing = [c for c in required_inputs(estimator) if c not in list(columns)]
+    if missing:
+        raise InputError(f"predictor {name!r} needs the input {missing[0]!r}; the feature "
+                         f"set {', '.join(map(str, columns))} lacks it", file=source,
+                         column="--features")
+
+
+# scikit-learn estimators used as they are, with the estimator checks scikit-learn itself
+# expects them to fail and its reasons (sklearn.utils._test_common.instance_generator)
+THIRD_PARTY_DEVIATIONS = {
+    "sklearn.pipeline.Pipeline": {
+        "check_dont_overwrite_parameters":
+            "Pipeline fits the estimators inside its `steps` parameter in place",
+        "check_estimators_overwrite_params":
+            "Pipeline fits the estimators inside its `steps` parameter in place",
+    },
+    "sklearn.ensemble._gb.GradientBoostingRegressor": {
+        "check_sample_weight_equivalence_on_dense_data":
+            "sample_weight is not equivalent to removing/repeating samples",
+        "check_sample_weight_equivalence_on_sparse_data":
+            "sample_weight is not equivalent to removing/repeating samples",
+    },
+}
+
+
+def expected_failed_checks(estimator) -> dict[str, str]:
+    """scikit-learn estimator checks ``estimator`` is declared to fail, with the reason."""
+    from models.persistence import class_name
+
+    return dict(THIRD_PARTY_DEVIATIONS.get(class_name(type(estimator)), {}))
 
 
 @dataclass
@@ -108,47 +182,103 @@ class TrainedModel:
 def save_model(model: TrainedModel, directory) -> Path:
     """Write a trained model directory (see module docstring)."""
     from features.readings.fileio import atomic_path, write_json
+    from models.persistence import digest
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     spec = save_estimator(model.estimator, directory, "estimator")
+    inputs = {}
     if model.training_inputs_ is not None:
-        with atomic_path(directory / "training_inputs.csv") as tmp:
+        with atomic_path(directory / TRAINING_INPUTS) as tmp:
             model.training_inputs_.to_csv(tmp, index=False)
-    write_json(directory / "model.json", {
-        "name": model.name, "estimator_format": spec["format"],
-        "estimator_class": spec["class"],
+        inputs = {"training_inputs_sha256": digest(directory / TRAINING_INPUTS)}
+    write_json(directory / MODEL_FILE, {
+        "name": model.name, "estimator": spec,
         "features": model.feature_names_, "target_kind": model.target_kind,
         "validation_rmse_um": model.validation_rmse_,
         "input_ranges": {k: list(v) for k, v in model.input_ranges_.items()},
-        **model.meta,
+        **inputs, **model.meta,
     })
     return directory
 
 
 def load_model(directory) -> TrainedModel:
-    """Read a model directory written by ``save_model``; refuse anything unexpected."""
+    """Read a model directory written by ``save_model``; refuse anything unexpected.
+
+    Checked before anything is built: ``model.json``'s keys and types, the predictor name (the
+    registry builds the template whose exact classes the saved parts must have), each part's
+    path (inside the directory) and sha256.
+    """
+    directory = Path(directory)
+    meta_path = directory / MODEL_FILE
+    if not meta_path.is_file():
+        raise InputError("not a trained model directory: no model.json", file=directory)
+    meta = _read_meta(meta_path)
+    template = make(meta["name"])
+    estimator = load_estimator(directory, meta["estimator"], template, where=meta_path)
+    fitted_on = getattr(estimator, "feature_names_in_", None)
+    if fitted_on is not None and list(fitted_on) != list(meta["features"]):
+        raise InputError("model.json key 'features' differs from the inputs the estimator was "
+                         f"fitted on ({', '.join(map(str, fitted_on))})", file=meta_path)
+    training = None
+    if "training_inputs_sha256" in meta:
+        training = _read_training_inputs(directory, meta["training_inputs_sha256"], meta_path)
+    known = {"name", "estimator", "features", "target_kind", "validation_rmse_um",
+             "input_ranges", "training_inputs_sha256"}
+    return TrainedModel(
+        meta["name"], estimator, list(meta["features"]), meta["target_kind"],
+        float(meta["validation_rmse_um"]),
+        {k: (float(v[0]), float(v[1])) for k, v in meta["input_ranges"].items()}, training,
+        {k: v for k, v in meta.items() if k not in known})
+
+
+def _read_meta(path: Path) -> dict:
+    """model.json, with every key ``load_model`` uses checked for presence and type."""
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(f"model.json is not valid JSON: {err}", file=path) from None
+    if not isinstance(meta, dict):
+        raise InputError("model.json must hold a JSON object", file=path)
+    expected = {"name": str, "estimator": dict, "features": list, "target_kind": str,
+                "validation_rmse_um": (int, float), "input_ranges": dict}
+    for key, kind in expected.items():
+        if key not in meta:
+            raise InputError(f"model.json lacks the key {key!r}", file=path)
+        if not isinstance(meta[key], kind) or isinstance(meta[key], bool):
+            raise InputError(f"model.json key {key!r} has the wrong type "
+                             f"({type(meta[key]).__name__})", file=path)
+    if meta["name"] not in DESCRIPTIONS:
+        raise InputError(f"model.json names an unknown predictor {meta['name']!r}", file=path)
+    if not meta["features"] or not all(isinstance(f, str) for f in meta["features"]):
+        raise InputError("model.json key 'features' must list the input column names",
+                         file=path)
+    for name, bounds in meta["input_ranges"].items():
+        if (not isinstance(bounds, list) or len(bounds) != 2
+                or not all(isinstance(b, (int, float)) for b in bounds)):
+            raise InputError(f"model.json input range of {name!r} must be [low, high]",
+                             file=path)
+    if not isinstance(meta.get("training_inputs_sha256", ""), str):
+        raise InputError("model.json key 'training_inputs_sha256' must be text", file=path)
+    return meta
+
+
+def _read_training_inputs(directory: Path, sha256: str, where: Path):
+    import hashlib
+    import io
 
     import pandas as pd
 
-    directory = Path(directory)
-    meta_path = directory / "model.json"
-    if not meta_path.is_file():
-        raise InputError("not a trained model directory: no model.json", file=directory)
+    from models.persistence import confined
+
+    path = confined(directory, TRAINING_INPUTS, where)
+    if not path.is_file():
+        raise InputError(f"model part {TRAINING_INPUTS!r} is missing", file=where)
+    data = path.read_bytes()
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise InputError(f"model part {TRAINING_INPUTS!r} does not match its sha256 (changed "
+                         "or damaged since it was saved)", file=where)
     try:
-        meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as err:
-        raise InputError(f"model.json is not valid JSON: {err}", file=meta_path) from None
-    fmt = meta.get("estimator_format")
-    estimator = load_estimator(directory, {
-        "format": fmt, "class": meta.get("estimator_class", ""),
-        "path": "estimator" if fmt == "self" else "estimator.skops"}, where=meta_path)
-    inputs_path = directory / "training_inputs.csv"
-    training = pd.read_csv(inputs_path) if inputs_path.is_file() else None
-    known = {"name", "estimator_format", "estimator_class", "features", "target_kind",
-             "validation_rmse_um", "input_ranges"}
-    return TrainedModel(
-        meta["name"], estimator, list(meta["features"]), meta.get("target_kind", "auto"),
-        float(meta.get("validation_rmse_um", float("nan"))),
-        {k: tuple(v) for k, v in meta.get("input_ranges", {}).items()}, training,
-        {k: v for k, v in meta.items() if k not in known})
+        return pd.read_csv(io.BytesIO(data))
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(f"cannot read the training inputs: {err}", file=path) from None

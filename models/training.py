@@ -44,6 +44,7 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     check_features(table.X, source)
     train, test = evaluation.holdout(table.meta, split, random_state, source)
     estimator = registry.make(name, random_state)
+    registry.check_inputs(name, estimator, table.X.columns, source)
     estimator.fit(table.X.iloc[train], table.y.iloc[train])
     predicted = np.asarray(estimator.predict(table.X), float)
     y = table.y.to_numpy(float)

@@ -71,6 +71,10 @@ def test_compare_prints_every_model_and_picks_the_best(readings_csv, tmp_path, c
     ("one_feed", [], "too few to split"),
     ("none", ["--features", "target,dwell_s"], "feature is constant"),
     ("nan_temp", ["--features", "target,machine_temp_c"], "NaN in feature"),
+    ("none", ["--model", "linear-temperature", "--features", "target,feed_mm_min"],
+     "predictor 'linear-temperature' needs the input 'machine_temp_c'"),
+    ("none", ["--model", "bspline", "--features", "feed_mm_min,machine_temp_c"],
+     "predictor 'bspline' needs the input 'target'"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, change, args, words):
     readings = ideal_tests(direct=True)
@@ -103,3 +107,38 @@ def test_forward_split_on_the_twin_beats_the_noise_floor(capsys):
     truth = {m["model"]: m["truth_rmse_um"] for m in result["models"]}
     assert min(truth.values()) <= result["noise_floor_um"]
     assert truth["effect-model"] <= result["noise_floor_um"] < truth["constant"]
+
+
+def test_default_predictor_fits_saves_and_predicts_without_skops_torch_or_mlflow(tmp_path):
+    """The everyday path imports only what it uses: the default predictor saves itself as plain
+    data, so fitting, saving, loading and ``backlash predict`` need none of the heavy
+    libraries (the time goal is in bench/bench_cli.py)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    # the demo's twin data: several visits, so any default predictor can fit them
+    readings_csv = Path(__file__).parents[1] / "experiments" / "data" / "twin" / "readings.csv"
+    model, pred = tmp_path / "model", tmp_path / "pred.csv"
+    script = "\n".join([
+        "import sys",
+        "from features.readings import read_readings",
+        "from features.table import feature_table",
+        "from models import registry",
+        "from models.training import fit_model",
+        "from pipeline.cli import main",
+        f"table = feature_table(read_readings({str(readings_csv)!r}, 'auto'), target='auto')",
+        "fit = fit_model(table, registry.RECOMMENDED)",
+        f"registry.save_model(fit.trained_model(), {str(model)!r})",
+        f"argv = ['predict', {str(model)!r}, {str(readings_csv)!r}, '--out', {str(pred)!r}]",
+        "assert main(argv) == 0",
+        "heavy = ('skops', 'torch', 'mlflow', 'matplotlib', 'optuna')",
+        "print(','.join(m for m in heavy if m in sys.modules))",
+    ])
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, check=True)
+    assert done.stdout.strip() == "", done.stdout
+    assert len(pd.read_csv(pred)) > 0 and pd.read_csv(pred)["backlash_um"].notna().all()
