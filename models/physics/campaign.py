@@ -30,6 +30,10 @@ machine_temp_c = 21.0                   # start-of-run screw temperature
 machine_temp_spread_k = 0.5             # its run-to-run spread (also ambient_spread_k,
                                         # pressure_spread_hpa, humidity_spread_pct)
 warmup_k = 1.5                          # warm-up of the screw during a run at 1000 mm/min
+warmup_tau_s = 1200.0                   # the screw's thermal time constant
+cooling_tau_s = 0.0                     # > 0: heat balance with the air, cooling in dwells
+ambient_drift_k_per_h = 0.0             # air profiles along a run (also pressure_drift_hpa_per_h,
+                                        # humidity_drift_pct_per_h)
 ambient_temp_c = 20.5
 pressure_hpa = 1013.0
 humidity_pct = 45.0
@@ -76,7 +80,11 @@ BASE = {
                     "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0,
                     # run-to-run spread (standard deviation) of the conditions
                     "machine_temp_spread_k": 0.5, "ambient_spread_k": 0.3,
-                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0},
+                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0,
+                    # profiles along a run: linear drifts of the air, and the screw's cooling
+                    # towards ambient during each dwell (time constant; 0: no cooling)
+                    "ambient_drift_k_per_h": 0.0, "pressure_drift_hpa_per_h": 0.0,
+                    "humidity_drift_pct_per_h": 0.0, "cooling_tau_s": 0.0},
     "noise": {"noise_um": 0.3, "resolution_um": 0.1},
     "effects": {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
                 "backlash_feed": {"k_um_per_m_min": 1.2},
@@ -109,6 +117,9 @@ def load_config(source, preset: str | None = None) -> dict:
     """A full, validated configuration: a preset name, a dict of overrides or a TOML file,
     applied on top of ``preset`` (a file or dict) or of the base plan."""
     where = "config"
+    if preset is not None and preset not in PRESETS:
+        raise InputError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}",
+                         column="preset")
     if isinstance(source, (str, Path)) and str(source) in PRESETS:
         overrides, where = PRESETS[str(source)], f"preset {source}"
     elif isinstance(source, dict):
@@ -148,8 +159,35 @@ def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
         elif isinstance(base[key], dict):
             out[key] = _merge(base[key], value, where, f"{prefix}{key}.")
         else:
+            _check_type(base[key], value, where, prefix + key)
             out[key] = value
     return out
+
+
+TEXT_LISTS = ("plan.methods", "fleet.axes")
+
+
+def _check_type(default, value, where: str, column: str) -> None:
+    """A value must have the kind of its default: number, true/false, text, list of text
+    (methods, axes) or list of numbers (targets, feeds, dwells, visits)."""
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    if isinstance(default, bool):
+        kind, ok = "true or false", isinstance(value, bool)
+    elif number(default):
+        kind, ok = "a number", number(value)
+    elif isinstance(default, str):
+        kind, ok = "text", isinstance(value, str)
+    elif column in TEXT_LISTS:
+        kind = "a list of text"
+        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+    else:  # lists of numbers; targets_mm may also stay unset
+        kind = "a list of numbers"
+        ok = (default is None and value is None) or (
+            isinstance(value, list) and all(number(v) for v in value))
+    if not ok:
+        raise InputError(f"expected {kind}, got {value!r}", file=where, column=column)
 
 
 def _validate(config: dict, where: str) -> None:
@@ -171,15 +209,18 @@ def _validate(config: dict, where: str) -> None:
         bad("plan.cycles", "ISO 230-2 needs at least 2 cycles")
     if set(plan["methods"]) - {"linear", "pendulum"} or not plan["methods"]:
         bad("plan.methods", "expected a list of 'linear' and/or 'pendulum'")
-    for name in ("machines", "visits", "repeats"):
-        value = fleet.get(name, plan.get(name))
-        if int(value) < 1:
-            bad(name, f"must be at least 1, got {value}")
+    for section, name in (("fleet", "machines"), ("fleet", "visits"), ("plan", "repeats")):
+        if int(config[section][name]) < 1:
+            bad(f"{section}.{name}", f"must be at least 1, got {config[section][name]}")
     for column, value in (("effects.backlash.b0_um", config["effects"].get("backlash", {})
                            .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet["adjusted_b0_um"]),
                           ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"])):
         if value < 0:
             bad(column, f"negative backlash ({value}); lost motion is a clearance >= 0 um")
+    for key in ("warmup_tau_s", "cooling_tau_s"):
+        if config["environment"][key] < 0 or (key == "warmup_tau_s"
+                                               and config["environment"][key] == 0):
+            bad(f"environment.{key}", "a thermal time constant must be > 0 s")
     if config["noise"]["noise_um"] < 0 or config["noise"]["resolution_um"] < 0:
         bad("noise", "noise and resolution must be >= 0")
 
@@ -218,12 +259,33 @@ def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def reference_backlash_um(config: dict, b0_um: np.ndarray) -> np.ndarray:
+    """True lost motion of each visit at reference conditions [um]: the play width b summed over
+    the enabled lost-motion effects with ``backlash``'s b0 of the visit, the screw at
+    20 degC, the plan's median feed, averaged over the plan's targets (b >= 0 at each target)."""
+    targets = _targets(config["plan"])
+    shape = (len(b0_um), len(targets))
+    conditions = {"feed_mm_min": np.full(shape, float(np.median(config["plan"]["feeds_mm_min"]))),
+                  "machine_temp_c": np.full(shape, effects.REFERENCE_TEMP_C)}
+    width = np.zeros(shape)
+    for name in effects.LOST_MOTION:
+        if name in config["effects"]:
+            params = dict(config["effects"][name])
+            if name == "backlash":
+                params["b0_um"] = np.asarray(b0_um, float)[:, None]
+            width += effects.contribution(name, np.broadcast_to(targets, shape), 0, conditions,
+                                          **params)
+    return np.maximum(width, 0.0).mean(axis=1)
+
+
 def simulate(config, seed: int = 0) -> Simulation:
     """Readings and truth of a whole campaign; same config and seed give the same numbers."""
     config = load_config(config)
     rng = np.random.default_rng(seed)
     plan, env = config["plan"], config["environment"]
     visits = visit_table(config, rng)
+    visits.insert(len(visits.columns) - 1, "reference_backlash_um",
+                  reference_backlash_um(config, visits["b0_um"].to_numpy(float)))
     targets = _targets(plan)
     grid = pd.MultiIndex.from_product(
         [range(len(visits)), plan["methods"], plan["feeds_mm_min"], plan["dwells_s"],
@@ -249,20 +311,39 @@ def simulate(config, seed: int = 0) -> Simulation:
         arrays = {c: part[c].to_numpy(float) for c in
                   ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
                    "ambient_temp_c", "pressure_hpa", "humidity_pct")}
-        arrays["warmup_tau_s"] = env["warmup_tau_s"]
+        for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
+                    "humidity_drift_pct_per_h", "cooling_tau_s"):
+            arrays[key] = float(env[key])
         arrays["params"] = {name: dict(params) for name, params in config["effects"].items()}
         if "backlash" in arrays["params"]:
             arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
-        out = simulate_tests(p, targets, arrays, config["effects"], config["system"],
-                             config["noise"]["noise_um"], config["noise"]["resolution_um"], rng)
-        readings.append(_readings_frame(part, out))
-        truth.append(_truth_frame(part, out))
+        # bounded blocks of tests keep the (tests x waypoints) arrays small; the noise is drawn
+        # block after block from one generator, so the numbers do not depend on the block size
+        for start in range(0, len(part), CHUNK_TESTS):
+            block = slice(start, start + CHUNK_TESTS)
+            arrays_block = {k: (v[block] if isinstance(v, np.ndarray) else v)
+                            for k, v in arrays.items() if k != "params"}
+            arrays_block["params"] = {
+                name: {k: (v[block] if isinstance(v, np.ndarray) else v)
+                       for k, v in params.items()} for name, params in arrays["params"].items()}
+            out = simulate_tests(p, targets, arrays_block, config["effects"], config["system"],
+                                 config["noise"]["noise_um"], config["noise"]["resolution_um"],
+                                 rng)
+            readings.append(_readings_frame(part.iloc[block], out))
+            truth.append(_truth_frame(part.iloc[block], out))
     readings = pd.concat(readings, ignore_index=True)
     truth = pd.concat(truth, ignore_index=True)
-    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist()}
+    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist(),
+                  "reference_conditions": {
+                      "machine_temp_c": effects.REFERENCE_TEMP_C,
+                      "feed_mm_min": float(np.median(plan["feeds_mm_min"])),
+                      "ambient_temp_c": effects.REFERENCE_TEMP_C,
+                      "pressure_hpa": effects.REFERENCE_PRESSURE_HPA,
+                      "humidity_pct": effects.REFERENCE_HUMIDITY_PCT}}
     return Simulation(readings, truth, visits, parameters)
 
 
+CHUNK_TESTS = 4096
 KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
 
 
