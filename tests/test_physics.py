@@ -223,3 +223,26 @@ def test_unknown_preset_and_wrong_types_are_rejected(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "plan.feeds_mm_min" in err and "list of numbers" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_local_wear_grows_with_hours_where_the_axis_works_and_resets_at_adjustment():
+    from models.physics.campaign import wear_rate_um_per_1000h
+
+    fleet = {"visits": 5, "adjust_at": [4], "wear_um_per_1000h": 0.2,
+             "wear_local_um_per_1000h": 1.5, "wear_center_mm": 100.0, "wear_width_mm": 40.0}
+    sim = simulate(config("indirect", {"backlash": {"b0_um": 2.0}}, fleet=fleet), seed=3)
+    visits = sim.visits.set_index("visit")
+    truth = sim.truth.join(visits[["operating_hours", "wear_local_um_per_1000h", "b0_um"]],
+                           on="visit")
+    rate = wear_rate_um_per_1000h(truth["target"], sim.parameters["config"]["fleet"],
+                                  truth["wear_local_um_per_1000h"])
+    np.testing.assert_allclose(truth["wear_um"], rate * truth["operating_hours"] / 1000)
+    # the play is b0 (with the uniform wear) plus the local worn zone
+    local = truth["wear_um"] - 0.2 * truth["operating_hours"] / 1000
+    np.testing.assert_allclose(truth["true_backlash_um"], truth["b0_um"] + local, atol=1e-9)
+    at = truth.groupby(["visit", "target"])["wear_um"].mean().unstack()
+    assert at.loc["03"].idxmax() == 100.0 and at.loc["03", 100.0] > 5 * at.loc["03", 350.0]
+    assert (at.loc["04"] == 0).all() and (at.loc["05"] > 0).all()  # the adjustment resets it
+    # the ISO reversal value follows the truth on an indirect axis
+    stats = per_target_truth(sim)
+    np.testing.assert_allclose(-stats["B_i"], stats["true_backlash_um"], atol=1e-9)

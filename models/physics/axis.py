@@ -85,8 +85,10 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     warmup_tau_s, ambient_temp_c, pressure_hpa, humidity_pct, and ``params`` (dict of effect
     name -> dict of parameter arrays, per test); optional scalars ambient_drift_k_per_h,
     pressure_drift_hpa_per_h, humidity_drift_pct_per_h (air profiles along the run) and
-    cooling_tau_s (> 0: the screw cools towards ambient during each dwell). Returns arrays of shape (tests, readings):
-    deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
+    cooling_tau_s (> 0: the screw cools towards ambient during each dwell); optional
+    wear_local_um (per test, peak of the local wear [um]) with scalars wear_center_mm and
+    wear_width_mm: a worn zone of ``backlash_position``'s shape added to the play width.
+    Returns arrays of shape (tests, readings): deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
     conditions at each reading, and per-reading target, direction and cycle.
     """
     n = len(tests["feed_mm_min"])
@@ -116,6 +118,11 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
         if name in enabled:
             width += effects.contribution(name, position, 0, conditions,
                                           **_column(tests["params"][name]))
+    if np.any(tests.get("wear_local_um", 0.0)):  # local wear: a worn zone growing with hours
+        width += effects.contribution("backlash_position", position, 0, conditions,
+                                      amplitude_um=np.asarray(tests["wear_local_um"])[:, None],
+                                      center_mm=tests["wear_center_mm"],
+                                      width_mm=tests["wear_width_mm"])
     width = np.maximum(width, 0.0)
     read = path.read
     target = targets_mm[path.target_index[read]]

@@ -19,7 +19,10 @@ axes = ["X"]
 visits = 6
 interval_days = 30
 hours_per_day = 8.0                     # axis operating hours accumulate between visits
-wear_um_per_1000h = 0.6                 # lost-motion growth with operating hours
+wear_um_per_1000h = 0.6                 # uniform lost-motion growth with operating hours
+wear_local_um_per_1000h = 0.0           # extra growth where the axis works most (peak rate)
+wear_center_mm = 175.0                  # centre of the worn zone
+wear_width_mm = 60.0                    # its half-width (Gaussian, as backlash_position)
 adjust_at = [4]                         # visits (1-based) at which a mechanic re-adjusted the nut
 adjusted_b0_um = 1.2                    # b0 right after an adjustment
 failure_at = 0                          # visit of a sudden failure (0: none)
@@ -45,8 +48,14 @@ b0_um = 2.0
 [effects.backlash_feed]
 ```
 
-Wear: ``backlash``'s b0 grows with operating hours since the last adjustment; an adjustment
-resets the hours and sets b0 to ``adjusted_b0_um``; a failure adds ``failure_jump_um``.
+Wear: lost motion grows with operating hours h since the last adjustment at a rate that varies
+along the screw, w(x) = wear_um_per_1000h + s * wear_local_um_per_1000h *
+exp(-((x - wear_center_mm) / wear_width_mm)^2) [um per 1000 h], s the machine's factor
+(0.8-1.25): the uniform part adds to ``backlash``'s b0, the local part is a ``backlash_position``
+bump whose amplitude grows with h. An adjustment resets the hours (and so the wear) and sets b0
+to ``adjusted_b0_um``; a failure adds ``failure_jump_um``. The visit table records the hours,
+b0, the local wear's peak ``wear_local_um`` and rate ``wear_local_um_per_1000h``; the truth table
+records ``wear_um`` (uniform plus local wear) at every target.
 The paper plan (``paper`` preset): 8 targets over 0-350 mm, feeds 200/500/1200 mm/min, dwells
 3/5/7 s, 3 repeats, linear and pendulum, 5 cycles: 3 x 3 x 3 x 8 targets x 2 directions = 432
 paired linear/pendulum points per axis (324 at interior targets, i.e. 162 backlash points).
@@ -73,7 +82,8 @@ BASE = {
              "feeds_mm_min": [200.0, 500.0, 1200.0], "dwells_s": [3.0, 5.0, 7.0], "repeats": 3,
              "cycles": 5, "methods": ["linear", "pendulum"], "overrun_mm": 5.0},
     "fleet": {"machines": 1, "axes": ["X"], "visits": 1, "interval_days": 30,
-              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "adjust_at": [],
+              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "wear_local_um_per_1000h": 0.0,
+              "wear_center_mm": 175.0, "wear_width_mm": 60.0, "adjust_at": [],
               "adjusted_b0_um": 1.2, "failure_at": 0, "failure_jump_um": 3.0,
               "start": "2026-01-05"},
     "environment": {"machine_temp_c": 21.0, "warmup_k": 1.5, "warmup_tau_s": 1200.0,
@@ -94,7 +104,8 @@ BASE = {
 PRESETS = {
     "paper": {},
     "fleet": {"fleet": {"machines": 4, "axes": ["X", "Y", "Z"], "visits": 8,
-                        "adjust_at": [5]}},
+                        "adjust_at": [5], "wear_um_per_1000h": 0.2,
+                        "wear_local_um_per_1000h": 1.2, "wear_center_mm": 120.0}},
     "drift": {"system": "indirect",
               "plan": {"feeds_mm_min": [500.0], "dwells_s": [5.0], "repeats": 1},
               "fleet": {"machines": 3, "visits": 20, "interval_days": 28, "hours_per_day": 14.0,
@@ -102,6 +113,11 @@ PRESETS = {
     "demo": {"plan": {"repeats": 1},
              "fleet": {"visits": 6, "interval_days": 45, "hours_per_day": 12.0}},
     "indirect": {"system": "indirect"},
+    # wear concentrated where the axis works most, growing over eight visits
+    "wear": {"plan": {"repeats": 1},
+             "fleet": {"visits": 8, "interval_days": 45, "hours_per_day": 12.0,
+                       "wear_um_per_1000h": 0.2, "wear_local_um_per_1000h": 1.2,
+                       "wear_center_mm": 120.0, "wear_width_mm": 50.0}},
 }
 
 
@@ -214,9 +230,12 @@ def _validate(config: dict, where: str) -> None:
             bad(f"{section}.{name}", f"must be at least 1, got {config[section][name]}")
     for column, value in (("effects.backlash.b0_um", config["effects"].get("backlash", {})
                            .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet["adjusted_b0_um"]),
-                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"])):
+                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"]),
+                          ("fleet.wear_local_um_per_1000h", fleet["wear_local_um_per_1000h"])):
         if value < 0:
             bad(column, f"negative backlash ({value}); lost motion is a clearance >= 0 um")
+    if fleet["wear_width_mm"] <= 0:
+        bad("fleet.wear_width_mm", "the worn zone's width must be > 0 mm")
     for key in ("warmup_tau_s", "cooling_tau_s"):
         if config["environment"][key] < 0 or (key == "warmup_tau_s"
                                                and config["environment"][key] == 0):
@@ -249,20 +268,42 @@ def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
                     hours, b0, jump, event = 0.0, fleet["adjusted_b0_um"] * scale, 0.0, "adjustment"
                 if v == fleet["failure_at"]:
                     jump, event = fleet["failure_jump_um"], "failure"
+                local_rate = fleet["wear_local_um_per_1000h"] * scale
                 rows.append({
                     "machine_id": f"M{m + 1:02d}", "axis": axis, "visit": f"{v:02d}",
                     "started_at": pd.Timestamp(fleet["start"])
                     + pd.Timedelta(days=(v - 1) * fleet["interval_days"], hours=8),
                     "operating_hours": hours,
                     "b0_um": b0 + fleet["wear_um_per_1000h"] * hours / 1000 + jump,
+                    "wear_local_um_per_1000h": local_rate,
+                    "wear_local_um": local_rate * hours / 1000,
                     "event": event})
     return pd.DataFrame(rows)
 
 
-def reference_backlash_um(config: dict, b0_um: np.ndarray) -> np.ndarray:
+def wear_rate_um_per_1000h(position_mm, fleet: dict, local_um_per_1000h=None) -> np.ndarray:
+    """True wear-rate map [um per 1000 h] along the screw:
+    w(x) = uniform + local exp(-((x - c) / width)^2), ``local`` the machine's peak rate
+    (default the configured one)."""
+    local = fleet["wear_local_um_per_1000h"] if local_um_per_1000h is None else local_um_per_1000h
+    bump = effects.contribution("backlash_position", np.asarray(position_mm, float), 0, {},
+                                amplitude_um=1.0, center_mm=fleet["wear_center_mm"],
+                                width_mm=fleet["wear_width_mm"])
+    return fleet["wear_um_per_1000h"] + np.asarray(local, float) * bump
+
+
+def local_wear_um(position_mm, fleet: dict, peak_um) -> np.ndarray:
+    """Local wear [um] at the positions for the given peak (the Gaussian worn zone)."""
+    return np.asarray(peak_um, float) * effects.contribution(
+        "backlash_position", np.asarray(position_mm, float), 0, {}, amplitude_um=1.0,
+        center_mm=fleet["wear_center_mm"], width_mm=fleet["wear_width_mm"])
+
+
+def reference_backlash_um(config: dict, b0_um: np.ndarray, wear_local_um=0.0) -> np.ndarray:
     """True lost motion of each visit at reference conditions [um]: the play width b summed over
-    the enabled lost-motion effects with ``backlash``'s b0 of the visit, the screw at
-    20 degC, the plan's median feed, averaged over the plan's targets (b >= 0 at each target)."""
+    the enabled lost-motion effects with ``backlash``'s b0 of the visit and its local wear, the
+    screw at 20 degC, the plan's median feed, averaged over the plan's targets (b >= 0 at each
+    target)."""
     targets = _targets(config["plan"])
     shape = (len(b0_um), len(targets))
     conditions = {"feed_mm_min": np.full(shape, float(np.median(config["plan"]["feeds_mm_min"]))),
@@ -275,6 +316,8 @@ def reference_backlash_um(config: dict, b0_um: np.ndarray) -> np.ndarray:
                 params["b0_um"] = np.asarray(b0_um, float)[:, None]
             width += effects.contribution(name, np.broadcast_to(targets, shape), 0, conditions,
                                           **params)
+    width += local_wear_um(np.broadcast_to(targets, shape), config["fleet"],
+                           np.broadcast_to(np.asarray(wear_local_um, float), len(b0_um))[:, None])
     return np.maximum(width, 0.0).mean(axis=1)
 
 
@@ -285,7 +328,8 @@ def simulate(config, seed: int = 0) -> Simulation:
     plan, env = config["plan"], config["environment"]
     visits = visit_table(config, rng)
     visits.insert(len(visits.columns) - 1, "reference_backlash_um",
-                  reference_backlash_um(config, visits["b0_um"].to_numpy(float)))
+                  reference_backlash_um(config, visits["b0_um"].to_numpy(float),
+                                        visits["wear_local_um"].to_numpy(float)))
     targets = _targets(plan)
     grid = pd.MultiIndex.from_product(
         [range(len(visits)), plan["methods"], plan["feeds_mm_min"], plan["dwells_s"],
@@ -310,7 +354,9 @@ def simulate(config, seed: int = 0) -> Simulation:
         p = path(method, targets, int(plan["cycles"]), float(plan["overrun_mm"]))
         arrays = {c: part[c].to_numpy(float) for c in
                   ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
-                   "ambient_temp_c", "pressure_hpa", "humidity_pct")}
+                   "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
+        arrays["wear_center_mm"] = float(config["fleet"]["wear_center_mm"])
+        arrays["wear_width_mm"] = float(config["fleet"]["wear_width_mm"])
         for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
                     "humidity_drift_pct_per_h", "cooling_tau_s"):
             arrays[key] = float(env[key])
@@ -330,7 +376,7 @@ def simulate(config, seed: int = 0) -> Simulation:
                                  config["noise"]["noise_um"], config["noise"]["resolution_um"],
                                  rng)
             readings.append(_readings_frame(part.iloc[block], out))
-            truth.append(_truth_frame(part.iloc[block], out))
+            truth.append(_truth_frame(part.iloc[block], out, config))
     readings = pd.concat(readings, ignore_index=True)
     truth = pd.concat(truth, ignore_index=True)
     parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist(),
@@ -361,9 +407,9 @@ def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
     return frame
 
 
-def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
+def _truth_frame(tests: pd.DataFrame, out: dict, config: dict) -> pd.DataFrame:
     """Mean over cycles per test, target and direction of the true lost motion and of every
-    effect's contribution [um]."""
+    effect's contribution [um], and the wear (uniform plus local) at the target [um]."""
     key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
     codes, groups = pd.factorize(key)
     onehot = np.zeros((len(codes), len(groups)))
@@ -376,6 +422,11 @@ def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
                **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
     for key_name, column in columns.items():
         frame[column] = (out[key_name] @ onehot).ravel()
+    fleet = config["fleet"]
+    hours = np.repeat(tests["operating_hours"].to_numpy(float), len(groups))
+    peak = np.repeat(tests["wear_local_um"].to_numpy(float), len(groups))
+    frame["wear_um"] = (fleet["wear_um_per_1000h"] * hours / 1000
+                        + local_wear_um(frame["target"].to_numpy(float), fleet, peak))
     return frame
 
 
