@@ -23,6 +23,9 @@ from models.persistence import load_estimator, save_estimator
 # name: (one-line description, factory(random_state) -> unfitted estimator)
 RECOMMENDED = "effect-model"
 DESCRIPTIONS = {
+    "wear-map": "level and wear rate along the screw (B-splines, CV) plus feed and temperature "
+                "terms; forecasts the next visit with a 95 % interval",
+    "wear-map-hybrid": "wear map plus the paper's 8-8-8-1 network on its residual",
     "hybrid": "effect-model physics fit plus a small network on its residual",
     "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
     "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
@@ -68,8 +71,13 @@ def _factories() -> dict:
     from sklearn.preprocessing import StandardScaler
 
     from models import baselines
+    from models.wear_map import WearMap
 
     return {
+        "wear-map": lambda seed: WearMap(),
+        "wear-map-hybrid": lambda seed: baselines.PhysicsHybrid(
+            physics=WearMap(),
+            residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),
         "hybrid": lambda seed: baselines.PhysicsHybrid(
             physics=baselines.EffectModelBaseline(),
             residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),
