@@ -102,6 +102,12 @@ def check_forecast(model, inputs, source: str, plan: bool) -> None:
     beyond the training hours gets a warning with the extrapolation factor."""
     from features.readings.errors import InputError
 
+    if plan and getattr(model.estimator, "can_forecast_", True) is False:
+        hours = model.input_ranges_.get("operating_hours")
+        raise InputError(f"model {model.name!r} was trained on a single visit (no spread in "
+                         f"operating hours{f', {hours[0]:g} h only' if hours else ''}): it cannot "
+                         "forecast; train on several visits", file=source,
+                         column="operating_hours")
     if "operating_hours" not in inputs or "operating_hours" not in model.input_ranges_:
         return
     low, high = model.input_ranges_["operating_hours"]
