@@ -145,7 +145,7 @@ def write_wear_map(table, out: Path):
     from features.readings.fileio import atomic_path
     from models.wear_map import WearMap, latest_epoch
 
-    hours = table.X["operating_hours"] if "operating_hours" in table.X else None
+    hours = table.X.get("operating_hours", None)
     keep = latest_epoch(table.meta, hours, table.meta.get("event"))
     model = WearMap().fit(table.X[keep], table.y[keep])
     if not model.can_forecast_:
