@@ -71,7 +71,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError
+from features.readings.validation import PLAUSIBLE
 from models.physics import effects
 from models.physics.axis import SYSTEMS, simulate_tests
 from models.physics.cycles import path, target_positions
@@ -156,8 +158,14 @@ def load_config(source, preset: str | None = None) -> dict:
 
 def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
     out = copy.deepcopy(base)
+    if not isinstance(overrides, dict):
+        raise InputError(f"expected a table, got {overrides!r}", file=where,
+                         column=prefix.rstrip(".") or None)
     for key, value in overrides.items():
         if prefix == "effects.":
+            if not isinstance(value, dict):
+                raise InputError(f"expected a table of the effect's parameters, got {value!r}",
+                                 file=where, column=f"effects.{key}")
             if key not in effects.EFFECTS:
                 raise InputError(f"unknown effect {key!r}; expected one of "
                                  f"{', '.join(effects.EFFECTS)}", file=where,
@@ -167,6 +175,8 @@ def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
                 raise InputError(f"unknown parameter {min(unknown)!r} of {key}; expected "
                                  f"{', '.join(effects.DEFAULTS[key]) or 'none'}", file=where,
                                  column=f"effects.{key}")
+            for name, number in value.items():
+                _check_type(0.0, number, where, f"effects.{key}.{name}")
             out[key] = dict(value)
         elif key == "effects":
             out[key] = _merge({}, value, where, "effects.")
@@ -187,7 +197,7 @@ def _check_type(default, value, where: str, column: str) -> None:
     """A value must have the kind of its default: number, true/false, text, list of text
     (methods, axes) or list of numbers (targets, feeds, dwells, visits)."""
     def number(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
 
     if isinstance(default, bool):
         kind, ok = "true or false", isinstance(value, bool)
@@ -203,7 +213,17 @@ def _check_type(default, value, where: str, column: str) -> None:
         ok = (default is None and value is None) or (
             isinstance(value, list) and all(number(v) for v in value))
     if not ok:
-        raise InputError(f"expected {kind}, got {value!r}", file=where, column=column)
+        raise InputError(f"expected {kind} (finite), got {value!r}", file=where, column=column)
+    if column in WHOLE and (value != int(value) if number(value) else
+                            any(v != int(v) for v in value)):
+        raise InputError(f"expected a whole number, got {value!r}", file=where, column=column)
+
+
+WHOLE = ("plan.n_targets", "plan.repeats", "plan.cycles", "fleet.machines", "fleet.visits",
+         "fleet.adjust_at", "fleet.failure_at")
+# Readings of one simulation held in memory at once [bytes per reading], readings and truth
+# frames with their intermediate arrays (measured on the fleet benchmark)
+BYTES_PER_READING = 600
 
 
 def _validate(config: dict, where: str) -> None:
@@ -211,6 +231,7 @@ def _validate(config: dict, where: str) -> None:
         raise InputError(message, file=where, column=column)
 
     plan, fleet = config["plan"], config["fleet"]
+    _check_size(config, where)
     if config["system"] not in SYSTEMS:
         bad("system", f"expected one of {', '.join(SYSTEMS)}, got {config['system']!r}")
     if plan["targets_mm"] is not None and len(plan["targets_mm"]) == 0:
@@ -225,6 +246,33 @@ def _validate(config: dict, where: str) -> None:
         bad("plan.cycles", "ISO 230-2 needs at least 2 cycles")
     if set(plan["methods"]) - {"linear", "pendulum"} or not plan["methods"]:
         bad("plan.methods", "expected a list of 'linear' and/or 'pendulum'")
+    # the rules of the readings the campaign will write
+    axes = (*schema.LINEAR_AXES, *schema.ROTARY_AXES)
+    unknown = [a for a in fleet["axes"] if a not in axes]
+    if unknown or not fleet["axes"]:
+        bad("fleet.axes", f"unknown axis {unknown[0] if unknown else ''!r}; expected some of "
+                          f"{', '.join(axes)}")
+    for column, values in (("plan.targets_mm", plan["targets_mm"] or []),
+                           ("plan.feeds_mm_min", plan["feeds_mm_min"]),
+                           ("plan.dwells_s", plan["dwells_s"]), ("plan.methods", plan["methods"]),
+                           ("fleet.axes", fleet["axes"])):
+        doubled = sorted({str(v) for v in values if list(values).count(v) > 1})
+        if doubled:
+            bad(column, f"{doubled[0]} given twice; every test and target must be unique")
+    for column, values in (("plan.feeds_mm_min", plan["feeds_mm_min"]),
+                           ("plan.dwells_s", plan["dwells_s"])):
+        low, high, expected = PLAUSIBLE[column.split(".")[1].replace("feeds", "feed")
+                                        .replace("dwells", "dwell")]
+        if any(v > high for v in values):
+            bad(column, f"{max(values):g} is not {expected}")
+    for name in ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct"):
+        low, high, expected = PLAUSIBLE[name]
+        if not low <= config["environment"][name] <= high:
+            bad(f"environment.{name}", f"{config['environment'][name]:g} is not {expected}")
+    try:
+        pd.Timestamp(fleet["start"])
+    except ValueError:
+        bad("fleet.start", f"{fleet['start']!r} is not an ISO 8601 date")
     for section, name in (("fleet", "machines"), ("fleet", "visits"), ("plan", "repeats")):
         if int(config[section][name]) < 1:
             bad(f"{section}.{name}", f"must be at least 1, got {config[section][name]}")
@@ -242,6 +290,41 @@ def _validate(config: dict, where: str) -> None:
             bad(f"environment.{key}", "a thermal time constant must be > 0 s")
     if config["noise"]["noise_um"] < 0 or config["noise"]["resolution_um"] < 0:
         bad("noise", "noise and resolution must be >= 0")
+
+
+def n_readings(config: dict) -> int:
+    """Readings the campaign will write: machines x axes x visits x methods x feeds x dwells x
+    repeats x cycles x 2 directions x targets."""
+    plan, fleet = config["plan"], config["fleet"]
+    n_targets = len(plan["targets_mm"]) if plan["targets_mm"] is not None else plan["n_targets"]
+    return int(np.prod([int(fleet["machines"]), len(fleet["axes"]), int(fleet["visits"]),
+                        len(plan["methods"]), len(plan["feeds_mm_min"]), len(plan["dwells_s"]),
+                        int(plan["repeats"]), int(plan["cycles"]), 2, int(n_targets)],
+                       dtype=float))
+
+
+def available_memory_bytes() -> float:
+    """Memory the machine can give now (MemAvailable), else its physical memory."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def _check_size(config: dict, where: str) -> None:
+    """Refuse up front a campaign that cannot fit in memory, before anything is computed."""
+    need = n_readings(config) * BYTES_PER_READING
+    have = available_memory_bytes()
+    if need > have:
+        raise InputError(f"{n_readings(config):,} readings need about {need / 1e9:,.1f} GB, "
+                         f"more than the {have / 1e9:.1f} GB of memory available; simulate fewer "
+                         "machines, visits or conditions per run", file=where, column="fleet")
 
 
 def _targets(plan: dict) -> np.ndarray:
