@@ -26,6 +26,8 @@ DESCRIPTIONS = {
     "wear-map": "level and wear rate along the screw (B-splines, CV) plus feed and temperature "
                 "terms; forecasts the next visit with a 95 % interval",
     "wear-map-hybrid": "wear map plus the paper's 8-8-8-1 network on its residual",
+    "shallow-lm-ensemble": "five paper networks on bootstrap resamples: mean and a 95 % "
+                           "interval from their spread",
     "hybrid": "effect-model physics fit plus a small network on its residual",
     "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
     "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
@@ -71,6 +73,7 @@ def _factories() -> dict:
     from sklearn.preprocessing import StandardScaler
 
     from models import baselines
+    from models.ensemble import BootstrapEnsemble
     from models.wear_map import WearMap
 
     return {
@@ -78,6 +81,8 @@ def _factories() -> dict:
         "wear-map-hybrid": lambda seed: baselines.PhysicsHybrid(
             physics=WearMap(),
             residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),
+        "shallow-lm-ensemble": lambda seed: BootstrapEnsemble(
+            _network(trainer="lm", random_state=seed), n_members=5, random_state=seed),
         "hybrid": lambda seed: baselines.PhysicsHybrid(
             physics=baselines.EffectModelBaseline(),
             residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),

@@ -133,3 +133,29 @@ def test_backtest_needs_several_visits(campaign, tmp_path, capsys):
     folder, _ = campaign
     assert main(["compare", str(folder / "one_visit.csv"), "--split", "backtest"]) == 2
     assert "at least 3 visits" in one_error_line(capsys)
+
+
+def test_bootstrap_ensemble_gives_intervals_and_saves_its_members(tmp_path):
+    import numpy as np
+    from sklearn.linear_model import Ridge
+
+    from features.table import feature_table
+    from models.ensemble import BootstrapEnsemble
+    from models.persistence import load_estimator, save_estimator
+
+    table = feature_table(simulate("demo", seed=2).readings)
+    model = BootstrapEnsemble(Ridge(alpha=1.0), n_members=8).fit(table.X, table.y)
+    mean, low, high = model.predict_interval(table.X)
+    members = np.stack([m.predict(table.X) for m in model.members_])
+    np.testing.assert_allclose(mean, members.mean(axis=0))
+    assert np.all(low < mean) and np.all(mean < high)
+    assert np.all(high - low > members.max(axis=0) - members.min(axis=0))  # t(7) x sd x 1.06
+    spec = save_estimator(model, tmp_path, "estimator")
+    back = load_estimator(tmp_path, spec)
+    np.testing.assert_allclose(back.predict_interval(table.X)[1], low)
+    spec_file = tmp_path / "estimator" / "ensemble.json"
+    state = json.loads(spec_file.read_text())
+    state["members"][0]["path"] = "../escape"
+    spec_file.write_text(json.dumps(state))
+    with pytest.raises(Exception, match="outside the model directory"):
+        load_estimator(tmp_path, spec)
