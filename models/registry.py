@@ -21,17 +21,17 @@ from features.readings.errors import InputError
 from models.persistence import load_estimator, save_estimator
 
 # name: (one-line description, factory(random_state) -> unfitted estimator)
-RECOMMENDED = "effect-model"
+RECOMMENDED = "wear-map"
 DESCRIPTIONS = {
     "wear-map": "level and wear rate along the screw (B-splines, CV) plus feed and temperature "
-                "terms; forecasts the next visit with a 95 % interval",
+                "terms; forecasts the next visit with a 95 % interval (recommended)",
     "wear-map-hybrid": "wear map plus the paper's 8-8-8-1 network on its residual",
     "shallow-lm-ensemble": "five paper networks on bootstrap resamples: mean and a 95 % "
                            "interval from their spread",
     "hybrid": "effect-model physics fit plus a small network on its residual",
     "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
     "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
-    "effect-model": "least-squares fit of the twin's lost-motion effects (recommended)",
+    "effect-model": "least-squares fit of the twin's lost-motion effects",
     "constant": "constant backlash (mean of the training targets)",
     "linear-temperature": "backlash linear in machine temperature",
     "bezier": "Bezier curve of degree 4 over position, 5 control points (least squares)",
