@@ -30,7 +30,8 @@ def main() -> None:
     rank = visit_order(table.meta)
     errors, fit_s = [], 0.0
     for rows in groups.values():
-        train, test = rows[rank[rows] < VISITS], rows[rank[rows] == VISITS]
+        last = rank[rows].max()
+        train, test = rows[rank[rows] < last], rows[rank[rows] == last]
         start = time.perf_counter()
         model = make("wear-map").fit(table.X.iloc[train], table.y.iloc[train])
         predicted, _, _ = model.predict_interval(table.X.iloc[test])
@@ -38,7 +39,7 @@ def main() -> None:
         errors.append(predicted - truth[test])
     network_s = 0.0
     for rows in list(groups.values())[:NETWORK_SAMPLE]:
-        train = rows[rank[rows] < VISITS]
+        train = rows[rank[rows] < rank[rows].max()]
         start = time.perf_counter()
         make("shallow-lm").fit(table.X.iloc[train], table.y.iloc[train])
         network_s += time.perf_counter() - start

@@ -51,8 +51,8 @@ def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np
     """Uniform clamped B-spline basis over [lo, hi] (seed 000, eq. 4), shape (len(x),
     n_control); degree min(degree, n_control - 1); outside the range the end values hold."""
     x = np.asarray(x, float)
-    if n_control == 1:
-        return np.ones((len(x), 1))
+    if n_control == 1 or len(x) == 0:
+        return np.ones((len(x), 1 if n_control == 1 else n_control))
     k = min(degree, n_control - 1)
     t = np.clip((x - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
     inner = np.linspace(0, 1, n_control - k + 1)
