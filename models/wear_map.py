@@ -15,7 +15,9 @@ that varies along the axis (DESIGN.md, wear). The model, linear in its coefficie
   control points is chosen by leave-one-visit-out cross-validation (visits told apart by their
   hours), so the data choose how much shape the screw shows;
 - fitted by least squares with a small ridge penalty for conditioning; the parameter covariance
-  s^2 (A'A + P)^-1 gives the 95 % interval of the predicted backlash and of w(x).
+  s^2 (A'A + P)^-1, plus the part of a common offset per visit (tau, from the spread of the
+  visits' mean residuals beyond the point noise), gives the 95 % interval of the predicted
+  backlash (which also carries the forecast visit's own offset) and of w(x).
 
 A condition the caller cannot give (a plan without machine temperature) may be NaN: the term
 then takes its training mean and the interval widens by the term's training spread. Terms whose
