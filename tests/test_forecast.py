@@ -28,6 +28,20 @@ def campaign(tmp_path_factory):
     return folder, sim
 
 
+@pytest.fixture(scope="module")
+def wear_model(campaign, tmp_path_factory):
+    """A wear map trained on visits 1-7, saved as a model directory (without MLflow)."""
+    from features.readings import read_readings
+    from features.table import feature_table
+    from models.registry import save_model
+    from models.training import fit_model
+
+    folder, _ = campaign
+    table = feature_table(read_readings(folder / "train.csv"))
+    fit = fit_model(table, "wear-map", "random", 0)
+    return save_model(fit.trained_model(), tmp_path_factory.mktemp("model") / "wear-map")
+
+
 def one_error_line(capsys) -> str:
     err = [line for line in capsys.readouterr().err.splitlines()
            if line.strip() and not line.startswith("note:")]
@@ -71,7 +85,8 @@ def test_network_given_a_plan_says_it_needs_the_deviations(campaign, tmp_path, c
     assert not out.exists()
 
 
-def test_single_visit_cannot_forecast_and_far_plans_warn(campaign, tmp_path, capsys):
+def test_single_visit_cannot_forecast_and_far_plans_warn(campaign, wear_model, tmp_path,
+                                                          capsys):
     folder, _ = campaign
     model = tmp_path / "one"
     assert main(["train", str(folder / "one_visit.csv"), "--model", "wear-map", "--out",
@@ -80,9 +95,7 @@ def test_single_visit_cannot_forecast_and_far_plans_warn(campaign, tmp_path, cap
     out = tmp_path / "p.csv"
     assert main(["predict", str(model), str(folder / "plan.csv"), "--out", str(out)]) == 2
     assert "single visit" in one_error_line(capsys) and not out.exists()
-    trained = tmp_path / "m"
-    assert main(["train", str(folder / "train.csv"), "--model", "wear-map", "--out",
-                 str(trained)]) == 0
+    trained = wear_model
     far = pd.read_csv(folder / "plan.csv").assign(operating_hours=30000.0)
     far.to_csv(tmp_path / "far.csv", index=False)
     capsys.readouterr()
@@ -99,11 +112,10 @@ def test_single_visit_cannot_forecast_and_far_plans_warn(campaign, tmp_path, cap
     (lambda p: p.assign(colour="red"), "unknown plan column"),
     (lambda p: p.drop(columns="operating_hours"), "operating_hours"),
 ])
-def test_bad_plan_one_line_nothing_written(campaign, tmp_path, capsys, change, words):
+def test_bad_plan_one_line_nothing_written(campaign, wear_model, tmp_path, capsys, change,
+                                          words):
     folder, _ = campaign
-    model = tmp_path / "m"
-    assert main(["train", str(folder / "train.csv"), "--model", "wear-map", "--out",
-                 str(model)]) == 0
+    model = wear_model
     bad = change(pd.read_csv(folder / "plan.csv"))
     bad.to_csv(tmp_path / "bad.csv", index=False)
     capsys.readouterr()
