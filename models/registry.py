@@ -24,12 +24,17 @@ MODEL_FILE = "model.json"
 TRAINING_INPUTS = "training_inputs.csv"
 
 # name: (one-line description, factory(random_state) -> unfitted estimator)
-RECOMMENDED = "effect-model"
+RECOMMENDED = "wear-map"
 DESCRIPTIONS = {
+    "wear-map": "level and wear rate along the screw (B-splines, CV) plus feed and temperature "
+                "terms; forecasts the next visit with a 95 % interval (recommended)",
+    "wear-map-hybrid": "wear map plus the paper's 8-8-8-1 network on its residual",
+    "shallow-lm-ensemble": "five paper networks on bootstrap resamples: mean and a 95 % "
+                           "interval from their spread",
     "hybrid": "effect-model physics fit plus a small network on its residual",
     "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
     "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
-    "effect-model": "least-squares fit of the twin's lost-motion effects (recommended)",
+    "effect-model": "least-squares fit of the twin's lost-motion effects",
     "constant": "constant backlash (mean of the training targets)",
     "linear-temperature": "backlash linear in machine temperature",
     "bezier": "Bezier curve of degree 4 over position, 5 control points (least squares)",
@@ -80,6 +85,25 @@ def _hybrid(seed: int):
                            residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed))
 
 
+def _wear_map():
+    from models.wear_map import WearMap
+
+    return WearMap()
+
+
+def _wear_map_hybrid(seed: int):
+    return _baselines().PhysicsHybrid(physics=_wear_map(),
+                                      residual=_network(hidden_sizes=(8, 8), trainer="lm",
+                                                        random_state=seed))
+
+
+def _ensemble(seed: int):
+    from models.ensemble import BootstrapEnsemble
+
+    return BootstrapEnsemble(_network(trainer="lm", random_state=seed), n_members=5,
+                             random_state=seed)
+
+
 def _scaled(regressor):
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
@@ -108,6 +132,9 @@ def _ridge(seed: int):
 def _factories() -> dict:
     """name -> factory(random_state); each imports only what its estimator needs."""
     return {
+        "wear-map": lambda seed: _wear_map(),
+        "wear-map-hybrid": _wear_map_hybrid,
+        "shallow-lm-ensemble": _ensemble,
         "hybrid": _hybrid,
         "shallow-lm": lambda seed: _network(trainer="lm", random_state=seed),
         "shallow-adam": lambda seed: _network(trainer="adam", random_state=seed),

@@ -205,3 +205,76 @@ def test_simulate_writes_readings_that_read_back(tmp_path, capsys):
 
     readings = read_readings(tmp_path / "d" / "readings.csv")
     assert readings["visit"].nunique() == 6 and "operating_hours" in readings
+
+
+def test_visit_truth_is_the_lost_motion_at_reference_conditions():
+    still = {"machine_temp_c": 20.0, "warmup_k": 0.0, "machine_temp_spread_k": 0.0}
+    sim = simulate(config("indirect", {"backlash": {"b0_um": 2.0},
+                                       "backlash_feed": {"k_um_per_m_min": 1.0},
+                                       "backlash_temperature": {}},
+                          plan={**QUIET["plan"], "feeds_mm_min": [200.0, 500.0, 1200.0]},
+                          environment=still, fleet={"visits": 3}), seed=5)
+    visits = sim.visits.set_index("visit")
+    np.testing.assert_allclose(visits["reference_backlash_um"], visits["b0_um"] + 0.5)  # 500 mm/min
+    at_reference = (sim.truth[sim.truth["feed_mm_min"] == 500.0]
+                    .groupby("visit")["true_backlash_um"].mean())
+    np.testing.assert_allclose(at_reference, visits["reference_backlash_um"], atol=1e-9)
+    assert sim.parameters["reference_conditions"]["feed_mm_min"] == 500.0
+
+
+def test_screw_cools_in_the_dwell_and_the_air_drifts_along_the_run():
+    env = {"machine_temp_c": 24.0, "warmup_k": 0.0, "machine_temp_spread_k": 0.0,
+           "ambient_temp_c": 20.0, "ambient_spread_k": 0.0, "ambient_drift_k_per_h": 0.6}
+    plan = {**QUIET["plan"], "dwells_s": [60.0], "methods": ["linear"]}
+    warm = simulate(config("indirect", {"thermal_expansion": {}}, plan=plan,
+                           environment=env), seed=6).readings
+    cool = simulate(config("indirect", {"thermal_expansion": {}}, plan=plan,
+                           environment={**env, "cooling_tau_s": 600.0}), seed=6).readings
+    assert (warm["machine_temp_c"] == 24.0).all()
+    # first reading: 5 mm overrun then a 60 s dwell, the air at 20 degC plus its drift
+    hours = (cool["measured_at"] - cool["started_at"]).dt.total_seconds() / 3600
+    np.testing.assert_allclose(cool["ambient_temp_c"], 20.0 + 0.6 * hours, atol=6e-4)
+    air = 20.0 + 0.6 * hours[0]
+    first = air + (24.0 - air) * np.exp(-0.6 / 1200.0 - 60.0 / 600.0)  # 5 mm at 500 mm/min
+    assert cool["machine_temp_c"].iloc[0] == pytest.approx(first, abs=2e-3)
+    gap = (cool["machine_temp_c"] - cool["ambient_temp_c"]).to_numpy()
+    # settles on the air, lagging the rising air by at most drift x the slower time constant
+    assert gap[0] > 3.0 and -0.6 * 1200 / 3600 < gap[-1] < -0.6 * 600 / 3600 / 2
+    # a cooler screw is shorter: the readings follow alpha (T - 20) x
+    shrink = (cool["deviation_um"] - warm["deviation_um"]).to_numpy()
+    expected = 11.5e-3 * (cool["machine_temp_c"] - 24.0) * cool["target"]
+    np.testing.assert_allclose(shrink, expected, atol=2.1e-3)  # temperatures to 1 mK
+
+
+def test_unknown_preset_and_wrong_types_are_rejected(tmp_path, capsys):
+    assert main(["simulate", "--preset", "nope", "--out", str(tmp_path / "o")]) == 2
+    assert "unknown preset 'nope'" in capsys.readouterr().err
+    path = tmp_path / "c.toml"
+    path.write_text("[plan]\nfeeds_mm_min = ['fast']\n")
+    assert main(["simulate", "--config", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "plan.feeds_mm_min" in err and "list of numbers" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_local_wear_grows_with_hours_where_the_axis_works_and_resets_at_adjustment():
+    from models.physics.campaign import wear_rate_um_per_1000h
+
+    fleet = {"visits": 5, "adjust_at": [4], "wear_um_per_1000h": 0.2,
+             "wear_local_um_per_1000h": 1.5, "wear_center_mm": 100.0, "wear_width_mm": 40.0}
+    sim = simulate(config("indirect", {"backlash": {"b0_um": 2.0}}, fleet=fleet), seed=3)
+    visits = sim.visits.set_index("visit")
+    truth = sim.truth.join(visits[["operating_hours", "wear_local_um_per_1000h", "b0_um"]],
+                           on="visit")
+    rate = wear_rate_um_per_1000h(truth["target"], sim.parameters["config"]["fleet"],
+                                  truth["wear_local_um_per_1000h"])
+    np.testing.assert_allclose(truth["wear_um"], rate * truth["operating_hours"] / 1000)
+    # the play is b0 (with the uniform wear) plus the local worn zone
+    local = truth["wear_um"] - 0.2 * truth["operating_hours"] / 1000
+    np.testing.assert_allclose(truth["true_backlash_um"], truth["b0_um"] + local, atol=1e-9)
+    at = truth.groupby(["visit", "target"])["wear_um"].mean().unstack()
+    assert at.loc["03"].idxmax() == 100.0 and at.loc["03", 100.0] > 5 * at.loc["03", 350.0]
+    assert (at.loc["04"] == 0).all() and (at.loc["05"] > 0).all()  # the adjustment resets it
+    # the ISO reversal value follows the truth on an indirect axis
+    stats = per_target_truth(sim)
+    np.testing.assert_allclose(-stats["B_i"], stats["true_backlash_um"], atol=1e-9)

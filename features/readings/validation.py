@@ -68,7 +68,7 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
                          file=path, row=1, column="deviation_um")
 
     for col in ("machine_id", "axis", "test_id"):
-        frame[col] = _to_label(frame[col], path, col, frame[ROW])
+        frame[col] = to_label(frame[col], path, col, frame[ROW])
     frame["axis"] = frame["axis"].str.upper()
     _check_allowed(frame, "axis", schema.LINEAR_AXES + schema.ROTARY_AXES, path,
                    "an axis name X, Y, Z, A, B or C")
@@ -78,16 +78,16 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
                                      "'+' or '-' (aliases fwd/up/1/+1, bwd/down/-1)")
     frame["target"] = to_float(frame["target"], path, "target", frame[ROW])
     frame["cycle"] = to_int(frame["cycle"], path, "cycle", frame[ROW])
-    frame["visit"] = _to_label(frame["visit"], path, "visit", frame[ROW]) if "visit" in frame else "1"
+    frame["visit"] = to_label(frame["visit"], path, "visit", frame[ROW]) if "visit" in frame else "1"
     frame["repeat"] = to_int(frame["repeat"], path, "repeat", frame[ROW]) \
         if "repeat" in frame else 1
     for col in schema.NUMERIC_OPTIONAL:
         if col in frame:
             frame[col] = to_float(frame[col], path, col, frame[ROW], allow_nan=True)
-            _check_plausible(frame, col, path)
+            check_plausible(frame, col, path)
     for col in schema.DATETIME_OPTIONAL:
         if col in frame:
-            frame[col] = _to_datetime(frame[col], path, col, frame[ROW])
+            frame[col] = to_datetime(frame[col], path, col, frame[ROW])
 
     frame["deviation_um"] = _deviation_um(frame, path)
     _check_structure(frame, path)
@@ -126,25 +126,25 @@ def _first_bad(mask: pd.Series) -> int:
     return int(np.flatnonzero(np.asarray(mask))[0])
 
 
-def _row_of(rows, index: int) -> int:
+def row_of(rows, index: int) -> int:
     return int(rows.iloc[index]) if isinstance(rows, pd.Series) else int(rows) + index
 
 
-def _to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
+def to_label(series: pd.Series, path: Path, col: str, rows) -> pd.Series:
     labels = series.astype(str).str.strip()
     if pd.api.types.is_float_dtype(series):  # Parquet visit 1.0 means visit "1"
         labels = labels.str.removesuffix(".0")
     blank = labels.eq("") | series.isna()
     if blank.any():
         raise InputError(f"empty {col}; expected a name", file=path,
-                         row=_row_of(rows, _first_bad(blank)), column=col)
+                         row=row_of(rows, _first_bad(blank)), column=col)
     # Control characters (a newline, a tab, NUL) would break every line and file name that
     # shows the label.
     control = labels.str.contains(r"[\x00-\x1f\x7f]", regex=True)
     if control.any():
         i = _first_bad(control)
         raise InputError(f"{col} {labels.iloc[i]!r} holds a control character; expected "
-                         "printable text", file=path, row=_row_of(rows, i), column=col)
+                         "printable text", file=path, row=row_of(rows, i), column=col)
     return labels
 
 
@@ -152,7 +152,7 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
     if pd.api.types.is_bool_dtype(series) or _holds_bools(series):
         i = _first_bad(series.map(lambda v: isinstance(v, (bool, np.bool_))))
         raise InputError(f"{bool(series.iloc[i])} is a boolean; expected a number", file=path,
-                         row=_row_of(rows, i), column=col)
+                         row=row_of(rows, i), column=col)
     if pd.api.types.is_numeric_dtype(series):
         values = series.astype(float)
         bad_text = pd.Series(False, index=series.index)
@@ -165,20 +165,20 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
         if boolean.any():
             i = _first_bad(boolean)
             raise InputError(f"{text.iloc[i]!r} is a boolean; expected a number", file=path,
-                             row=_row_of(rows, i), column=col)
+                             row=row_of(rows, i), column=col)
         if bad_text.any():
             i = _first_bad(bad_text)
             raise InputError(f"{text.iloc[i]!r} is not a number", file=path,
-                             row=_row_of(rows, i), column=col)
+                             row=row_of(rows, i), column=col)
     if not allow_nan and values.isna().any():
         i = _first_bad(values.isna())
         raise InputError("missing value (NaN); expected a number", file=path,
-                         row=_row_of(rows, i), column=col)
+                         row=row_of(rows, i), column=col)
     inf = np.isinf(values)
     if inf.any():
         i = _first_bad(inf)
         raise InputError("infinite value; expected a finite number", file=path,
-                         row=_row_of(rows, i), column=col)
+                         row=row_of(rows, i), column=col)
     return values.astype(float)
 
 
@@ -199,18 +199,18 @@ def to_int(series, path, col, rows) -> pd.Series:
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"{values.iloc[i]:g} is not a whole number from 1 to {MAX_INDEX}",
-                         file=path, row=_row_of(rows, i), column=col)
+                         file=path, row=row_of(rows, i), column=col)
     return values.astype(int)
 
 
-def _to_datetime(series, path, col, rows) -> pd.Series:
+def to_datetime(series, path, col, rows) -> pd.Series:
     given = series.notna() & series.astype(str).str.strip().ne("")
     values = pd.to_datetime(series.where(given), errors="coerce", utc=True, format="ISO8601")
     bad = values.isna() & given
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"{series.iloc[i]!r} is not an ISO 8601 date-time", file=path,
-                         row=_row_of(rows, i), column=col)
+                         row=row_of(rows, i), column=col)
     return values
 
 
@@ -220,7 +220,7 @@ def _map_labels(frame, col, aliases, path, expected) -> pd.Series:
     if mapped.isna().any():
         i = _first_bad(mapped.isna())
         raise InputError(f"unknown {col} {frame[col].iloc[i]!r}; expected {expected}",
-                         file=path, row=_row_of(frame[ROW], i), column=col)
+                         file=path, row=row_of(frame[ROW], i), column=col)
     return mapped
 
 
@@ -229,17 +229,17 @@ def _check_allowed(frame, col, allowed, path, expected) -> None:
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"unknown {col} {frame[col].iloc[i]!r}; expected {expected}",
-                         file=path, row=_row_of(frame[ROW], i), column=col)
+                         file=path, row=row_of(frame[ROW], i), column=col)
 
 
-def _check_plausible(frame, col, path) -> None:
+def check_plausible(frame, col, path) -> None:
     low, high, expected = PLAUSIBLE[col]
     values = frame[col]
     bad = (values < low) | (values > high) | ((values == 0) & (col == "feed_mm_min"))
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"{values.iloc[i]:g} is not {expected}", file=path,
-                         row=_row_of(frame[ROW], i), column=col)
+                         row=row_of(frame[ROW], i), column=col)
 
 
 def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
@@ -255,7 +255,7 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
             raise InputError(
                 f"measured {measured.iloc[i]:g} is {measured.iloc[i] - frame['target'].iloc[i]:+g} "
                 "away from its target; expected a position in mm (deg) like the target",
-                file=path, row=_row_of(frame[ROW], i), column="measured")
+                file=path, row=row_of(frame[ROW], i), column="measured")
         frame["measured"] = measured
     if schema.DEVIATION not in frame:
         return (measured - frame["target"]) * scale
@@ -283,7 +283,7 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
         raise InputError(
             f"the readings at target {frame['target'].iloc[i]:g} hold absolute positions in mm "
             f"while other readings of test {frame['test_id'].iloc[i]!r} hold deviations; "
-            "expected one or the other in a test", file=path, row=_row_of(frame[ROW], i),
+            "expected one or the other in a test", file=path, row=row_of(frame[ROW], i),
             column="deviation_um")
     if absolute.any():
         warn(f"{path}: {int(absolute.sum())} deviation_um values hold absolute positions in mm; "
@@ -295,7 +295,7 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
         raise InputError(
             f"deviation {deviation.iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm (deg); "
             "expected a deviation in um (arcsec), positions belong in 'measured'", file=path,
-            row=_row_of(frame[ROW], i), column="deviation_um")
+            row=row_of(frame[ROW], i), column="deviation_um")
     _check_deviation_units(frame.assign(deviation_um=deviation), path, measured, scale)
     return deviation
 
@@ -309,7 +309,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
         if as_mm.any():
             i = _first_bad(as_mm)
             raise InputError("deviation_um equals measured - target in mm; expected um "
-                             "(x1000)", file=path, row=_row_of(frame[ROW], i),
+                             "(x1000)", file=path, row=row_of(frame[ROW], i),
                              column="deviation_um")
         # Both columns given: they must tell the same reading (rounding aside), or which
         # one is right cannot be known.
@@ -319,7 +319,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
             raise InputError(
                 f"deviation_um {dev.iloc[i]:g} disagrees with measured - target = "
                 f"{expected.iloc[i]:g}; expected the same reading in both columns (or only one "
-                "of them)", file=path, row=_row_of(frame[ROW], i), column="deviation_um")
+                "of them)", file=path, row=row_of(frame[ROW], i), column="deviation_um")
     # A reading 1000x smaller than its siblings at the same target and direction: mm among um.
     keys = [*schema.TEST_KEYS, "target", "direction"]
     groups = frame.groupby(keys, sort=False)["deviation_um"]
@@ -333,7 +333,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
         raise InputError(
             f"mixed units: {dev.iloc[i]:g} looks like mm while the other readings at this "
             f"target are about {sibling.iloc[i]:.3g} um", file=path,
-            row=_row_of(frame[ROW], i), column="deviation_um")
+            row=row_of(frame[ROW], i), column="deviation_um")
     largest = dev.abs().groupby([frame[k] for k in schema.TEST_KEYS], sort=False).transform("max")
     tiny = largest < MIN_PLAUSIBLE_MAX_DEVIATION_UM
     if tiny.any() and measured is None:
@@ -341,7 +341,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
         raise InputError(
             f"every |deviation_um| of test {frame['test_id'].iloc[i]!r} is below "
             f"{MIN_PLAUSIBLE_MAX_DEVIATION_UM} um: the values look like mm; expected um "
-            "(or give the 'measured' column)", file=path, row=_row_of(frame[ROW], i),
+            "(or give the 'measured' column)", file=path, row=row_of(frame[ROW], i),
             column="deviation_um")
 
 
@@ -354,24 +354,24 @@ def _check_structure(frame: pd.DataFrame, path: Path) -> None:
         i = _first_bad(methods > 1)
         raise InputError(f"test {frame['test_id'].iloc[i]!r} mixes linear and pendulum "
                          "readings; expected one method per test_id", file=path,
-                         row=_row_of(frame[ROW], i), column="method")
+                         row=row_of(frame[ROW], i), column="method")
     reading = [*test, "target", "direction", "cycle"]
     dup = frame.duplicated(reading, keep="first")
     if dup.any():
         i = _first_bad(dup)
         raise InputError("duplicate reading: same test, target, direction and cycle as an "
-                         "earlier row", file=path, row=_row_of(frame[ROW], i), column="cycle")
+                         "earlier row", file=path, row=row_of(frame[ROW], i), column="cycle")
     dirs = frame.groupby([*test, "target"], sort=False)["direction"].transform("nunique")
     if (dirs < 2).any():
         i = _first_bad(dirs < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} of test "
                          f"{frame['test_id'].iloc[i]!r} is measured in direction "
                          f"{frame['direction'].iloc[i]!r} only; expected both + and -",
-                         file=path, row=_row_of(frame[ROW], i), column="direction")
+                         file=path, row=row_of(frame[ROW], i), column="direction")
     cycles = frame.groupby([*test, "target", "direction"], sort=False)["cycle"].transform("size")
     if (cycles < 2).any():
         i = _first_bad(cycles < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} direction "
                          f"{frame['direction'].iloc[i]!r} of test {frame['test_id'].iloc[i]!r} "
                          "has 1 reading; expected at least 2 cycles", file=path,
-                         row=_row_of(frame[ROW], i), column="cycle")
+                         row=row_of(frame[ROW], i), column="cycle")

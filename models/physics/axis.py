@@ -47,8 +47,34 @@ def run_times_s(path: Path, feed_mm_min: np.ndarray, dwell_s: np.ndarray) -> np.
 
 
 def machine_temperature_c(start_c, warmup_k, tau_s, elapsed_s):
-    """Screw temperature warming from its start value: T = T0 + dT (1 - exp(-t / tau))."""
+    """Screw temperature warming from its start value [degC], shape (tests, waypoints):
+    T = T0 + dT (1 - exp(-t / tau)), t [s] time since the run's start, dT [K] the warm-up the
+    run's feed drives towards, tau [s] the screw's thermal time constant."""
     return start_c[:, None] + warmup_k[:, None] * (1 - np.exp(-elapsed_s / tau_s))
+
+
+def machine_temperature_cooling_c(path: Path, feed_mm_min, dwell_s, start_c, warmup_k, tau_s,
+                                  ambient_c, cooling_tau_s):
+    """Screw temperature [degC] from a heat balance with the air, shape (tests, waypoints),
+    read at the end of the dwell.
+
+    Moving: dT/dt = (T_air + dT_warm - T) / tau, friction in nut and bearings holds the screw
+    dT_warm [K] above the air; dwelling: dT/dt = (T_air - T) / tau_cool, the drive stands and the
+    screw gives its heat to the air. Exact per segment: T <- T_eq + (T - T_eq) exp(-dt / tau),
+    starting from T0 = ``start_c``. Sequential along the path, vectorised over tests.
+    ``ambient_c`` (tests, waypoints) [degC]; ``warmup_k`` per test [K]; time constants [s]."""
+    travel = np.abs(np.diff(path.position_mm, prepend=path.position_mm[0]))
+    keep_moving = np.exp(-travel[None, :] / feed_mm_min[:, None] * 60.0 / tau_s)
+    keep_dwell = np.exp(-dwell_s / cooling_tau_s)
+    out = np.empty_like(keep_moving)
+    t = np.asarray(start_c, float).copy()
+    for k in range(out.shape[1]):
+        hot = ambient_c[:, k] + warmup_k
+        t = hot + (t - hot) * keep_moving[:, k]
+        if path.read[k]:
+            t = ambient_c[:, k] + (t - ambient_c[:, k]) * keep_dwell
+        out[:, k] = t
+    return out
 
 
 def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dict, system: str,
@@ -58,8 +84,12 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
 
     ``tests``: arrays per test — feed_mm_min, dwell_s, machine_temp_start_c, warmup_k,
     warmup_tau_s, ambient_temp_c, pressure_hpa, humidity_pct, and ``params`` (dict of effect
-    name -> dict of parameter arrays, per test). Returns arrays of shape (tests, readings):
-    deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
+    name -> dict of parameter arrays, per test); optional scalars ambient_drift_k_per_h,
+    pressure_drift_hpa_per_h, humidity_drift_pct_per_h (air profiles along the run) and
+    cooling_tau_s (> 0: the screw cools towards ambient during each dwell); optional
+    wear_local_um (per test, peak of the local wear [um]) with scalars wear_center_mm and
+    wear_width_mm: a worn zone of ``backlash_position``'s shape added to the play width.
+    Returns arrays of shape (tests, readings): deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
     conditions at each reading, and per-reading target, direction and cycle.
 
     ``compensation`` (optional): one controller model per test (or None), with
@@ -68,14 +98,24 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     """
     n = len(tests["feed_mm_min"])
     elapsed = run_times_s(path, tests["feed_mm_min"], tests["dwell_s"])
+    hours = elapsed / 3600.0
+    # air profiles: the run's start value plus a linear drift along the run (drifts default 0)
+    air = {k: tests[k][:, None] + tests.get(drift, 0.0) * hours for k, drift in (
+        ("ambient_temp_c", "ambient_drift_k_per_h"), ("pressure_hpa", "pressure_drift_hpa_per_h"),
+        ("humidity_pct", "humidity_drift_pct_per_h"))}
+    if tests.get("cooling_tau_s", 0.0) > 0:
+        machine = machine_temperature_cooling_c(
+            path, tests["feed_mm_min"], tests["dwell_s"], tests["machine_temp_start_c"],
+            tests["warmup_k"], tests["warmup_tau_s"], air["ambient_temp_c"], tests["cooling_tau_s"])
+    else:
+        machine = machine_temperature_c(tests["machine_temp_start_c"], tests["warmup_k"],
+                                        tests["warmup_tau_s"], elapsed)
     conditions = {
         "feed_mm_min": np.repeat(tests["feed_mm_min"][:, None], len(path.position_mm), 1),
         "dwell_s": np.repeat(tests["dwell_s"][:, None], len(path.position_mm), 1),
-        "machine_temp_c": machine_temperature_c(tests["machine_temp_start_c"], tests["warmup_k"],
-                                                tests["warmup_tau_s"], elapsed),
+        "machine_temp_c": machine,
         "elapsed_s": elapsed,
-        **{k: np.repeat(tests[k][:, None], len(path.position_mm), 1)
-           for k in ("ambient_temp_c", "pressure_hpa", "humidity_pct")},
+        **air,
     }
     position = np.broadcast_to(path.position_mm, (n, len(path.position_mm)))
     width = np.zeros((n, len(path.position_mm)))
@@ -83,6 +123,11 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
         if name in enabled:
             width += effects.contribution(name, position, 0, conditions,
                                           **_column(tests["params"][name]))
+    if np.any(tests.get("wear_local_um", 0.0)):  # local wear: a worn zone growing with hours
+        width += effects.contribution("backlash_position", position, 0, conditions,
+                                      amplitude_um=np.asarray(tests["wear_local_um"])[:, None],
+                                      center_mm=tests["wear_center_mm"],
+                                      width_mm=tests["wear_width_mm"])
     width = np.maximum(width, 0.0)
     read = path.read
     target = targets_mm[path.target_index[read]]

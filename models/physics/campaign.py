@@ -19,7 +19,10 @@ axes = ["X"]
 visits = 6
 interval_days = 30
 hours_per_day = 8.0                     # axis operating hours accumulate between visits
-wear_um_per_1000h = 0.6                 # lost-motion growth with operating hours
+wear_um_per_1000h = 0.6                 # uniform lost-motion growth with operating hours
+wear_local_um_per_1000h = 0.0           # extra growth where the axis works most (peak rate)
+wear_center_mm = 175.0                  # centre of the worn zone
+wear_width_mm = 60.0                    # its half-width (Gaussian, as backlash_position)
 adjust_at = [4]                         # visits (1-based) at which a mechanic re-adjusted the nut
 adjusted_b0_um = 1.2                    # b0 right after an adjustment
 failure_at = 0                          # visit of a sudden failure (0: none)
@@ -30,6 +33,10 @@ machine_temp_c = 21.0                   # start-of-run screw temperature
 machine_temp_spread_k = 0.5             # its run-to-run spread (also ambient_spread_k,
                                         # pressure_spread_hpa, humidity_spread_pct)
 warmup_k = 1.5                          # warm-up of the screw during a run at 1000 mm/min
+warmup_tau_s = 1200.0                   # the screw's thermal time constant
+cooling_tau_s = 0.0                     # > 0: heat balance with the air, cooling in dwells
+ambient_drift_k_per_h = 0.0             # air profiles along a run (also pressure_drift_hpa_per_h,
+                                        # humidity_drift_pct_per_h)
 ambient_temp_c = 20.5
 pressure_hpa = 1013.0
 humidity_pct = 45.0
@@ -41,8 +48,14 @@ b0_um = 2.0
 [effects.backlash_feed]
 ```
 
-Wear: ``backlash``'s b0 grows with operating hours since the last adjustment; an adjustment
-resets the hours and sets b0 to ``adjusted_b0_um``; a failure adds ``failure_jump_um``.
+Wear: lost motion grows with operating hours h since the last adjustment at a rate that varies
+along the screw, w(x) = wear_um_per_1000h + s * wear_local_um_per_1000h *
+exp(-((x - wear_center_mm) / wear_width_mm)^2) [um per 1000 h], s the machine's factor
+(0.8-1.25): the uniform part adds to ``backlash``'s b0, the local part is a ``backlash_position``
+bump whose amplitude grows with h. An adjustment resets the hours (and so the wear) and sets b0
+to ``adjusted_b0_um``; a failure adds ``failure_jump_um``. The visit table records the hours,
+b0, the local wear's peak ``wear_local_um`` and rate ``wear_local_um_per_1000h``; the truth table
+records ``wear_um`` (uniform plus local wear) at every target.
 The paper plan (``paper`` preset): 8 targets over 0-350 mm, feeds 200/500/1200 mm/min, dwells
 3/5/7 s, 3 repeats, linear and pendulum, 5 cycles: 3 x 3 x 3 x 8 targets x 2 directions = 432
 paired linear/pendulum points per axis (324 at interior targets, i.e. 162 backlash points).
@@ -58,7 +71,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError
+from features.readings.validation import PLAUSIBLE
 from models.physics import effects
 from models.physics.axis import SYSTEMS, simulate_tests
 from models.physics.cycles import path, target_positions
@@ -69,14 +84,19 @@ BASE = {
              "feeds_mm_min": [200.0, 500.0, 1200.0], "dwells_s": [3.0, 5.0, 7.0], "repeats": 3,
              "cycles": 5, "methods": ["linear", "pendulum"], "overrun_mm": 5.0},
     "fleet": {"machines": 1, "axes": ["X"], "visits": 1, "interval_days": 30,
-              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "adjust_at": [],
+              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "wear_local_um_per_1000h": 0.0,
+              "wear_center_mm": 175.0, "wear_width_mm": 60.0, "adjust_at": [],
               "adjusted_b0_um": 1.2, "failure_at": 0, "failure_jump_um": 3.0,
               "start": "2026-01-05"},
     "environment": {"machine_temp_c": 21.0, "warmup_k": 1.5, "warmup_tau_s": 1200.0,
                     "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0,
                     # run-to-run spread (standard deviation) of the conditions
                     "machine_temp_spread_k": 0.5, "ambient_spread_k": 0.3,
-                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0},
+                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0,
+                    # profiles along a run: linear drifts of the air, and the screw's cooling
+                    # towards ambient during each dwell (time constant; 0: no cooling)
+                    "ambient_drift_k_per_h": 0.0, "pressure_drift_hpa_per_h": 0.0,
+                    "humidity_drift_pct_per_h": 0.0, "cooling_tau_s": 0.0},
     "noise": {"noise_um": 0.3, "resolution_um": 0.1},
     "effects": {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
                 "backlash_feed": {"k_um_per_m_min": 1.2},
@@ -86,7 +106,8 @@ BASE = {
 PRESETS = {
     "paper": {},
     "fleet": {"fleet": {"machines": 4, "axes": ["X", "Y", "Z"], "visits": 8,
-                        "adjust_at": [5]}},
+                        "adjust_at": [5], "wear_um_per_1000h": 0.2,
+                        "wear_local_um_per_1000h": 1.2, "wear_center_mm": 120.0}},
     "drift": {"system": "indirect",
               "plan": {"feeds_mm_min": [500.0], "dwells_s": [5.0], "repeats": 1},
               "fleet": {"machines": 3, "visits": 20, "interval_days": 28, "hours_per_day": 14.0,
@@ -94,6 +115,11 @@ PRESETS = {
     "demo": {"plan": {"repeats": 1},
              "fleet": {"visits": 6, "interval_days": 45, "hours_per_day": 12.0}},
     "indirect": {"system": "indirect"},
+    # wear concentrated where the axis works most, growing over eight visits
+    "wear": {"plan": {"repeats": 1},
+             "fleet": {"visits": 8, "interval_days": 45, "hours_per_day": 12.0,
+                       "wear_um_per_1000h": 0.2, "wear_local_um_per_1000h": 1.2,
+                       "wear_center_mm": 120.0, "wear_width_mm": 50.0}},
 }
 
 
@@ -109,6 +135,9 @@ def load_config(source, preset: str | None = None) -> dict:
     """A full, validated configuration: a preset name, a dict of overrides or a TOML file,
     applied on top of ``preset`` (a file or dict) or of the base plan."""
     where = "config"
+    if preset is not None and preset not in PRESETS:
+        raise InputError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}",
+                         column="preset")
     if isinstance(source, (str, Path)) and str(source) in PRESETS:
         overrides, where = PRESETS[str(source)], f"preset {source}"
     elif isinstance(source, dict):
@@ -129,8 +158,14 @@ def load_config(source, preset: str | None = None) -> dict:
 
 def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
     out = copy.deepcopy(base)
+    if not isinstance(overrides, dict):
+        raise InputError(f"expected a table, got {overrides!r}", file=where,
+                         column=prefix.rstrip(".") or None)
     for key, value in overrides.items():
         if prefix == "effects.":
+            if not isinstance(value, dict):
+                raise InputError(f"expected a table of the effect's parameters, got {value!r}",
+                                 file=where, column=f"effects.{key}")
             if key not in effects.EFFECTS:
                 raise InputError(f"unknown effect {key!r}; expected one of "
                                  f"{', '.join(effects.EFFECTS)}", file=where,
@@ -140,6 +175,8 @@ def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
                 raise InputError(f"unknown parameter {min(unknown)!r} of {key}; expected "
                                  f"{', '.join(effects.DEFAULTS[key]) or 'none'}", file=where,
                                  column=f"effects.{key}")
+            for name, number in value.items():
+                _check_type(0.0, number, where, f"effects.{key}.{name}")
             out[key] = dict(value)
         elif key == "effects":
             out[key] = _merge({}, value, where, "effects.")
@@ -148,8 +185,45 @@ def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
         elif isinstance(base[key], dict):
             out[key] = _merge(base[key], value, where, f"{prefix}{key}.")
         else:
+            _check_type(base[key], value, where, prefix + key)
             out[key] = value
     return out
+
+
+TEXT_LISTS = ("plan.methods", "fleet.axes")
+
+
+def _check_type(default, value, where: str, column: str) -> None:
+    """A value must have the kind of its default: number, true/false, text, list of text
+    (methods, axes) or list of numbers (targets, feeds, dwells, visits)."""
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+
+    if isinstance(default, bool):
+        kind, ok = "true or false", isinstance(value, bool)
+    elif number(default):
+        kind, ok = "a number", number(value)
+    elif isinstance(default, str):
+        kind, ok = "text", isinstance(value, str)
+    elif column in TEXT_LISTS:
+        kind = "a list of text"
+        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+    else:  # lists of numbers; targets_mm may also stay unset
+        kind = "a list of numbers"
+        ok = (default is None and value is None) or (
+            isinstance(value, list) and all(number(v) for v in value))
+    if not ok:
+        raise InputError(f"expected {kind} (finite), got {value!r}", file=where, column=column)
+    if column in WHOLE and (value != int(value) if number(value) else
+                            any(v != int(v) for v in value)):
+        raise InputError(f"expected a whole number, got {value!r}", file=where, column=column)
+
+
+WHOLE = ("plan.n_targets", "plan.repeats", "plan.cycles", "fleet.machines", "fleet.visits",
+         "fleet.adjust_at", "fleet.failure_at")
+# Readings of one simulation held in memory at once [bytes per reading], readings and truth
+# frames with their intermediate arrays (measured on the fleet benchmark)
+BYTES_PER_READING = 600
 
 
 def _validate(config: dict, where: str) -> None:
@@ -157,6 +231,7 @@ def _validate(config: dict, where: str) -> None:
         raise InputError(message, file=where, column=column)
 
     plan, fleet = config["plan"], config["fleet"]
+    _check_size(config, where)
     if config["system"] not in SYSTEMS:
         bad("system", f"expected one of {', '.join(SYSTEMS)}, got {config['system']!r}")
     if plan["targets_mm"] is not None and len(plan["targets_mm"]) == 0:
@@ -171,17 +246,85 @@ def _validate(config: dict, where: str) -> None:
         bad("plan.cycles", "ISO 230-2 needs at least 2 cycles")
     if set(plan["methods"]) - {"linear", "pendulum"} or not plan["methods"]:
         bad("plan.methods", "expected a list of 'linear' and/or 'pendulum'")
-    for name in ("machines", "visits", "repeats"):
-        value = fleet.get(name, plan.get(name))
-        if int(value) < 1:
-            bad(name, f"must be at least 1, got {value}")
+    # the rules of the readings the campaign will write
+    axes = (*schema.LINEAR_AXES, *schema.ROTARY_AXES)
+    unknown = [a for a in fleet["axes"] if a not in axes]
+    if unknown or not fleet["axes"]:
+        bad("fleet.axes", f"unknown axis {unknown[0] if unknown else ''!r}; expected some of "
+                          f"{', '.join(axes)}")
+    for column, values in (("plan.targets_mm", plan["targets_mm"] or []),
+                           ("plan.feeds_mm_min", plan["feeds_mm_min"]),
+                           ("plan.dwells_s", plan["dwells_s"]), ("plan.methods", plan["methods"]),
+                           ("fleet.axes", fleet["axes"])):
+        doubled = sorted({str(v) for v in values if list(values).count(v) > 1})
+        if doubled:
+            bad(column, f"{doubled[0]} given twice; every test and target must be unique")
+    for column, values in (("plan.feeds_mm_min", plan["feeds_mm_min"]),
+                           ("plan.dwells_s", plan["dwells_s"])):
+        low, high, expected = PLAUSIBLE[column.split(".")[1].replace("feeds", "feed")
+                                        .replace("dwells", "dwell")]
+        if any(v > high for v in values):
+            bad(column, f"{max(values):g} is not {expected}")
+    for name in ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct"):
+        low, high, expected = PLAUSIBLE[name]
+        if not low <= config["environment"][name] <= high:
+            bad(f"environment.{name}", f"{config['environment'][name]:g} is not {expected}")
+    try:
+        pd.Timestamp(fleet["start"])
+    except ValueError:
+        bad("fleet.start", f"{fleet['start']!r} is not an ISO 8601 date")
+    for section, name in (("fleet", "machines"), ("fleet", "visits"), ("plan", "repeats")):
+        if int(config[section][name]) < 1:
+            bad(f"{section}.{name}", f"must be at least 1, got {config[section][name]}")
     for column, value in (("effects.backlash.b0_um", config["effects"].get("backlash", {})
                            .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet["adjusted_b0_um"]),
-                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"])):
+                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"]),
+                          ("fleet.wear_local_um_per_1000h", fleet["wear_local_um_per_1000h"])):
         if value < 0:
             bad(column, f"negative backlash ({value}); lost motion is a clearance >= 0 um")
+    if fleet["wear_width_mm"] <= 0:
+        bad("fleet.wear_width_mm", "the worn zone's width must be > 0 mm")
+    for key in ("warmup_tau_s", "cooling_tau_s"):
+        if config["environment"][key] < 0 or (key == "warmup_tau_s"
+                                               and config["environment"][key] == 0):
+            bad(f"environment.{key}", "a thermal time constant must be > 0 s")
     if config["noise"]["noise_um"] < 0 or config["noise"]["resolution_um"] < 0:
         bad("noise", "noise and resolution must be >= 0")
+
+
+def n_readings(config: dict) -> int:
+    """Readings the campaign will write: machines x axes x visits x methods x feeds x dwells x
+    repeats x cycles x 2 directions x targets."""
+    plan, fleet = config["plan"], config["fleet"]
+    n_targets = len(plan["targets_mm"]) if plan["targets_mm"] is not None else plan["n_targets"]
+    return int(np.prod([int(fleet["machines"]), len(fleet["axes"]), int(fleet["visits"]),
+                        len(plan["methods"]), len(plan["feeds_mm_min"]), len(plan["dwells_s"]),
+                        int(plan["repeats"]), int(plan["cycles"]), 2, int(n_targets)],
+                       dtype=float))
+
+
+def available_memory_bytes() -> float:
+    """Memory the machine can give now (MemAvailable), else its physical memory."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def _check_size(config: dict, where: str) -> None:
+    """Refuse up front a campaign that cannot fit in memory, before anything is computed."""
+    need = n_readings(config) * BYTES_PER_READING
+    have = available_memory_bytes()
+    if need > have:
+        raise InputError(f"{n_readings(config):,} readings need about {need / 1e9:,.1f} GB, "
+                         f"more than the {have / 1e9:.1f} GB of memory available; simulate fewer "
+                         "machines, visits or conditions per run", file=where, column="fleet")
 
 
 def _targets(plan: dict) -> np.ndarray:
@@ -208,14 +351,57 @@ def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
                     hours, b0, jump, event = 0.0, fleet["adjusted_b0_um"] * scale, 0.0, "adjustment"
                 if v == fleet["failure_at"]:
                     jump, event = fleet["failure_jump_um"], "failure"
+                local_rate = fleet["wear_local_um_per_1000h"] * scale
                 rows.append({
                     "machine_id": f"M{m + 1:02d}", "axis": axis, "visit": f"{v:02d}",
                     "started_at": pd.Timestamp(fleet["start"])
                     + pd.Timedelta(days=(v - 1) * fleet["interval_days"], hours=8),
                     "operating_hours": hours,
                     "b0_um": b0 + fleet["wear_um_per_1000h"] * hours / 1000 + jump,
+                    "wear_local_um_per_1000h": local_rate,
+                    "wear_local_um": local_rate * hours / 1000,
                     "event": event})
     return pd.DataFrame(rows)
+
+
+def wear_rate_um_per_1000h(position_mm, fleet: dict, local_um_per_1000h=None) -> np.ndarray:
+    """True wear-rate map [um per 1000 h] along the screw:
+    w(x) = uniform + local exp(-((x - c) / width)^2), ``local`` the machine's peak rate
+    (default the configured one)."""
+    local = fleet["wear_local_um_per_1000h"] if local_um_per_1000h is None else local_um_per_1000h
+    bump = effects.contribution("backlash_position", np.asarray(position_mm, float), 0, {},
+                                amplitude_um=1.0, center_mm=fleet["wear_center_mm"],
+                                width_mm=fleet["wear_width_mm"])
+    return fleet["wear_um_per_1000h"] + np.asarray(local, float) * bump
+
+
+def local_wear_um(position_mm, fleet: dict, peak_um) -> np.ndarray:
+    """Local wear [um] at the positions for the given peak (the Gaussian worn zone)."""
+    return np.asarray(peak_um, float) * effects.contribution(
+        "backlash_position", np.asarray(position_mm, float), 0, {}, amplitude_um=1.0,
+        center_mm=fleet["wear_center_mm"], width_mm=fleet["wear_width_mm"])
+
+
+def reference_backlash_um(config: dict, b0_um: np.ndarray, wear_local_um=0.0) -> np.ndarray:
+    """True lost motion of each visit at reference conditions [um]: the play width b summed over
+    the enabled lost-motion effects with ``backlash``'s b0 of the visit and its local wear, the
+    screw at 20 degC, the plan's median feed, averaged over the plan's targets (b >= 0 at each
+    target)."""
+    targets = _targets(config["plan"])
+    shape = (len(b0_um), len(targets))
+    conditions = {"feed_mm_min": np.full(shape, float(np.median(config["plan"]["feeds_mm_min"]))),
+                  "machine_temp_c": np.full(shape, effects.REFERENCE_TEMP_C)}
+    width = np.zeros(shape)
+    for name in effects.LOST_MOTION:
+        if name in config["effects"]:
+            params = dict(config["effects"][name])
+            if name == "backlash":
+                params["b0_um"] = np.asarray(b0_um, float)[:, None]
+            width += effects.contribution(name, np.broadcast_to(targets, shape), 0, conditions,
+                                          **params)
+    width += local_wear_um(np.broadcast_to(targets, shape), config["fleet"],
+                           np.broadcast_to(np.asarray(wear_local_um, float), len(b0_um))[:, None])
+    return np.maximum(width, 0.0).mean(axis=1)
 
 
 def simulate(config, seed: int = 0, compensation: dict | None = None,
@@ -229,6 +415,9 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     rng = np.random.default_rng(seed)
     plan, env = config["plan"], config["environment"]
     visits = visit_table(config, rng)
+    visits.insert(len(visits.columns) - 1, "reference_backlash_um",
+                  reference_backlash_um(config, visits["b0_um"].to_numpy(float),
+                                        visits["wear_local_um"].to_numpy(float)))
     if session_seed is not None:
         rng = np.random.default_rng([seed, session_seed])
     targets = _targets(plan)
@@ -255,24 +444,45 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
         p = path(method, targets, int(plan["cycles"]), float(plan["overrun_mm"]))
         arrays = {c: part[c].to_numpy(float) for c in
                   ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
-                   "ambient_temp_c", "pressure_hpa", "humidity_pct")}
-        arrays["warmup_tau_s"] = env["warmup_tau_s"]
+                   "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
+        arrays["wear_center_mm"] = float(config["fleet"]["wear_center_mm"])
+        arrays["wear_width_mm"] = float(config["fleet"]["wear_width_mm"])
+        for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
+                    "humidity_drift_pct_per_h", "cooling_tau_s"):
+            arrays[key] = float(env[key])
         arrays["params"] = {name: dict(params) for name, params in config["effects"].items()}
         if "backlash" in arrays["params"]:
             arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
-        comp = None if compensation is None else [
-            compensation.get(key) for key in zip(part["machine_id"], part["axis"])]
-        out = simulate_tests(p, targets, arrays, config["effects"], config["system"],
-                             config["noise"]["noise_um"], config["noise"]["resolution_um"], rng,
-                             compensation=comp)
-        readings.append(_readings_frame(part, out))
-        truth.append(_truth_frame(part, out))
+        # bounded blocks of tests keep the (tests x waypoints) arrays small; the noise is drawn
+        # block after block from one generator, so the numbers do not depend on the block size
+        for start in range(0, len(part), CHUNK_TESTS):
+            block = slice(start, start + CHUNK_TESTS)
+            arrays_block = {k: (v[block] if isinstance(v, np.ndarray) else v)
+                            for k, v in arrays.items() if k != "params"}
+            arrays_block["params"] = {
+                name: {k: (v[block] if isinstance(v, np.ndarray) else v)
+                       for k, v in params.items()} for name, params in arrays["params"].items()}
+            comp = None if compensation is None else [
+                compensation.get(key) for key in zip(part["machine_id"].iloc[block],
+                                                     part["axis"].iloc[block])]
+            out = simulate_tests(p, targets, arrays_block, config["effects"], config["system"],
+                                 config["noise"]["noise_um"], config["noise"]["resolution_um"],
+                                 rng, compensation=comp)
+            readings.append(_readings_frame(part.iloc[block], out))
+            truth.append(_truth_frame(part.iloc[block], out, config))
     readings = pd.concat(readings, ignore_index=True)
     truth = pd.concat(truth, ignore_index=True)
-    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist()}
+    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist(),
+                  "reference_conditions": {
+                      "machine_temp_c": effects.REFERENCE_TEMP_C,
+                      "feed_mm_min": float(np.median(plan["feeds_mm_min"])),
+                      "ambient_temp_c": effects.REFERENCE_TEMP_C,
+                      "pressure_hpa": effects.REFERENCE_PRESSURE_HPA,
+                      "humidity_pct": effects.REFERENCE_HUMIDITY_PCT}}
     return Simulation(readings, truth, visits, parameters)
 
 
+CHUNK_TESTS = 4096
 KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
 
 
@@ -290,9 +500,9 @@ def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
     return frame
 
 
-def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
+def _truth_frame(tests: pd.DataFrame, out: dict, config: dict) -> pd.DataFrame:
     """Mean over cycles per test, target and direction of the true lost motion and of every
-    effect's contribution [um]."""
+    effect's contribution [um], and the wear (uniform plus local) at the target [um]."""
     key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
     codes, groups = pd.factorize(key)
     onehot = np.zeros((len(codes), len(groups)))
@@ -305,6 +515,11 @@ def _truth_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
                **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
     for key_name, column in columns.items():
         frame[column] = (out[key_name] @ onehot).ravel()
+    fleet = config["fleet"]
+    hours = np.repeat(tests["operating_hours"].to_numpy(float), len(groups))
+    peak = np.repeat(tests["wear_local_um"].to_numpy(float), len(groups))
+    frame["wear_um"] = (fleet["wear_um_per_1000h"] * hours / 1000
+                        + local_wear_um(frame["target"].to_numpy(float), fleet, peak))
     return frame
 
 

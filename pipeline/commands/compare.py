@@ -15,6 +15,10 @@ COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_data_arguments(parser)
+    for action in parser._actions:  # compare alone also backtests (rolling origin)
+        if action.dest == "split":
+            action.choices = (*action.choices, "backtest")
+            action.help += "; or backtest: train on visits <= k, forecast visit k + 1, every k"
     parser.add_argument("--models", help="comma-separated predictor names (default: all)")
     parser.add_argument("--out", help="folder for the comparison table and figures")
     parser.add_argument("--json", action="store_true", help="print the table as JSON on stdout")
@@ -36,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
     for name in names:
         registry.check_name(name)
     readings, table, floor, truth = load_table(args)
+    if args.split == "backtest":
+        return run_backtest(args, names, readings, table, floor, truth)
     digest = tracking.data_hash(readings)
     rows, fits = [], {}
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="backlash-compare-"))
@@ -78,3 +84,91 @@ def print_table(result, floor: float, table, file) -> None:
     print(f"{len(table.y)} points, target {table.target_kind}; noise floor of one measured "
           f"target {floor:.3f} um", file=file)
     print(result[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"), file=file)
+
+
+BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "coverage_pct",
+                    "truth_coverage_pct", "skill_vs_persistence")
+
+
+def run_backtest(args, names, readings, table, floor, truth) -> int:
+    """Rolling-origin backtest of every predictor against persistence; tables, the wear-rate
+    map of the wear map on all visits, all logged to MLflow."""
+    import pandas as pd
+    from tqdm import tqdm
+
+    from features.readings.fileio import atomic_path, clean_nan, dumps
+    from models import backtest
+    from pipeline import tracking
+
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="backlash-backtest-"))
+    results = backtest.backtest(table, names, truth, args.seed,
+                                progress=lambda s: tqdm(s, desc="origins", file=sys.stderr,
+                                                        leave=False))
+    summary = backtest.summary(results)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / "backtest.csv") as tmp:
+        results.to_csv(tmp, index=False)
+    with atomic_path(out / "backtest_summary.csv") as tmp:
+        summary.to_csv(tmp, index=False)
+    figure = write_wear_map(table, out) if "wear-map" in names else None
+    with tracking.run("compare", f"backtest {Path(args.data).name}") as parent:
+        import mlflow
+
+        mlflow.log_params({"data": str(args.data), "data_sha256": tracking.data_hash(readings),
+                           "split": "backtest", "target_kind": table.target_kind,
+                           "seed": args.seed, "models": ",".join(names),
+                           "noise_floor_um": floor})
+        for row in summary.to_dict("records"):
+            mlflow.log_metrics({f"{row['model']}_{k}": float(v) for k, v in row.items()
+                                if k != "model" and pd.notna(v)})
+        for name in ("backtest.csv", "backtest_summary.csv", "wear_map.csv"):
+            if (out / name).is_file():
+                mlflow.log_artifact(str(out / name))
+        if figure:
+            mlflow.log_artifact(str(figure))
+    cols = [c for c in BACKTEST_COLUMNS if c in summary]
+    print(f"{len(table.y)} points, target {table.target_kind}; noise floor of one measured "
+          f"target {floor:.3f} um; forecast of the next visit from every earlier origin",
+          file=sys.stderr)
+    print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"),
+          file=sys.stderr)
+    print(f"best forecast: {summary.iloc[0]['model']}; MLflow run {parent.info.run_id}; tables "
+          f"-> {out / 'backtest_summary.csv'}", file=sys.stderr)
+    if args.json:
+        print(dumps(clean_nan({"target_kind": table.target_kind, "noise_floor_um": floor,
+                               "split": "backtest", "models": summary.to_dict("records"),
+                               "origins": results.to_dict("records")})))
+    return 0
+
+
+def write_wear_map(table, out: Path):
+    """The wear map fitted on the visits since the last adjustment: w(x) with its interval
+    (CSV and PNG); None when the data cannot give a wear rate (one visit)."""
+    from features.readings.fileio import atomic_path
+    from models.wear_map import WearMap, latest_epoch
+
+    hours = table.X.get("operating_hours", None)
+    keep = latest_epoch(table.meta, hours, table.meta.get("event"))
+    model = WearMap().fit(table.X[keep], table.y[keep])
+    if not model.can_forecast_:
+        return None
+    wear = model.wear_rate_map()
+    with atomic_path(out / "wear_map.csv") as tmp:
+        wear.to_csv(tmp, index=False)
+    return plot_wear_map(wear, out / "wear_map.png")
+
+
+def plot_wear_map(wear, path):
+    """Wear rate along the screw [um per 1000 h] with its 95 % band."""
+    from pipeline.report_page import new_figure, save_figure
+
+    fig = new_figure(6.5, 3.2)
+    ax = fig.subplots()
+    ax.fill_between(wear["position_mm"], wear["wear_rate_low"], wear["wear_rate_high"],
+                    alpha=0.3, label="95 % interval")
+    ax.plot(wear["position_mm"], wear["wear_rate_um_per_1000h"], label="wear rate w(x)")
+    ax.set_xlabel("position [mm]")
+    ax.set_ylabel("wear rate [um / 1000 h]")
+    ax.set_title("Where the screw wears, and how fast")
+    ax.legend(loc="best")
+    return save_figure(fig, path)

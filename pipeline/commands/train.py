@@ -13,7 +13,7 @@ HELP = "Train a backlash predictor on paired tests and save it (default: the rec
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_data_arguments(parser)
     parser.add_argument("--out", required=True, help="model directory to write")
-    parser.add_argument("--model", help="predictor name (default: effect-model); see backlash "
+    parser.add_argument("--model", help="predictor name (default: wear-map); see backlash "
                                         "compare for the list")
 
 

@@ -1,0 +1,130 @@
+"""Rolling-origin backtest: forecast the next maintenance visit the way forecasting libraries
+backtest (skforecast, sktime): for every origin k, train on visits <= k, predict visit k + 1.
+
+Every predictor is scored on the points of the forecast visit against what was measured there
+and, on twin data, against the true backlash; beside them stands *persistence*, the forecast
+that the next visit measures what the last one did (the same point's value at visit k, else that
+target's mean at visit k). An adjustment restarts the wear clock: training keeps the visits since
+the last adjustment before the origin (``models.wear_map.latest_epoch``), and an origin whose
+next visit is itself an adjustment is skipped (nothing before it says where the new clock
+starts). Predictors with ``predict_interval`` also report how often their 95 % interval covers
+the measured value and the truth.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from features.readings.errors import InputError
+from features.table import FeatureTable
+from models import evaluation, registry
+from models.wear_map import latest_epoch
+
+PERSISTENCE = "persistence"
+SAME_POINT = ("machine_id", "axis", "feed_mm_min", "dwell_s", "repeat", "target")
+
+
+def origins(table: FeatureTable, min_train_visits: int = 2) -> list[int]:
+    """Visit ranks k that can serve as an origin: at least ``min_train_visits`` visits up to k."""
+    rank = evaluation.visit_order(table.meta)
+    visits = np.unique(rank)
+    if len(visits) < min_train_visits + 1:
+        raise InputError(f"the backtest needs at least {min_train_visits + 1} visits "
+                         f"(found {len(visits)}): it trains on visits <= k and forecasts k + 1",
+                         file=table.meta.attrs.get("source", "data"))
+    return [int(k) for k in visits[min_train_visits - 1:-1]]
+
+
+def persistence(table: FeatureTable, train: np.ndarray, test: np.ndarray) -> np.ndarray:
+    """Last measured value at the same point (same machine, axis, conditions and target) in the
+    latest training visit; that target's mean there when the point is new."""
+    meta, y = table.meta, table.y.to_numpy(float)
+    rank = evaluation.visit_order(meta)
+    last = train[rank[train] == rank[train].max()]
+    keys = [k for k in SAME_POINT if k in meta]
+    known = meta.iloc[last][keys].assign(_y=y[last]).groupby(keys, dropna=False)["_y"].mean()
+    found = meta.iloc[test][keys].merge(known.reset_index(), on=keys, how="left")["_y"]
+    by_target = (meta.iloc[last][["target"]].assign(_y=y[last]).groupby("target")["_y"].mean())
+    fallback = meta.iloc[test]["target"].map(by_target).to_numpy(float)
+    out = found.to_numpy(float)
+    out = np.where(np.isnan(out), fallback, out)
+    return np.where(np.isnan(out), float(np.mean(y[last])), out)
+
+
+def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None = None,
+             random_state: int = 0, min_train_visits: int = 2, progress=None) -> pd.DataFrame:
+    """One row per predictor and origin: ``model, origin, forecast_visit, n_train, n_test,
+    rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and ``coverage_pct`` /
+    ``truth_coverage_pct`` where known. ``progress`` wraps the origin loop (e.g. tqdm)."""
+    meta = table.meta
+    rank = evaluation.visit_order(meta)
+    y = table.y.to_numpy(float)
+    true = evaluation.true_backlash(meta, truth) if truth is not None else None
+    hours = table.X.get("operating_hours", None)
+    events = meta.get("event", None)
+    rows = []
+    steps = origins(table, min_train_visits)
+    for k in (progress(steps) if progress else steps):
+        upto = rank <= k + 1
+        epoch = np.zeros(len(meta), bool)
+        epoch[upto] = latest_epoch(meta[upto], None if hours is None else hours[upto],
+                                   None if events is None else events[upto])
+        test = np.flatnonzero(rank == k + 1)
+        if not epoch[test].all():  # the forecast visit is an adjustment: a new clock
+            continue
+        train = np.flatnonzero(epoch & (rank <= k))
+        if len(np.unique(rank[train])) < min_train_visits:
+            continue
+        forecast_visit = str(meta["visit"].iloc[test[0]])
+        for name in [PERSISTENCE, *names]:
+            predicted, low, high = _forecast(table, name, train, test, random_state)
+            row = {"model": name, "origin": int(k), "forecast_visit": forecast_visit,
+                   "n_train": len(train), "n_test": len(test),
+                   **{f"{m}": v for m, v in evaluation.scores(y[test], predicted).items()
+                      if m in ("rmse_um", "mae_um")}}
+            if low is not None:
+                row["coverage_pct"] = float(100 * np.mean((low <= y[test]) & (y[test] <= high)))
+            if true is not None and np.isfinite(true[test]).all():
+                row["truth_rmse_um"] = float(np.sqrt(np.mean((predicted - true[test]) ** 2)))
+                if low is not None:
+                    row["truth_coverage_pct"] = float(100 * np.mean(
+                        (low <= true[test]) & (true[test] <= high)))
+            rows.append(row)
+    if not rows:
+        raise InputError("no origin to backtest: every forecast visit follows an adjustment or "
+                         "has too few visits before it", file=meta.attrs.get("source", "data"))
+    return pd.DataFrame(rows)
+
+
+def _forecast(table, name, train, test, random_state):
+    if name == PERSISTENCE:
+        return persistence(table, train, test), None, None
+    estimator = registry.make(name, random_state)
+    X, y = table.X, table.y
+    estimator.fit(X.iloc[train], y.iloc[train])
+    if hasattr(estimator, "predict_interval"):
+        return estimator.predict_interval(X.iloc[test])
+    return np.asarray(estimator.predict(X.iloc[test]), float), None, None
+
+
+def summary(results: pd.DataFrame) -> pd.DataFrame:
+    """Per predictor, over all origins: RMSE pooled over points (measured and true), MAE,
+    interval coverage, and the skill against persistence (1 - RMSE / RMSE of persistence)."""
+    def pooled(frame, column):
+        return float(np.sqrt(np.sum(frame[column] ** 2 * frame["n_test"]) / frame["n_test"].sum()))
+
+    rows = []
+    for name, frame in results.groupby("model", sort=False):
+        row = {"model": name, "origins": len(frame), "rmse_um": pooled(frame, "rmse_um"),
+               "mae_um": float(np.average(frame["mae_um"], weights=frame["n_test"]))}
+        if "truth_rmse_um" in frame and frame["truth_rmse_um"].notna().all():
+            row["truth_rmse_um"] = pooled(frame, "truth_rmse_um")
+        for column in ("coverage_pct", "truth_coverage_pct"):
+            if column in frame and frame[column].notna().all():
+                row[column] = float(np.average(frame[column], weights=frame["n_test"]))
+        rows.append(row)
+    out = pd.DataFrame(rows)
+    base = out.set_index("model").loc[PERSISTENCE, "rmse_um"]
+    out["skill_vs_persistence"] = 1 - out["rmse_um"] / base
+    return out.sort_values("rmse_um", kind="stable").reset_index(drop=True)

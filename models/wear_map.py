@@ -1,0 +1,401 @@
+"""Wear map: backlash as a level plus a wear rate that vary along the screw.
+
+A ball screw wears where the axis works most, so backlash grows with operating hours at a rate
+that varies along the axis (DESIGN.md, wear). The model, linear in its coefficients:
+
+    b(x, h, c) = b0(x) + w(x) h / 1000 + k_f f / 1000 + k_T (T - 20 degC)
+
+- x [mm] the target, h [h] the operating hours since the last mechanical adjustment
+  (SCHEMA.md section 1), f [mm/min] the feed and T [degC] the machine temperature: the condition
+  terms of the ``backlash_feed`` and ``backlash_temperature`` effects, each evaluated with unit
+  amplitude (``models.physics.effects``);
+- b0(x) [um] and the wear-rate map w(x) [um per 1000 h] are B-splines over the position with
+  the same basis (seed 000, eq. 4: uniform clamped knots, cubic), or one value per target
+  (piecewise linear between the targets) when the targets repeat across visits. The number of
+  control points is chosen by leave-one-visit-out cross-validation (visits told apart by their
+  hours), so the data choose how much shape the screw shows;
+- fitted by least squares with a small ridge penalty for conditioning; the parameter covariance
+  s^2 (A'A + P)^-1, plus the part of a common offset per visit (tau, from the spread of the
+  visits' mean residuals beyond the point noise), gives the 95 % interval of the predicted
+  backlash (which also carries the forecast visit's own offset) and of w(x).
+
+A condition the caller cannot give (a plan without machine temperature) may be NaN: the term
+then takes its training mean and the interval widens by the term's training spread. Terms whose
+input is absent or constant in training are left out; without operating hours (or with one
+value of them) there is no wear term and the model cannot forecast (``can_forecast_``).
+
+Follows the estimator convention of the project: a DataFrame names its columns, a numpy input
+uses ``features`` when given; unnamed inputs give a constant model.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+from scipy.interpolate import BSpline
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+POSITION = "target"
+HOURS = "operating_hours"
+# condition input -> the effect whose unit-amplitude contribution is the term's column
+CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
+              "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
+FILE_NAME = "wear_map.json"
+
+
+def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np.ndarray:
+    """Uniform clamped B-spline basis over [lo, hi] (seed 000, eq. 4), shape (len(x),
+    n_control); degree min(degree, n_control - 1); outside the range the end values hold."""
+    x = np.asarray(x, float)
+    if n_control == 1 or len(x) == 0:
+        return np.ones((len(x), 1 if n_control == 1 else n_control))
+    k = min(degree, n_control - 1)
+    t = np.clip((x - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    inner = np.linspace(0, 1, n_control - k + 1)
+    knots = np.r_[[0.0] * k, inner, [1.0] * k]
+    return BSpline.design_matrix(t, knots, k).toarray()
+
+
+def target_basis(x, knots_mm) -> np.ndarray:
+    """One value per target: hat functions on the training targets (piecewise linear between
+    them, the end values held beyond), shape (len(x), len(knots))."""
+    x = np.clip(np.asarray(x, float), knots_mm[0], knots_mm[-1])
+    return np.column_stack([np.interp(x, knots_mm, np.eye(len(knots_mm))[j])
+                            for j in range(len(knots_mm))])
+
+
+class WearMap(RegressorMixin, BaseEstimator):
+    """Backlash b0(x) + w(x) h + condition terms, smooth along the axis (module docstring).
+
+    Parameters
+    ----------
+    features : tuple of str, optional
+        Column names of a numpy input (a DataFrame names its own).
+    n_control : int or 'targets', optional
+        Control points of b0 and w; default chosen by leave-one-visit-out cross-validation
+        among 1 .. ``max_control`` cubic B-splines and one value per target.
+    max_control : int
+        Largest number of B-spline control points tried.
+    alpha : float
+        Ridge penalty relative to the mean diagonal of A'A (conditioning only).
+    level : float
+        Coverage of the intervals (default 0.95).
+    """
+
+    def __init__(self, features=None, n_control=None, max_control: int = 8,
+                 alpha: float = 1e-8, level: float = 0.95):
+        self.features = features
+        self.n_control = n_control
+        self.max_control = max_control
+        self.alpha = alpha
+        self.level = level
+
+    # ---- inputs -------------------------------------------------------------------------
+    def _names(self, X, n_columns: int) -> list[str]:
+        if isinstance(X, pd.DataFrame):
+            return [str(c) for c in X.columns]
+        if self.features is not None and len(self.features) == n_columns:
+            return list(self.features)
+        return [f"x{i}" for i in range(n_columns)]
+
+    def _frame(self, X) -> pd.DataFrame:
+        names = self._names(X, np.shape(X)[1])
+        return pd.DataFrame(np.asarray(X, float), columns=names)
+
+    # ---- design -------------------------------------------------------------------------
+    def _basis(self, x: np.ndarray, choice) -> np.ndarray:
+        if choice == "targets":
+            return target_basis(x, self.knots_mm_)
+        return spline_basis(x, *self.range_mm_, int(choice))
+
+    def _design(self, frame: pd.DataFrame, choice) -> np.ndarray:
+        from models.physics import effects
+
+        n = len(frame)
+        x = frame[POSITION].to_numpy(float) if self.use_position_ else np.zeros(n)
+        basis = self._basis(x, choice) if self.use_position_ else np.ones((n, 1))
+        cols = [basis]
+        if self.use_hours_:
+            cols.append(basis * frame[HOURS].to_numpy(float)[:, None] / 1000.0)
+        for name in self.conditions_:
+            effect, amplitude = CONDITIONS[name]
+            values = frame[name].to_numpy(float)
+            values = np.where(np.isnan(values), self.condition_means_[name], values)
+            cols.append(effects.contribution(effect, np.zeros(n), 0, {name: values},
+                                             **{amplitude: 1.0})[:, None])
+        return np.hstack(cols)
+
+    def _solve(self, A: np.ndarray, y: np.ndarray):
+        gram = A.T @ A
+        penalty = self.alpha * max(np.trace(gram) / len(gram), 1e-12) * np.eye(len(gram))
+        inverse = np.linalg.pinv(gram + penalty)
+        return inverse @ (A.T @ y), inverse
+
+    # ---- fit ----------------------------------------------------------------------------
+    def fit(self, X, y):
+        names = (self._names(X, X.shape[1])
+                 if hasattr(X, "shape") and len(X.shape) == 2 else None)
+        values, y = validate_data(self, X, y, reset=True, y_numeric=True)
+        frame = pd.DataFrame(values, columns=names or self._names(values, values.shape[1]))
+        y = np.asarray(y, float)
+        names = list(frame.columns)
+        self.use_position_ = POSITION in names and np.ptp(frame[POSITION]) > 0
+        self.use_hours_ = HOURS in names and np.ptp(frame[HOURS]) > 0
+        self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0]
+        self.condition_means_ = {c: float(frame[c].mean()) for c in self.conditions_}
+        self.condition_sd_ = {c: float(frame[c].std(ddof=1)) for c in self.conditions_}
+        self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_)
+                               if c in names and (c != POSITION or self.use_position_)
+                               and (c != HOURS or self.use_hours_)]
+        x = frame[POSITION].to_numpy(float) if self.use_position_ else np.zeros(len(frame))
+        self.range_mm_ = (float(x.min()), float(x.max()))
+        self.knots_mm_ = np.unique(x)
+        self.hours_range_ = ((float(frame[HOURS].min()), float(frame[HOURS].max()))
+                             if HOURS in names else (0.0, 0.0))
+        self.cv_scores_ = {}
+        self.n_control_ = self._choose(frame, y) if self.use_position_ else 1
+        A = self._design(frame, self.n_control_)
+        self.coef_, inverse = self._solve(A, y)
+        dof = max(len(y) - A.shape[1], 1)
+        residual = y - A @ self.coef_
+        self.sigma_um_ = float(np.sqrt(np.sum(residual ** 2) / dof))
+        self.dof_ = dof
+        self.visit_sd_um_, visit_sums = self._visit_effect(frame, A, residual)
+        # errors shared by the points of one visit (its conditions on the day) correlate the
+        # residuals: cov = s^2 (A'A)^-1 + tau^2 (A'A)^-1 (sum_g A_g'1 1'A_g) (A'A)^-1
+        self.covariance_ = (self.sigma_um_ ** 2 * inverse
+                            + self.visit_sd_um_ ** 2 * inverse @ visit_sums @ inverse)
+        self.can_forecast_ = bool(self.use_hours_)
+        return self
+
+    def _visit_effect(self, frame: pd.DataFrame, A: np.ndarray, residual: np.ndarray):
+        """Standard deviation tau [um] of a common offset per visit (visits told apart by their
+        hours), from the spread of the visits' mean residuals beyond what the point noise
+        explains, and sum_g (A_g'1)(A_g'1)'."""
+        p = A.shape[1]
+        if not self.use_hours_:
+            return 0.0, np.zeros((p, p))
+        hours = frame[HOURS].to_numpy(float)
+        labels, codes = np.unique(hours, return_inverse=True)
+        if len(labels) < 3:
+            return 0.0, np.zeros((p, p))
+        counts = np.bincount(codes)
+        means = np.bincount(codes, residual) / counts
+        tau2 = max(0.0, float(np.var(means, ddof=1)) - self.sigma_um_ ** 2 * float(np.mean(
+            1.0 / counts)))
+        sums = np.stack([A[codes == g].sum(axis=0) for g in range(len(labels))])
+        return float(np.sqrt(tau2)), sums.T @ sums
+
+    def _candidates(self) -> list:
+        n_unique = len(self.knots_mm_)
+        splines = list(range(1, min(self.max_control, n_unique) + 1))
+        if self.n_control is not None:
+            return [self.n_control]
+        return splines + (["targets"] if 2 < n_unique <= 40 else [])
+
+    def _choose(self, frame: pd.DataFrame, y: np.ndarray):
+        """Control points by leave-one-visit-out CV (visits told apart by their hours; 5 folds
+        when there is one visit)."""
+        candidates = self._candidates()
+        if len(candidates) == 1:
+            return candidates[0]
+        groups = (frame[HOURS].to_numpy(float) if self.use_hours_
+                  else np.arange(len(frame)) % 5)
+        labels = np.unique(groups)
+        if len(labels) < 3:
+            labels, groups = np.arange(5), np.arange(len(frame)) % 5
+        for choice in candidates:
+            A = self._design(frame, choice)
+            sse = 0.0
+            for g in labels:
+                test = groups == g
+                coef, _ = self._solve(A[~test], y[~test])
+                sse += float(np.sum((A[test] @ coef - y[test]) ** 2))
+            self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
+        best = min(self.cv_scores_, key=self.cv_scores_.get)
+        return best if best == "targets" else int(best)
+
+    # ---- predict ------------------------------------------------------------------------
+    def _predict_frame(self, X) -> pd.DataFrame:
+        check_is_fitted(self, "coef_")
+        if isinstance(X, pd.DataFrame) and not hasattr(self, "feature_names_in_"):
+            X = X.to_numpy(float)  # fitted on unnamed columns: take them by position
+        if isinstance(X, pd.DataFrame):
+            frame = X.copy()
+            frame.columns = [str(c) for c in frame.columns]
+        else:
+            values = validate_data(self, X, reset=False, ensure_all_finite=False)
+            frame = pd.DataFrame(values, columns=self._names(values, values.shape[1]))
+        values = frame.to_numpy(float)
+        if np.isinf(values).any():
+            raise ValueError("Input X contains infinity")
+        nan = [c for c in frame.columns[np.isnan(values).any(axis=0)] if c not in self.conditions_]
+        if nan:
+            raise ValueError(f"Input X contains NaN in {nan[0]!r}; only a condition the model "
+                             f"uses ({', '.join(self.conditions_) or 'none'}) may be missing")
+        for name in (POSITION, HOURS):
+            if name in self.used_features_ and name not in frame:
+                raise ValueError(f"the wear map needs the input column {name!r}")
+        for name in self.conditions_:
+            if name not in frame:
+                frame[name] = np.nan
+        return frame
+
+    def predict(self, X) -> np.ndarray:
+        frame = self._predict_frame(X)
+        return self._design(frame, self.n_control_) @ self.coef_
+
+    def predict_interval(self, X, level: float | None = None):
+        """Predicted backlash [um] and its interval (low, high) at ``level`` (default the
+        estimator's): parameter covariance, plus the training spread of every condition term
+        whose input is missing (NaN)."""
+        frame = self._predict_frame(X)
+        A = self._design(frame, self.n_control_)
+        mean = A @ self.coef_
+        # the forecast visit carries its own common offset too
+        var = np.einsum("ij,jk,ik->i", A, self.covariance_, A) + self.visit_sd_um_ ** 2
+        offset = A.shape[1] - len(self.conditions_)
+        for j, name in enumerate(self.conditions_):
+            missing = frame[name].isna().to_numpy()
+            effect, amplitude = CONDITIONS[name]
+            scale = float(np.ptp(_unit_term(effect, amplitude, name, [0.0, 1.0])))
+            var = var + missing * (self.coef_[offset + j] * scale * self.condition_sd_[name]) ** 2
+        z = stats.t.ppf(0.5 + (level or self.level) / 2, self.dof_)
+        half = z * np.sqrt(var)
+        return mean, mean - half, mean + half
+
+    def wear_rate_map(self, positions_mm=None, level: float | None = None) -> pd.DataFrame:
+        """The wear-rate map w(x) [um per 1000 h] with its interval, and b0(x) [um], at
+        ``positions_mm`` (default 50 points over the training range)."""
+        check_is_fitted(self, "coef_")
+        x = (np.linspace(*self.range_mm_, 50) if positions_mm is None
+             else np.asarray(positions_mm, float))
+        basis = (self._basis(x, self.n_control_) if self.use_position_
+                 else np.ones((len(x), 1)))
+        k = basis.shape[1]
+        b0 = basis @ self.coef_[:k]
+        if self.use_hours_:
+            rate = basis @ self.coef_[k:2 * k]
+            var = np.einsum("ij,jk,ik->i", basis, self.covariance_[k:2 * k, k:2 * k], basis)
+        else:
+            rate, var = np.zeros(len(x)), np.full(len(x), np.nan)
+        half = stats.t.ppf(0.5 + (level or self.level) / 2, self.dof_) * np.sqrt(var)
+        return pd.DataFrame({"position_mm": x, "wear_rate_um_per_1000h": rate,
+                             "wear_rate_low": rate - half, "wear_rate_high": rate + half,
+                             "b0_um": b0})
+
+    # ---- persistence (JSON, no pickle) ----------------------------------------------------
+    def save(self, directory) -> Path:
+        check_is_fitted(self, "coef_")
+        from features.readings.fileio import write_json
+
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        params = self.get_params()
+        params["features"] = list(params["features"]) if params["features"] else None
+        state = {
+            "params": params, "n_features_in": int(self.n_features_in_),
+            "feature_names_in": [str(c) for c in getattr(self, "feature_names_in_", [])],
+            **{name: _jsonable(getattr(self, name)) for name in _STATE},
+        }
+        write_json(directory / FILE_NAME, state)
+        return directory / FILE_NAME
+
+    @classmethod
+    def load(cls, directory) -> WearMap:
+        from features.readings.errors import InputError
+
+        path = Path(directory) / FILE_NAME
+        try:
+            state = json.loads(path.read_text(encoding="utf-8"))
+            params = dict(state["params"])
+            if params.get("features") is not None:
+                params["features"] = tuple(params["features"])
+            model = cls(**params)
+            model.n_features_in_ = int(state["n_features_in"])
+            if state["feature_names_in"]:
+                model.feature_names_in_ = np.asarray(state["feature_names_in"], dtype=object)
+            for name in _STATE:
+                setattr(model, name, _restore(name, state[name]))
+        except FileNotFoundError:
+            raise InputError("model directory has no wear-map file", file=path) from None
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+            raise InputError(f"broken wear-map file: {err}", file=path) from None
+        return model
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        # unnamed numpy inputs carry no position or hours: the model is then a constant
+        tags.regressor_tags.poor_score = True
+        tags.input_tags.allow_nan = False
+        return tags
+
+
+_STATE = ("use_position_", "use_hours_", "conditions_", "condition_means_", "condition_sd_",
+          "used_features_", "range_mm_", "knots_mm_", "hours_range_", "cv_scores_",
+          "n_control_", "coef_", "sigma_um_", "dof_", "covariance_", "can_forecast_",
+          "visit_sd_um_")
+_ARRAYS = ("knots_mm_", "coef_", "covariance_")
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value
+
+
+def _restore(name: str, value):
+    if name in _ARRAYS:
+        return np.asarray(value, float)
+    if name in ("range_mm_", "hours_range_"):
+        return tuple(float(v) for v in value)
+    return value
+
+
+def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
+    from models.physics import effects
+
+    values = np.asarray(values, float)
+    return effects.contribution(effect, np.zeros(len(values)), 0, {name: values},
+                                **{amplitude: 1.0})
+
+
+def latest_epoch(meta: pd.DataFrame, hours: pd.Series | None = None,
+                 events: pd.Series | None = None) -> np.ndarray:
+    """Rows since the last mechanical adjustment of their machine and axis (a boolean mask).
+
+    An adjustment restarts the wear clock: it shows as an ``event`` 'adjustment' (or 'reset')
+    on a visit, or as operating hours that drop from one visit to the next (visits in date
+    order, else in natural label order).
+    """
+    from models.evaluation import visit_order
+
+    keep = np.ones(len(meta), bool)
+    rank = visit_order(meta)
+    axes = [c for c in ("machine_id", "axis") if c in meta]
+    groups = meta.groupby(axes, dropna=False).indices if axes else {None: np.arange(len(meta))}
+    for rows in groups.values():
+        order = rank[rows]
+        visits = np.unique(order)
+        start = visits[0]
+        for previous, current in itertools.pairwise(visits):
+            at = rows[order == current]
+            before = rows[order == previous]
+            reset = events is not None and events.iloc[at].astype(str).str.lower().isin(
+                ("adjustment", "reset")).any()
+            if hours is not None:
+                reset = reset or float(hours.iloc[at].mean()) < float(hours.iloc[before].mean())
+            if reset:
+                start = current
+        keep[rows] = order >= start
+    return keep
