@@ -69,6 +69,8 @@ VERDICTS = ("driver", "proxy", "none", "undecided")
 TARGET_DERIVED = ("deviation_down_um", "deviation_up_um")
 CONFOUNDED_R = 0.7           # |correlation| over the design above which two inputs are confounded
 WEAR = "operating_hours"
+WEAR_READING = ("wear of screw and nut with running time since the last adjustment opens the "
+                "clearance")
 LABELS = {
     "target": "Position", "deviation_down_um": "Negative-direction deviation",
     "deviation_up_um": "Positive-direction deviation", "feed_mm_min": "Feed rate",
@@ -99,12 +101,12 @@ def effect_paths(inputs) -> dict[str, Path]:
     """
     found = {name: ([], []) for name in inputs}
     for name, kind, needs, reading in _records():
+        reading = reading.strip().rstrip(".")
         for used in needs:
             if used in found:
                 found[used][0 if kind == "lost_motion" else 1].append((name, reading))
     if WEAR in found and not found[WEAR][0]:
-        found[WEAR][0].append(("wear", "wear of screw and nut with running time since the last "
-                                       "adjustment opens the clearance"))
+        found[WEAR][0].append(("wear", WEAR_READING))
     return {k: Path(tuple(lost), tuple(pos)) for k, (lost, pos) in found.items()}
 
 
@@ -219,6 +221,8 @@ def design_diagnostics(X: pd.DataFrame, labels: dict[str, np.ndarray]) -> Design
     """Variance shares per level, the correlation over the design and confounded pairs with
     the test that would separate them."""
     shares = variance_shares(X, labels)
+    if labels["run"].max() + 1 == len(X):  # every point its own run: no run level
+        shares = shares.assign(point=shares["point"] + shares["run"], run=0.0)
     level = shares.idxmax(axis=1)
     corr = X.corr().fillna(0.0)
     counts = {"points": len(X), "runs": int(labels["run"].max() + 1),
@@ -294,8 +298,9 @@ def strata(X: pd.DataFrame, y: np.ndarray, labels: dict, shares: pd.DataFrame) -
             continue
         frame = pd.DataFrame(X.to_numpy(float), columns=X.columns).groupby(cells).mean()
         ymean = pd.Series(y).groupby(cells).mean().to_numpy()
-        inputs = tuple(c for c in X.columns if shares.loc[c, level] >= MIN_SHARE)
-        out.append(Stratum(level, ymean, frame.reset_index(drop=True), blocks, inputs))
+        name = "point" if n_cells == len(X) else level
+        inputs = tuple(c for c in X.columns if shares.loc[c, name] >= MIN_SHARE)
+        out.append(Stratum(name, ymean, frame.reset_index(drop=True), blocks, inputs))
     return out
 
 
@@ -484,11 +489,11 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
         degrees = choose_degrees(s, phys, ranges)
         fits[s.level] = degrees
         for c in phys:
-            F, p, df = partial_f(s, degrees, c, ranges)
+            _, p, df = partial_f(s, degrees, c, ranges)
             rows[c]["p"].append((p, s.level, df, degrees))
         for c in (c for c in s.inputs if c not in physics):
             extra = choose_degrees(s, [c], ranges, fixed=degrees)
-            F, p, df = partial_f(s, extra, c, ranges)
+            _, p, df = partial_f(s, extra, c, ranges)
             rows[c]["p"].append((p, s.level, df, extra))
         for c in s.inputs:
             alone = choose_degrees(s, [c], ranges)
@@ -512,7 +517,7 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
     table = table.join(effects)
     assoc = (association.reindex(table.index).fillna(False).astype(bool)
              if association is not None else pd.Series(False, index=table.index))
-    verdicts = [_verdict(c, table.loc[c], assoc[c], alpha, design) for c in table.index]
+    verdicts = [_verdict(c, table.loc[c], assoc[c], alpha) for c in table.index]
     table["verdict"] = [v for v, _ in verdicts]
     table["proxy_for"] = [p for _, p in verdicts]
     table["proxy_for"] = pd.Series(_proxy_targets(table, layers, X, fits, ranges),
@@ -527,8 +532,8 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
     table = table.assign(_o=table["verdict"].map(order), _e=-table["effect_um"].fillna(0))
     table = table.sort_values(["_o", "_e"], kind="stable").drop(columns=["_o", "_e"])
     table.index.name = "feature"
-    notes = [f"partial F-tests in the effect model by stratum, family-wise level {alpha:g} per "
-             f"input; effect intervals from {n_boot} bootstrap resamples of the stratum's cells"]
+    notes = [(f"partial F-tests in the effect model by stratum, family-wise level {alpha:g} per "
+              f"input; effect intervals from {n_boot} bootstrap resamples of the stratum's cells")]
     return Influence(table, design, alpha, n_boot, notes)
 
 
@@ -547,7 +552,7 @@ def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
         s, degrees = by_level[level], dict(items)
         grids = {c: _grid(X[c].to_numpy()) for c in names}
 
-        def effects(cells=None):
+        def effects(cells=None, s=s, degrees=degrees, grids=grids, names=names):
             fit = fit_stratum(s, degrees, ranges, cells)
             return {c: partial_effect(fit.coef[c], degrees[c], grids[c], *ranges[c])
                     for c in names}
@@ -574,9 +579,15 @@ def _resample_within(blocks: np.ndarray, rng) -> np.ndarray:
     return order[draw]
 
 
-def _verdict(name, row, associated, alpha, design) -> tuple[str, str | None]:
+def _verdict(name, row, associated, alpha) -> tuple[str, str | None]:
+    """Verdict and (``?`` = to be named) what a proxy stands in for. The marginal views'
+    association counts on its own only for inputs that changed between visits, where the
+    stratum test has few degrees of freedom; elsewhere it must survive the stratum's own
+    marginal test (the views treat the points of one run as independent)."""
     significant = np.isfinite(row["p_value"]) and row["p_value"] < alpha
     marginal = np.isfinite(row["p_marginal"]) and row["p_marginal"] < alpha
+    if name not in TARGET_DERIVED and row["level"] not in ("visit", "unit"):
+        associated = False
     if name in TARGET_DERIVED:
         return ("proxy", "backlash_um") if (significant or marginal or associated) \
             else ("none", None)
@@ -738,3 +749,84 @@ def dropcolumn_importance(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
                    else np.nan)
     return pd.DataFrame.from_dict(rows, orient="index",
                                   columns=["dropcolumn_um", "dropcolumn_std_um"])
+
+
+# --- association and influence together: what ``backlash rank`` reports ----------------------
+
+@dataclass
+class Explanation:
+    """The paper's association views (``ranking``) and the verdicts given the others
+    (``influence``); ``table`` joins both, ordered drivers first (largest effect first), then
+    proxies, undecided and none, each group in the association rank."""
+
+    ranking: object              # features.ranking.Ranking
+    influence: Influence
+    table: pd.DataFrame
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def knn(self):
+        return self.ranking.knn
+
+    @property
+    def n_points(self) -> int:
+        return self.ranking.n_points
+
+    def drivers(self) -> list[str]:
+        return self.influence.drivers()
+
+    def to_json(self) -> dict:
+        """``features.ranking.Ranking.to_json`` plus, per feature, ``verdict``, ``effect_um``
+        with ``effect_interval_um``, ``proxy_for`` and the conditional tests; ``rank`` is the
+        verdict order, ``association_rank`` the marginal views' rank; ``design`` holds the
+        diagnostics."""
+        base = self.ranking.to_json()
+        by_name = {f["name"]: f for f in base["features"]}
+        features = []
+        for position, name in enumerate(self.table.index, start=1):
+            item = dict(by_name[name])
+            item["association_rank"] = item["rank"]
+            item["rank"] = position
+            item.update(self.influence.feature_json(name))
+            features.append(item)
+        base.update(features=features, drivers=self.drivers(),
+                    verdict_alpha=self.influence.alpha, n_boot=self.influence.n_boot,
+                    design=self.influence.design.to_json(), notes=[*base["notes"], *self.notes])
+        return base
+
+
+def explain(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = None, *, bins=4,
+            n_neighbors: int = 5, estimator=None, prefit: bool = False,
+            rank_by: str = "consensus", n_boot: int = 200, n_repeats: int = 5,
+            dropcolumn: bool = True, alpha: float = ALPHA, random_state: int = 0,
+            source: str = "features") -> Explanation:
+    """Association (``features.ranking.rank_features``) and conditional influence
+    (``conditional_influence``, with ``dropcolumn_importance`` unless ``dropcolumn=False``) of
+    every input of a feature table. ``meta`` holds the point keys (runs, visits, units)."""
+    from features.ranking import rank_features
+
+    groups = None
+    if meta is not None and "visit" in meta and meta["visit"].nunique(dropna=True) > 1:
+        groups = design_groups(meta, len(X))["visit"]
+    ranking = rank_features(X, y_um, groups=groups, bins=bins, n_neighbors=n_neighbors,
+                            estimator=estimator, prefit=prefit, rank_by=rank_by,
+                            n_boot=n_boot, n_repeats=n_repeats, random_state=random_state,
+                            source=source)
+    X = X.reset_index(drop=True)
+    drop = (dropcolumn_importance(X, y_um, meta, random_state=random_state)
+            if dropcolumn else None)
+    result = conditional_influence(X, y_um, meta, association=ranking.table["influence"],
+                                   alpha=alpha, n_boot=n_boot, random_state=random_state,
+                                   dropcolumn=drop, source=source)
+    verdict = result.table[[c for c in result.table.columns if c != "label"]]
+    joined = ranking.table.join(verdict, rsuffix="_conditional")
+    order = {"driver": 0, "proxy": 1, "undecided": 2, "none": 3}
+    joined = joined.assign(_o=joined["verdict"].map(order),
+                           _e=np.where(joined["verdict"] == "driver",
+                                       -joined["effect_um"].fillna(0), 0.0))
+    joined = joined.sort_values(["_o", "_e", "rank"], kind="stable").drop(columns=["_o", "_e"])
+    notes = list(result.notes)
+    if drop is not None:
+        notes.append("drop-column importance: gradient boosting, cross-validation grouped by "
+                     "visit (or run), increase of the held-out RMSE when the input is left out")
+    return Explanation(ranking, result, joined, notes)

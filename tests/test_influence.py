@@ -169,7 +169,7 @@ def test_a_path_input_without_its_effect_is_not_a_driver():
 # --- design diagnostics ---------------------------------------------------------------------
 
 def test_design_levels_and_confounded_pairs():
-    X, y, meta, _ = independent_campaign(1)
+    X, _, meta, _ = independent_campaign(1)
     labels = influence._nested(influence.design_groups(meta, len(X)), len(X))
     design = influence.design_diagnostics(X, labels)
     assert design.level["target"] == "point"

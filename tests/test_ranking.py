@@ -53,9 +53,24 @@ def test_final_rank_and_influence_follow_the_truth(truth):
     assert list(table["rank"]) == [1, 2, 3, 4, 5]
     assert table.loc[list(DRIVERS), "influence"].all()
     assert not table.loc[list(NON_DRIVERS), "influence"].any()
-    assert "no measurable influence" in table.loc["humidity_pct", "reading"]
-    assert "backlash_feed" in table.loc["feed_mm_min", "reading"]
-    assert "wear" in table.loc["target", "reading"]
+    assert "no measurable association" in table.loc["humidity_pct", "reading"]
+    assert "is associated with backlash" in table.loc["feed_mm_min", "reading"]
+    for reading in table["reading"]:  # association only: no physics claimed here
+        assert "drives" not in reading and "Edlen" not in reading
+
+
+def test_physical_readings_come_from_the_effect_records(truth):
+    """The physics of each verdict is the effect records' reading (models.influence)."""
+    from models.influence import conditional_influence
+
+    X, y, result = truth
+    table = conditional_influence(X, y, association=result.table["influence"], n_boot=20).table
+    assert "no measurable influence" in table.loc["humidity_pct", "physical_reading"]
+    assert "backlash_feed" in table.loc["feed_mm_min", "physical_reading"]
+    assert "wear" in table.loc["target", "physical_reading"]
+    assert "air_refraction" in table.loc["humidity_pct", "physical_reading"]
+    assert list(table.loc[list(DRIVERS), "verdict"]) == ["driver", "driver"]
+    assert set(table.loc[list(NON_DRIVERS), "verdict"]) == {"none"}
 
 
 def test_each_score_carries_a_finite_spread(truth):
