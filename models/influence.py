@@ -819,7 +819,7 @@ def explain(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = None, *, bins=4,
                                    alpha=alpha, n_boot=n_boot, random_state=random_state,
                                    dropcolumn=drop, source=source)
     verdict = result.table[[c for c in result.table.columns if c != "label"]]
-    joined = ranking.table.join(verdict, rsuffix="_conditional")
+    joined = ranking.table.join(verdict.drop(columns=["association"]))
     order = {"driver": 0, "proxy": 1, "undecided": 2, "none": 3}
     joined = joined.assign(_o=joined["verdict"].map(order),
                            _e=np.where(joined["verdict"] == "driver",

@@ -281,3 +281,43 @@ def test_twin_drivers_rank_above_inputs_without_effect():
     for idle in ("humidity_pct", "pressure_hpa", "ambient_temp_c", "dwell_s"):
         assert rank[idle] > drivers, (idle, rank.to_dict())
     assert not result.table.loc[["humidity_pct", "dwell_s"], "influence"].any()
+
+
+# --- the command ----------------------------------------------------------------------------
+
+def test_rank_command_json_has_verdicts_and_headline_lists_only_drivers(tmp_path, capsys):
+    """Twin data (paper plan, one repeat): JSON keeps the association keys and adds the
+    verdicts; the report's headline names the drivers and nothing else."""
+    from models.physics.campaign import load_config, simulate
+    from pipeline.cli import main
+    from pipeline.commands.simulate import write
+
+    write(simulate(load_config({"plan": {"repeats": 1}}, preset="paper"), seed=3), tmp_path / "t")
+    code = main(["rank", str(tmp_path / "t" / "readings.csv"), "--out", str(tmp_path / "r"),
+                 "--boot", "10", "--no-dropcolumn", "--json"])
+    assert code == 0
+    payload = json.loads(capsys.readouterr().out)
+    features = {f["name"]: f for f in payload["features"]}
+    for f in features.values():
+        assert {"anova_score", "permutation", "mutual_info", "rank", "reading", "verdict",
+                "effect_um", "effect_interval_um", "proxy_for"} <= set(f)
+        assert f["verdict"] in ("driver", "proxy", "none", "undecided")
+    for idle in ("pressure_hpa", "humidity_pct", "ambient_temp_c", "dwell_s"):
+        assert features[idle]["verdict"] != "driver"
+    assert features["feed_mm_min"]["verdict"] == "driver"
+    low, high = features["feed_mm_min"]["effect_interval_um"]
+    assert low < 1.2 < high  # backlash_feed: 1.2 um per m/min over 0.2-1.2 m/min
+    assert payload["drivers"] == [f["name"] for f in payload["features"]
+                                  if f["verdict"] == "driver"]
+    page = (tmp_path / "r" / "rank_report.html").read_text(encoding="utf-8")
+    headline = page.split('<div class="summary">')[1].split("</div>")[0]
+    for name, f in features.items():
+        assert (f"<b>{f['label']}</b>" in headline) == (f["verdict"] == "driver"), name
+
+
+def test_rank_command_refuses_negative_boot(tmp_path, capsys):
+    from pipeline.cli import main
+
+    code = main(["rank", "missing.csv", "--out", str(tmp_path), "--boot", "-1"])
+    assert code == 2
+    assert "--boot must be 0 or more" in capsys.readouterr().err
