@@ -10,9 +10,7 @@ uses only the columns its physics names, so the same ``X`` feeds every model:
 - ``BezierPosition`` (degree 4) and ``BSplinePosition`` (degree 2, uniform clamped knots), five
   control points each, least squares over the position normalised to [0, 1] on the training
   range — the intra-axis error models of seed 000 (eqs. 18 and 20), here for the backlash profile.
-- ``EffectModelBaseline``: least squares of the twin's lost-motion effects (``backlash``,
-  ``backlash_position``, ``backlash_feed``, ``backlash_temperature``, and wear growing with
-  operating hours) on whichever inputs the table supplies.
+- (the effect-model baseline, built from the effect records, is in ``models.effect_model``)
 - ``PhysicsHybrid``: a physics baseline plus any regressor fitted on its residual.
 """
 
@@ -26,8 +24,7 @@ from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted
 
 from models.persistence import load_estimator, save_estimator
-
-REFERENCE_TEMP_C = 20.0
+from models.physics.effects import REFERENCE_TEMP_C
 
 
 def _column(X, name: str) -> np.ndarray:
@@ -144,68 +141,6 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
     @classmethod
     def load(cls, directory):
         return _hybrid_load(cls, directory)
-
-
-class EffectModelBaseline(RegressorMixin, BaseEstimator):
-    """Least squares of the twin's lost-motion effects (``models.physics.effects``):
-
-    b = b0 + A * backlash_position(x; c, w) + k_f * backlash_feed + k_T * backlash_temperature
-        + k_h * operating_hours / 1000
-
-    each effect evaluated with unit amplitude, so the fit is linear; the wear location c is
-    searched over the training positions (w a quarter of the travel). Terms whose input the
-    table lacks, or that do not vary in training, are left out.
-    """
-
-    def __init__(self, n_centers: int = 9):
-        self.n_centers = n_centers
-
-    def _design(self, X, center_mm: float, width_mm: float) -> tuple[np.ndarray, list[str]]:
-        from models.physics import effects
-
-        n = len(X)
-        cols, names = [np.ones(n)], ["backlash"]
-        conditions = {c: X[c].to_numpy(float) for c in ("feed_mm_min", "machine_temp_c")
-                      if c in X}
-        if "target" in X:
-            cols.append(effects.contribution("backlash_position", X["target"].to_numpy(float), 0,
-                                             conditions, amplitude_um=1.0, center_mm=center_mm,
-                                             width_mm=width_mm))
-            names.append("backlash_position")
-        if "feed_mm_min" in X:
-            cols.append(effects.contribution("backlash_feed", np.zeros(n), 0, conditions,
-                                             k_um_per_m_min=1.0))
-            names.append("backlash_feed")
-        if "machine_temp_c" in X:
-            cols.append(effects.contribution("backlash_temperature", np.zeros(n), 0, conditions,
-                                             k_um_per_k=1.0))
-            names.append("backlash_temperature")
-        if "operating_hours" in X:
-            cols.append(X["operating_hours"].to_numpy(float) / 1000.0)
-            names.append("wear_um_per_1000h")
-        return np.column_stack(cols), names
-
-    def fit(self, X, y):
-        y = np.asarray(y, float)
-        x = X["target"].to_numpy(float) if "target" in X else np.zeros(len(X))
-        width = max(np.ptp(x) / 4, 1e-9)
-        best = None
-        for center in np.linspace(x.min(), x.max(), self.n_centers):
-            design, names = self._design(X, center, width)
-            keep = np.r_[True, np.ptp(design[:, 1:], axis=0) > 1e-12]
-            coef = np.zeros(design.shape[1])
-            coef[keep] = _lstsq(design[:, keep], y)
-            sse = float(np.sum((design @ coef - y) ** 2))
-            if best is None or sse < best[0]:
-                best = (sse, center, coef, names)
-        _, self.center_mm_, self.coef_, self.terms_ = best
-        self.width_mm_ = width
-        self.n_features_in_ = np.shape(X)[1]
-        return self
-
-    def predict(self, X):
-        check_is_fitted(self, "coef_")
-        return self._design(X, self.center_mm_, self.width_mm_)[0] @ self.coef_
 
 
 def _hybrid_save(self, directory) -> None:

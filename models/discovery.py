@@ -47,40 +47,14 @@ COLLINEAR = 0.95
 CLOSE_GAIN = 0.10
 STOP_RATIO = 1.05  # residual within 5 % of the repeatability: nothing measurable left
 
-# Nuisance grids: the parameter searched, and the values tried.
-GRIDS = {
-    "lead_error_periodic": ("pitch_mm", np.r_[np.arange(4.0, 12.0, 0.5), np.arange(12.0, 20.5, 1.0)]),
-    "thermal_drift": ("tau_s", np.geomspace(120.0, 7200.0, 12)),
-    "dwell_settling": ("tau_s", np.geomspace(0.5, 20.0, 10)),
-}
-# The parameter whose value is the fitted amplitude, its unit, and the plausible range.
-AMPLITUDE = {
-    "backlash": ("b0_um", "um", (0.0, 50.0)),
-    "backlash_position": ("amplitude_um", "um", (-20.0, 20.0)),
-    "backlash_feed": ("k_um_per_m_min", "um per m/min", (-10.0, 10.0)),
-    "backlash_temperature": ("k_um_per_k", "um/K", (-3.0, 3.0)),
-    "lead_error_linear": ("k_um_per_m", "um/m", (-200.0, 200.0)),
-    "lead_error_periodic": ("amplitude_um", "um", (0.05, 10.0)),
-    "thermal_expansion": ("alpha_um_per_m_k", "um/(m K)", (5.0, 25.0)),
-    "thermal_drift": ("amplitude_um", "um", (-30.0, 30.0)),
-    "air_refraction": ("fraction", "", (0.3, 1.6)),
-    "abbe": ("pitch_urad", "urad at 150 mm offset", (-200.0, 200.0)),
-    "dwell_settling": ("amplitude_um", "um", (-10.0, 10.0)),
-}
-SEPARATING_TEST = {
-    frozenset({"thermal_expansion", "lead_error_linear"}):
-        "repeat the test at a different machine temperature",
-    frozenset({"air_refraction", "lead_error_linear"}):
-        "repeat the test under a different air pressure or temperature, or check the laser's "
-        "air compensation",
-    frozenset({"thermal_expansion", "air_refraction"}):
-        "log machine and air temperature separately and repeat at a different machine "
-        "temperature",
-    frozenset({"dwell_settling", "backlash"}): "repeat with several dwell times",
-    frozenset({"backlash_feed", "backlash"}): "repeat at several feed rates",
-    frozenset({"backlash_temperature", "backlash"}): "repeat at a different machine temperature",
-    frozenset({"lead_error_periodic"}): "use ISO irregular target spacing",
-}
+# Per-effect knowledge (amplitude, plausible range, nuisance grids, inputs, separating test)
+# lives in the effect records, ``models.physics.effects.RECORDS``.
+RECORDS = effects.RECORDS
+# readings columns -> the condition arrays derived from them
+CONDITION_OF = {"measured_at": "elapsed_s"}
+ALWAYS_PRESENT = ("target", "direction")
+# general smooth forms (one control point per target at most): tried as fallbacks only
+GENERAL_FORMS = tuple(name for name, r in RECORDS.items() if "per_target" in r.nuisance.values())
 
 
 @dataclass
@@ -127,23 +101,49 @@ def conditions_of(readings: pd.DataFrame) -> dict:
 
 
 def missing_inputs(name: str, cond: dict) -> list[str]:
-    needs = effects.NEEDS.get(name, ())
-    return [c for c in needs if c not in cond or not np.isfinite(cond[c]).all()]
+    """Inputs of the effect's record that the readings lack (or hold gaps in)."""
+    missing = []
+    for column in RECORDS[name].inputs:
+        if column in ALWAYS_PRESENT:
+            continue
+        key = CONDITION_OF.get(column, column)
+        if key not in cond or not np.isfinite(cond[key]).all():
+            missing.append(column)
+    return missing
+
+
+def data_value(word: str, x: np.ndarray) -> float:
+    """A nuisance value the measured targets fix (see ``models.physics.effects``)."""
+    lo, hi = float(np.min(x)), float(np.max(x))
+    return {"travel": (hi - lo) or 1.0, "middle": (lo + hi) / 2, "start": lo,
+            "stop": hi if hi > lo else lo + 1.0}[word]
+
+
+def nuisance_grid(name: str, x: np.ndarray) -> tuple[str | None, np.ndarray | None]:
+    """The searched nuisance parameter of an effect and its grid (None when nothing is
+    searched)."""
+    for key, grid in RECORDS[name].nuisance.items():
+        if grid == "targets":
+            return key, np.unique(x)
+        if isinstance(grid, tuple):
+            return key, np.asarray(grid, float)
+    return None, None
 
 
 def effect_column(name: str, x, d, cond, nuisance: dict | None = None) -> np.ndarray:
     """The effect with unit amplitude as a design column [um per unit amplitude]."""
-    amp, _, _ = AMPLITUDE[name]
-    params = {**(nuisance or {}), amp: 1.0}
-    if name == "abbe":
-        params = {**params, "length_mm": float(np.ptp(x) or 1.0)}  # bow over the measured travel
-        return effects.contribution(name, x - x.min(), d, cond, **params)
-    if name == "lead_error_periodic":
-        # amplitude and phase: two columns, sin and cos
-        return np.column_stack([effects.contribution(name, x, d, cond, **params, phase_rad=ph)
-                                for ph in (0.0, np.pi / 2)])
-    value = effects.contribution(name, x, d, cond, **params)
-    return -d * value / 2 if name in effects.LOST_MOTION else value
+    record = RECORDS[name]
+    fixed = {k: data_value(v, x) for k, v in record.nuisance.items()
+             if v in ("travel", "middle", "start", "stop")}
+    params = {**fixed, **(nuisance or {}), record.amplitude: 1.0}
+    quadrature = [k for k, v in record.nuisance.items() if v == "quadrature"]
+    if quadrature:  # amplitude and phase: a sine and a cosine column
+        value = np.column_stack([effects.contribution(name, x, d, cond, **params,
+                                                      **{quadrature[0]: ph})
+                                 for ph in (0.0, np.pi / 2)])
+    else:
+        value = effects.contribution(name, x, d, cond, **params)
+    return -d[:, None] * value.reshape(len(x), -1) / 2 if record.kind == "lost_motion" else value
 
 
 def repeatability_um(readings: pd.DataFrame) -> float:
@@ -211,7 +211,7 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
     design = Design(readings)
     result = Discovery(repeatability_um=repeatability_um(readings))
     skipped = {}
-    for name in effects.EFFECTS:
+    for name in RECORDS:
         missing = missing_inputs(name, design.cond)
         if missing:
             skipped[name] = missing
@@ -251,9 +251,9 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
         _, resid = lstsq_fit(X, design.demean(design.y)[:, 0])
         result.named.append(winner["effect"])
         result.steps.append(Step(
-            winner["effect"], {**winner["nuisance"], AMPLITUDE[winner["effect"]][0]:
+            winner["effect"], {**winner["nuisance"], RECORDS[winner["effect"]].amplitude:
                                float(winner["coef"])},
-            {AMPLITUDE[winner["effect"]][0]: interval}, float(winner["delta_bic"]),
+            {RECORDS[winner["effect"]].amplitude: interval}, float(winner["delta_bic"]),
             float(winner["cv_gain"]), rmse_now, _rmse(resid, design, X)))
     result.residual_after = resid
     result.rmse_after_um = _rmse(resid, design, X)
@@ -265,9 +265,9 @@ def check_baseline(baseline, source: str = "readings") -> list[str]:
     names = [b.strip() for b in (baseline.split(",") if isinstance(baseline, str) else baseline)
              if b.strip()]
     for name in names:
-        if name not in effects.EFFECTS:
+        if name not in RECORDS:
             raise InputError(f"unknown effect {name!r} in --baseline; expected names from "
-                             f"{', '.join(effects.EFFECTS)}", column="--baseline")
+                             f"{', '.join(RECORDS)}", column="--baseline")
     return names
 
 
@@ -281,10 +281,7 @@ def _stack(design: Design, model: dict) -> np.ndarray:
 
 
 def _best_nuisance(design: Design, name: str, others: list) -> tuple[dict, float]:
-    if name == "backlash_position":  # the wear location: one of the measured targets
-        key, grid = "center_mm", np.unique(design.x)
-    else:
-        key, grid = GRIDS.get(name, (None, None))
+    key, grid = nuisance_grid(name, design.x)
     if key is None:
         return {}, float("nan")
     y = design.demean(design.y)[:, 0]
@@ -307,8 +304,8 @@ def _candidates(design: Design, model: dict, skipped: dict) -> pd.DataFrame:
     n = len(y)
     cv0 = loro_rmse(base, y, design.run, design.n_runs)
     rows = []
-    for name in effects.EFFECTS:
-        if name in model or name in skipped:
+    for name in RECORDS:
+        if name in model or name in skipped or name in GENERAL_FORMS:
             continue
         nuisance, _ = _best_nuisance(design, name, [base])
         col = design.column(name, nuisance)
@@ -321,7 +318,7 @@ def _candidates(design: Design, model: dict, skipped: dict) -> pd.DataFrame:
         delta_bic = bic(sse, n, base.shape[1] + k_extra) - bic(sse0, n, base.shape[1])
         cv_gain = 1 - loro_rmse(X, y, design.run, design.n_runs) / cv0
         amp = _amplitude(name, coef[base.shape[1]:])
-        low, high = AMPLITUDE[name][2]
+        low, high = RECORDS[name].plausible
         plausible = low <= amp <= high
         rows.append({"effect": name, "nuisance": nuisance, "coef": amp, "delta_bic": delta_bic,
                      "cv_gain": cv_gain, "plausible": plausible, "sse": sse,
@@ -403,8 +400,8 @@ def _confounding_notes(design: Design, model: dict, skipped: dict, result: Disco
     """Candidates this design cannot see apart from the model, and aliased periodic errors."""
     base = _stack(design, model)
     proj = _projector(base)
-    for name in effects.EFFECTS:
-        if name in model or name in skipped:
+    for name in RECORDS:
+        if name in model or name in skipped or name in GENERAL_FORMS:
             continue
         col = design.column(name, _best_nuisance(design, name, [base])[0])
         total = float(np.sum(col ** 2))
@@ -413,14 +410,14 @@ def _confounding_notes(design: Design, model: dict, skipped: dict, result: Disco
         left = float(np.sum(_residualise(col, proj) ** 2)) / total
         if left < 1e-3:
             twins = [m for m in model if _max_corr(col, design.column(m, model[m])) > COLLINEAR]
-            test = SEPARATING_TEST.get(frozenset({name, *twins[:1]}), "vary the conditions")
+            test = RECORDS[name].separating_test
             result.notes.append(f"{name} cannot be told apart from {', '.join(twins) or 'the model'}"
                                 f" on this design: {test}")
             if twins:
                 _add_group(result.ambiguous, {name, *twins})
     spacing = np.diff(np.unique(design.x))
     if len(spacing) and "lead_error_periodic" not in model:
-        pitches = GRIDS["lead_error_periodic"][1]
+        pitches = nuisance_grid("lead_error_periodic", design.x)[1]
         aliased = [p for p in pitches if np.allclose(spacing / p, np.round(spacing / p), atol=1e-6)]
         if aliased:
             result.notes.append(

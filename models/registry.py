@@ -68,14 +68,15 @@ def _factories() -> dict:
     from sklearn.preprocessing import StandardScaler
 
     from models import baselines
+    from models.effect_model import EffectModelBaseline
 
     return {
         "hybrid": lambda seed: baselines.PhysicsHybrid(
-            physics=baselines.EffectModelBaseline(),
+            physics=EffectModelBaseline(),
             residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed)),
         "shallow-lm": lambda seed: _network(trainer="lm", random_state=seed),
         "shallow-adam": lambda seed: _network(trainer="adam", random_state=seed),
-        "effect-model": lambda seed: baselines.EffectModelBaseline(),
+        "effect-model": lambda seed: EffectModelBaseline(),
         "constant": lambda seed: baselines.ConstantBacklash(),
         "linear-temperature": lambda seed: baselines.LinearInTemperature(),
         "bezier": lambda seed: baselines.BezierPosition(),

@@ -107,7 +107,39 @@ def test_every_effect_matches_its_formula():
     np.testing.assert_allclose(f("air_refraction", x, d, c), ppm * x / 1000)
     np.testing.assert_allclose(f("abbe", x, d, c), [2.25, 0.0, 2.25])
     np.testing.assert_allclose(f("dwell_settling", x, d, c), d * np.exp(-2.0))
-    assert set(effects.EFFECTS) == set(__import__("features.readings.schema").readings.schema.EFFECTS)
+    t = x / 350
+    bezier = (4 * t * (1 - t) ** 3 * 2.0 - 6 * t ** 2 * (1 - t) ** 2 * 1.5
+              + 4 * t ** 3 * (1 - t) * 1.5)
+    np.testing.assert_allclose(f("lead_error_profile", x, d, c), bezier)
+    np.testing.assert_allclose(f("lead_error_profile", x, d, c, p0_um=1.0, p4_um=3.0)[[0, 2]],
+                               [1.0, 3.0])
+
+
+def test_records_cover_the_public_vocabulary_and_drive_the_twin():
+    from features.readings import schema
+
+    assert set(schema.EFFECTS) | {schema.NO_EFFECT} == set(effects.RECORDS) | {"none"}
+    assert len(schema.EFFECTS) == len(set(schema.EFFECTS))
+    for name, record in effects.RECORDS.items():
+        assert record.name == name and record.kind in ("lost_motion", "position")
+        assert record.function.__doc__ and "References" in record.function.__doc__
+        assert record.separating_test and record.reading and record.reference
+        low, high = record.plausible
+        assert low < high
+        assert set(record.nuisance) - {"n_control"} <= set(record.defaults)
+        if record.amplitude != "peak_um":  # profiles report their largest departure
+            assert record.amplitude in record.defaults
+    assert effects.LOST_MOTION == ("backlash", "backlash_position", "backlash_feed",
+                                   "backlash_temperature")
+    # the twin simulates the new profile through the same records: a quiet indirect axis
+    # shows the Bezier curve in its mean deviations
+    profile = {"p1_um": 3.0, "p2_um": -2.0, "p3_um": 2.5, "stop_mm": 350.0}
+    sim = simulate(config("indirect", {"lead_error_profile": profile},
+                          plan={**QUIET["plan"], "methods": ["linear"]}), seed=5)
+    stats = iso230.per_target(sim.readings)
+    expected = effects.contribution("lead_error_profile", stats["target"].to_numpy(), 1, {},
+                                    **profile)
+    np.testing.assert_allclose(stats["mean_up"], expected, atol=1e-9)
 
 
 def test_play_operator_ignores_a_reversal_shorter_than_the_clearance():

@@ -45,7 +45,8 @@ METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "
 
 EFFECTS = (
     "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
-    "lead_error_linear", "lead_error_periodic", "thermal_expansion", "thermal_drift",
+    "lead_error_linear", "lead_error_periodic", "lead_error_profile", "thermal_expansion",
+    "thermal_drift",
     "air_refraction", "abbe", "dwell_settling",
 )
 NO_EFFECT = "none"

@@ -1,26 +1,45 @@
-"""Named physical effects of a ball-screw feed axis, one definition each (SCHEMA.md section 4).
+"""Named physical effects of a ball-screw feed axis: one record and one function each.
 
-Every effect is a pure function of arrays, in the manner of pvlib: inputs with units in their
-names, parameters with physically plausible defaults (``DEFAULTS``), output in um.
+Every name of the vocabulary (``docs``/SCHEMA.md section 4, except ``none``) has a pure
+function of arrays, in the manner of pvlib's ``temperature.py``: inputs with units in their
+names, parameters with physically plausible defaults, output in um. ``RECORDS`` holds, per
+effect, everything the rest of the product needs to know about it (in the spirit of pvlib's
+``TEMPERATURE_MODEL_PARAMETERS``): the function, its kind and unit, which parameter is the
+amplitude and its plausible range, the nuisance parameters and the grids they are searched
+over, the readings it needs, the reference, the test that separates it from its look-alikes,
+the one-sentence physical reading, and the named default parameter set. The twin
+(``models.physics.axis``), the effect-model baseline (``models.effect_model``), the discovery
+workflow (``models.discovery``) and the benchmark read only this table: adding an effect means
+adding one function and one record.
 
 Two kinds:
 
-- **lost motion** (``LOST_MOTION``): the width b [um] of the play between motor and table. The
-  axis model (``models.physics.axis``) runs the commanded path through a play operator of that
-  width; b is the sum of the enabled lost-motion effects.
-- **position errors** (all others): the laser reading minus the true target position [um],
-  added to every reading.
+- ``lost_motion``: the width b [um] of the play between motor and table. The axis model runs
+  the commanded path through a play operator of that width; b is the sum of the enabled
+  lost-motion effects.
+- ``position``: the laser reading minus the true target position [um], added to every reading.
 
 Conditions are arrays aligned with the positions: ``feed_mm_min``, ``dwell_s``,
 ``machine_temp_c``, ``ambient_temp_c``, ``pressure_hpa``, ``humidity_pct`` and ``elapsed_s``
-(time since the start of the run). ``direction`` is +1 or -1 (approach direction).
+(time since the start of the run, derived from ``measured_at``). ``direction`` is +1 or -1.
+
+Nuisance grids (``Effect.nuisance``, parameter -> grid) are either a tuple of values to try or
+a word for a value the data fix: ``"targets"`` (each measured target position), ``"travel"``
+(the measured travel), ``"middle"``, ``"start"``, ``"stop"`` (of the measured travel),
+``"quadrature"`` (a phase fitted in closed form as a sine and a cosine column) and
+``"per_target"`` (a number of control points from 3 up to one per measured target, chosen by
+the information criterion).
 """
 
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import BSpline
+from scipy.special import comb
 
 REFERENCE_TEMP_C = 20.0
 REFERENCE_PRESSURE_HPA = 1013.25
@@ -31,58 +50,270 @@ EDLEN_PPM_PER_HPA = 0.27
 EDLEN_PPM_PER_PCT = -0.0085
 STEEL_ALPHA_UM_PER_M_K = 11.5
 
+SEED_004 = "backlash paper (seed 004), section 2.2.2"
+SEED_000 = "intra-axis error models (seed 000), eqs. 1-5, 18 and 20"
 
+
+# ------------------------------------------------------------------------------ bases
+def unit_interval(position_mm, start_mm, stop_mm) -> np.ndarray:
+    """Parametric coordinate t = (x - start) / (stop - start), clipped to [0, 1] [-]."""
+    span = (stop_mm - start_mm) if stop_mm != start_mm else 1.0
+    return np.clip((np.asarray(position_mm, float) - start_mm) / span, 0.0, 1.0)
+
+
+def bezier_basis(t, degree: int = 4) -> np.ndarray:
+    """Bernstein polynomials B_i,n(t) = C(n, i) t^i (1 - t)^(n - i), i = 0..n (seed 000, eqs.
+    1-3); shape ``t.shape + (n + 1,)``."""
+    t = np.asarray(t, float)[..., None]
+    i = np.arange(degree + 1)
+    return comb(degree, i) * t ** i * (1 - t) ** (degree - i)
+
+
+def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
+    """B-spline basis N_i,k(t) of degree k on a uniform clamped (non-periodic) knot vector with
+    ``n_control`` control points (seed 000, eqs. 4-5); shape ``(len(t), n_control)``."""
+    degree = min(degree, n_control - 1)
+    inner = np.linspace(0.0, 1.0, n_control - degree + 1)
+    knots = np.r_[[0.0] * degree, inner, [1.0] * degree]
+    return BSpline.design_matrix(np.ravel(np.asarray(t, float)), knots, degree).toarray()
+
+
+# ------------------------------------------------------------------------------ lost motion
 def backlash(position_mm, direction, conditions, b0_um=2.0):
-    """Constant lost motion b = b0 [um] (seed 004, section 2.2.2)."""
+    """Constant lost motion at reversal.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position [mm] (sets the output shape only).
+    b0_um : float
+        Clearance between motor and table [um].
+
+    Returns
+    -------
+    b : ndarray
+        Play width b = b0 [um].
+
+    References
+    ----------
+    Backlash paper (seed 004), section 2.2.2.
+    """
     return np.broadcast_to(np.asarray(b0_um, float), np.shape(position_mm))
 
 
 def backlash_position(position_mm, direction, conditions, amplitude_um=1.0, center_mm=175.0,
                       width_mm=80.0):
-    """Local wear of screw and nut where the axis works most: a Gaussian bump
-    b = A exp(-((x - c) / w)^2) [um]."""
+    """Lost motion varying along the axis: local wear of screw and nut where the axis works
+    most, as a Gaussian bump.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    amplitude_um : float
+        Extra clearance at the centre of the worn zone A [um].
+    center_mm, width_mm : float
+        Centre c and width w of the worn zone [mm].
+
+    Returns
+    -------
+    b : ndarray
+        b = A exp(-((x - c) / w)^2) [um].
+
+    References
+    ----------
+    Backlash paper (seed 004), section 2.2.2 (wear of the nut); the general smooth form the
+    discovery workflow also tries is seed 000's B-spline (``bspline_basis``).
+    """
     return amplitude_um * np.exp(-((np.asarray(position_mm) - center_mm) / width_mm) ** 2)
 
 
 def backlash_feed(position_mm, direction, conditions, k_um_per_m_min=1.0):
-    """Friction windup: the drive's friction grows with speed and winds up the axial stiffness,
-    b = k * feed / 1000 [um] with feed in mm/min (k in um per m/min)."""
+    """Friction windup: the drive's friction grows with speed and winds up the axial stiffness.
+
+    Parameters
+    ----------
+    conditions : dict
+        ``feed_mm_min``: feed rate f [mm/min].
+    k_um_per_m_min : float
+        Lost motion per unit of feed k [um per m/min].
+
+    Returns
+    -------
+    b : ndarray
+        b = k f / 1000 [um].
+
+    References
+    ----------
+    Backlash paper (seed 004), section 2.2.2 (speed dependence of lost motion).
+    """
     return k_um_per_m_min * np.asarray(conditions["feed_mm_min"]) / 1000.0
 
 
 def backlash_temperature(position_mm, direction, conditions, k_um_per_k=-0.3):
-    """Ball-nut preload changes with screw temperature: b = k (T_machine - 20 degC) [um];
-    negative k: a warmer nut expands onto the balls and closes the clearance."""
+    """Ball-nut preload changing with screw temperature.
+
+    Parameters
+    ----------
+    conditions : dict
+        ``machine_temp_c``: machine (screw) temperature T [degC].
+    k_um_per_k : float
+        Sensitivity k [um/K]; negative: a warmer nut expands onto the balls and closes the
+        clearance.
+
+    Returns
+    -------
+    b : ndarray
+        b = k (T - 20 degC) [um].
+
+    References
+    ----------
+    Backlash paper (seed 004), section 2.2.2 and Table 2 (machine temperature as an input).
+    """
     return k_um_per_k * (np.asarray(conditions["machine_temp_c"]) - REFERENCE_TEMP_C)
 
 
+# ------------------------------------------------------------------------------ position errors
 def lead_error_linear(position_mm, direction, conditions, k_um_per_m=8.0):
-    """Cumulative lead (or scale) error proportional to position: e = k x / 1000 [um]."""
+    """Cumulative lead (or scale) error proportional to position.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    k_um_per_m : float
+        Lead error per metre of travel k [um/m].
+
+    Returns
+    -------
+    e : ndarray
+        e = k x / 1000 [um].
+
+    References
+    ----------
+    ISO 230-2:2014, systematic positioning deviation; seed 000, section 2.
+    """
     return k_um_per_m * np.asarray(position_mm) / 1000.0
 
 
 def lead_error_periodic(position_mm, direction, conditions, amplitude_um=1.0, pitch_mm=10.0,
                         phase_rad=0.0):
-    """Periodic lead error of the screw, period = pitch: e = A sin(2 pi x / p + phi) [um].
-    Invisible when targets are spaced at multiples of the pitch (ISO 230-2 irregular spacing)."""
+    """Periodic lead error of the screw with its pitch as period.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    amplitude_um : float
+        Amplitude A [um].
+    pitch_mm : float
+        Screw pitch p [mm].
+    phase_rad : float
+        Phase phi [rad].
+
+    Returns
+    -------
+    e : ndarray
+        e = A sin(2 pi x / p + phi) [um]. Invisible when the targets are spaced at multiples of
+        the pitch, hence ISO 230-2's irregular spacing.
+
+    References
+    ----------
+    ISO 230-2:2014, section 4.3 (target positions with irregular spacing).
+    """
     return amplitude_um * np.sin(2 * np.pi * np.asarray(position_mm) / pitch_mm + phase_rad)
+
+
+def lead_error_profile(position_mm, direction, conditions, p0_um=0.0, p1_um=2.0, p2_um=-1.5,
+                       p3_um=1.5, p4_um=0.0, start_mm=0.0, stop_mm=350.0):
+    """Smooth non-linear positioning error along the axis: seed 000's Bezier intra-axis model of
+    degree 4 with five control points, what a pitch-error compensation table corrects.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    p0_um, p1_um, p2_um, p3_um, p4_um : float
+        Control-point values P_i [um], evenly spaced over the travel.
+    start_mm, stop_mm : float
+        Travel over which the curve is defined [mm]; t = (x - start) / (stop - start).
+
+    Returns
+    -------
+    e : ndarray
+        e = sum_i C(4, i) t^i (1 - t)^(4 - i) P_i [um].
+
+    References
+    ----------
+    Seed 000, eqs. 1-3 and 18 (Bezier model of degree 4, five control points); the discovery
+    workflow fits the general form, eq. 4-5 and 20 (B-spline of degree 2), with the number of
+    control points chosen by BIC.
+    """
+    t = unit_interval(position_mm, start_mm, stop_mm)
+    points = np.stack(np.broadcast_arrays(p0_um, p1_um, p2_um, p3_um, p4_um), axis=-1)
+    points = np.asarray(points, float)
+    basis = bezier_basis(t, 4)
+    if points.ndim > 1:  # per-test control points (tests, 1, 5) against (tests, points, 5)
+        return np.sum(basis * points, axis=-1)
+    return basis @ points
 
 
 def thermal_expansion(position_mm, direction, conditions, alpha_um_per_m_k=STEEL_ALPHA_UM_PER_M_K,
                       x_fixed_mm=0.0):
-    """Screw expansion from its fixed bearing: e = alpha (T_machine - 20) (x - x_fixed) / 1000
-    [um], alpha of steel 11.5 um/(m K)."""
+    """Screw expansion from its fixed bearing.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    conditions : dict
+        ``machine_temp_c``: screw temperature T [degC].
+    alpha_um_per_m_k : float
+        Expansion coefficient alpha [um/(m K)], steel 11.5.
+    x_fixed_mm : float
+        Position of the fixed bearing [mm].
+
+    Returns
+    -------
+    e : ndarray
+        e = alpha (T - 20 degC) (x - x_fixed) / 1000 [um].
+
+    References
+    ----------
+    ISO 230-3 (thermal effects); ISO 1 (reference temperature 20 degC).
+    """
     dT = np.asarray(conditions["machine_temp_c"]) - REFERENCE_TEMP_C
     return alpha_um_per_m_k * dT * (np.asarray(position_mm) - x_fixed_mm) / 1000.0
 
 
 def thermal_drift(position_mm, direction, conditions, amplitude_um=2.0, tau_s=900.0):
-    """Warm-up drift during a run: e = A (1 - exp(-t / tau)) [um], t = time since run start."""
+    """Warm-up drift during a run.
+
+    Parameters
+    ----------
+    conditions : dict
+        ``elapsed_s``: time since the start of the run t [s].
+    amplitude_um : float
+        Drift at the end of the warm-up A [um].
+    tau_s : float
+        Time constant tau [s].
+
+    Returns
+    -------
+    e : ndarray
+        e = A (1 - exp(-t / tau)) [um].
+
+    References
+    ----------
+    ISO 230-3, thermal drift test (first-order warm-up).
+    """
     return amplitude_um * (1.0 - np.exp(-np.asarray(conditions["elapsed_s"]) / tau_s))
 
 
 def edlen_ppm(conditions):
-    """Refractive-index change of air from its reference state [ppm] (linearised Edlen)."""
+    """Refractive-index change of air from its reference state [ppm], linearised Edlen:
+    dn = -0.93 (T_air - 20) + 0.27 (p - 1013.25) - 0.0085 (RH - 50) [ppm] (Edlen 1966,
+    Birch and Downs 1993)."""
     return (EDLEN_PPM_PER_K * (np.asarray(conditions["ambient_temp_c"]) - REFERENCE_TEMP_C)
             + EDLEN_PPM_PER_HPA * (np.asarray(conditions["pressure_hpa"]) - REFERENCE_PRESSURE_HPA)
             + EDLEN_PPM_PER_PCT * (np.asarray(conditions["humidity_pct"])
@@ -90,45 +321,203 @@ def edlen_ppm(conditions):
 
 
 def air_refraction(position_mm, direction, conditions, fraction=1.0):
-    """Uncompensated air refraction of the laser: the wavelength in air changes by the Edlen
-    index change, e = fraction * ppm * x / 1000 [um] (1 ppm of 1 m is 1 um); fraction 1 means
-    no compensation at all."""
+    """Uncompensated air refraction of the laser interferometer.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    conditions : dict
+        ``ambient_temp_c`` [degC], ``pressure_hpa`` [hPa], ``humidity_pct`` [%RH].
+    fraction : float
+        Uncompensated fraction of the index change [-]; 1 means no compensation at all.
+
+    Returns
+    -------
+    e : ndarray
+        e = fraction * dn_ppm * x / 1000 [um] (1 ppm of 1 m is 1 um).
+
+    References
+    ----------
+    Edlen (1966), Birch and Downs (1993); ISO 230-2:2014, annex A (environmental compensation).
+    """
     return fraction * edlen_ppm(conditions) * np.asarray(position_mm) / 1000.0
 
 
-def abbe(position_mm, direction, conditions, offset_mm=150.0, pitch_urad=15.0, length_mm=350.0):
-    """Abbe error (seed 001): the carriage's pitch angle times the offset between the laser
-    beam and the functional point, e = offset * eps(x) / 1000 [um] (mm * urad = nm), with a
-    bowed guideway eps(x) = pitch * (2 (x - L/2) / L)^2 [urad]."""
-    eps_urad = pitch_urad * (2 * (np.asarray(position_mm) - length_mm / 2) / length_mm) ** 2
+def abbe(position_mm, direction, conditions, offset_mm=150.0, pitch_urad=15.0, length_mm=350.0,
+         center_mm=175.0):
+    """Abbe error: the carriage's pitch angle times the offset between the laser beam and the
+    functional point, on a bowed guideway.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    offset_mm : float
+        Abbe offset [mm].
+    pitch_urad : float
+        Pitch angle at the ends of the bow eps_0 [urad].
+    length_mm, center_mm : float
+        Length L and centre c of the bow [mm].
+
+    Returns
+    -------
+    e : ndarray
+        e = offset * eps(x) / 1000 [um] (mm * urad = nm), eps(x) = eps_0 (2 (x - c) / L)^2.
+
+    References
+    ----------
+    Seed 000, eq. 17 (positioning error amplified by angular errors through the Abbe offset).
+    """
+    eps_urad = pitch_urad * (2 * (np.asarray(position_mm) - center_mm) / length_mm) ** 2
     return offset_mm * eps_urad / 1000.0
 
 
 def dwell_settling(position_mm, direction, conditions, amplitude_um=1.0, tau_s=2.0):
-    """Approach-dependent overshoot that settles during the dwell at the target:
-    e = d A exp(-dwell / tau) [um], d the approach direction (+1 or -1)."""
+    """Approach-dependent overshoot that settles during the dwell at the target.
+
+    Parameters
+    ----------
+    direction : array-like
+        Approach direction d (+1 or -1).
+    conditions : dict
+        ``dwell_s``: dwell at the target before the reading t_d [s].
+    amplitude_um : float
+        Overshoot at zero dwell A [um].
+    tau_s : float
+        Settling time constant tau [s].
+
+    Returns
+    -------
+    e : ndarray
+        e = d A exp(-t_d / tau) [um].
+
+    References
+    ----------
+    ISO 230-2:2014, section 5.3 (dwell at each target); first-order settling of the position
+    loop.
+    """
     return (np.asarray(direction) * amplitude_um
             * np.exp(-np.asarray(conditions["dwell_s"]) / tau_s))
 
 
-EFFECTS = {f.__name__: f for f in (
-    backlash, backlash_position, backlash_feed, backlash_temperature, lead_error_linear,
-    lead_error_periodic, thermal_expansion, thermal_drift, air_refraction, abbe, dwell_settling)}
-LOST_MOTION = ("backlash", "backlash_position", "backlash_feed", "backlash_temperature")
-# Named parameter sets: the defaults of each effect.
-DEFAULTS = {name: {k: v.default for k, v in inspect.signature(f).parameters.items()
-                   if v.default is not v.empty} for name, f in EFFECTS.items()}
-# Conditions each effect reads (beyond position and direction).
-NEEDS = {"backlash_feed": ("feed_mm_min",), "backlash_temperature": ("machine_temp_c",),
-         "thermal_expansion": ("machine_temp_c",), "thermal_drift": ("elapsed_s",),
-         "air_refraction": ("ambient_temp_c", "pressure_hpa", "humidity_pct"),
-         "dwell_settling": ("dwell_s",)}
+# ------------------------------------------------------------------------------ records
+@dataclass(frozen=True)
+class Effect:
+    """Everything the product knows about one named effect (see the module docstring)."""
+
+    name: str
+    function: Callable
+    kind: str                      # 'lost_motion' or 'position'
+    unit: str                      # unit of the amplitude
+    amplitude: str                 # the amplitude parameter (linear in the output)
+    plausible: tuple[float, float]
+    nuisance: dict = field(default_factory=dict)   # parameter -> grid
+    inputs: tuple[str, ...] = ()   # readings / feature-table columns it depends on
+    reference: str = ""
+    separating_test: str = ""
+    reading: str = ""
+    defaults: dict = field(default_factory=dict)
+
+
+def _defaults(function) -> dict:
+    return {k: v.default for k, v in inspect.signature(function).parameters.items()
+            if v.default is not v.empty}
+
+
+def _record(function, **fields) -> Effect:
+    return Effect(name=function.__name__, function=function, defaults=_defaults(function),
+                  **fields)
+
+
+_PITCHES_MM = tuple(np.r_[np.arange(4.0, 12.0, 0.5), np.arange(12.0, 20.5, 1.0)].tolist())
+
+RECORDS: dict[str, Effect] = {r.name: r for r in (
+    _record(backlash, kind="lost_motion", unit="um", amplitude="b0_um", plausible=(0.0, 50.0),
+            inputs=(), reference=SEED_004,
+            separating_test="compare linear and pendulum tests, or repeat with the indicator "
+                            "at the nut",
+            reading="a constant clearance between motor and table that every reversal has to "
+                    "take up"),
+    _record(backlash_position, kind="lost_motion", unit="um", amplitude="amplitude_um",
+            plausible=(-20.0, 20.0), nuisance={"center_mm": "targets"}, inputs=("target",),
+            reference=SEED_004,
+            separating_test="measure the reversal value at more targets along the travel",
+            reading="the clearance changes along the axis: screw and nut are worn where the "
+                    "axis works most"),
+    _record(backlash_feed, kind="lost_motion", unit="um per m/min", amplitude="k_um_per_m_min",
+            plausible=(-10.0, 10.0), inputs=("feed_mm_min",), reference=SEED_004,
+            separating_test="repeat at several feed rates",
+            reading="friction grows with speed and winds up the drive's axial stiffness, so "
+                    "the lost motion grows with feed"),
+    _record(backlash_temperature, kind="lost_motion", unit="um/K", amplitude="k_um_per_k",
+            plausible=(-3.0, 3.0), inputs=("machine_temp_c",), reference=SEED_004,
+            separating_test="repeat at a different machine temperature",
+            reading="the ball nut's preload changes with screw temperature and with it the "
+                    "clearance"),
+    _record(lead_error_linear, kind="position", unit="um/m", amplitude="k_um_per_m",
+            plausible=(-200.0, 200.0), inputs=("target",), reference="ISO 230-2:2014; seed 000",
+            separating_test="repeat at a different machine temperature and air state",
+            reading="the screw's lead (or the scale) is off by a constant ratio, so the error "
+                    "grows in proportion to position"),
+    _record(lead_error_periodic, kind="position", unit="um", amplitude="amplitude_um",
+            plausible=(0.05, 10.0), nuisance={"pitch_mm": _PITCHES_MM, "phase_rad": "quadrature"},
+            inputs=("target",), reference="ISO 230-2:2014, section 4.3",
+            separating_test="use ISO irregular target spacing, or targets finer than half the "
+                            "pitch",
+            reading="the screw's lead varies within each turn: an error that repeats with the "
+                    "screw pitch"),
+    _record(lead_error_profile, kind="position", unit="um", amplitude="peak_um",
+            plausible=(0.0, 100.0),
+            nuisance={"n_control": "per_target", "start_mm": "start", "stop_mm": "stop"},
+            inputs=("target",), reference=SEED_000,
+            separating_test="measure pitch and yaw along the axis (an Abbe error has the same "
+                            "shape along one line), or repeat at more targets",
+            reading="a smooth non-linear positioning error along the axis, what a pitch-error "
+                    "compensation table corrects (backlash compensate)"),
+    _record(thermal_expansion, kind="position", unit="um/(m K)", amplitude="alpha_um_per_m_k",
+            plausible=(5.0, 25.0), inputs=("target", "machine_temp_c"),
+            reference="ISO 230-3; ISO 1",
+            separating_test="repeat the test at a different machine temperature",
+            reading="the screw expands from its fixed bearing as it warms"),
+    _record(thermal_drift, kind="position", unit="um", amplitude="amplitude_um",
+            plausible=(-30.0, 30.0), nuisance={"tau_s": tuple(np.geomspace(120.0, 7200.0, 12))},
+            inputs=("measured_at",), reference="ISO 230-3, thermal drift test",
+            separating_test="repeat after a warm-up, or log time and temperature along the run",
+            reading="the axis drifts during the run as the machine warms up"),
+    _record(air_refraction, kind="position", unit="", amplitude="fraction",
+            plausible=(0.3, 1.6), inputs=("target", "ambient_temp_c", "pressure_hpa",
+                                          "humidity_pct"),
+            reference="Edlen (1966); Birch and Downs (1993)",
+            separating_test="repeat under a different air pressure or temperature, or check the "
+                            "laser's air compensation",
+            reading="the laser's wavelength in air is not compensated for the air's state"),
+    _record(abbe, kind="position", unit="urad at 150 mm offset", amplitude="pitch_urad",
+            plausible=(-200.0, 200.0), nuisance={"length_mm": "travel", "center_mm": "middle"},
+            inputs=("target",), reference="seed 000, eq. 17",
+            separating_test="measure the carriage's pitch angle along the axis, or repeat with "
+                            "a different Abbe offset",
+            reading="the carriage pitches along a bowed guideway and the offset between beam "
+                    "and tool turns the angle into a position error"),
+    _record(dwell_settling, kind="position", unit="um", amplitude="amplitude_um",
+            plausible=(-10.0, 10.0), nuisance={"tau_s": tuple(np.geomspace(0.5, 20.0, 10))},
+            inputs=("direction", "dwell_s"), reference="ISO 230-2:2014, section 5.3",
+            separating_test="repeat with several (at least three) dwell times",
+            reading="the position loop overshoots against the approach and settles during the "
+                    "dwell"),
+)}
+
+# Derived views, kept for the twin and older callers.
+EFFECTS = {name: r.function for name, r in RECORDS.items()}
+LOST_MOTION = tuple(name for name, r in RECORDS.items() if r.kind == "lost_motion")
+DEFAULTS = {name: dict(r.defaults) for name, r in RECORDS.items()}
 
 
 def contribution(name: str, position_mm, direction, conditions, **params) -> np.ndarray:
     """The named effect with its defaults overridden by ``params`` [um]."""
-    return np.asarray(EFFECTS[name](position_mm, direction, conditions,
-                                    **{**DEFAULTS[name], **params}), float)
+    record = RECORDS[name]
+    return np.asarray(record.function(position_mm, direction, conditions,
+                                      **{**record.defaults, **params}), float)
 
 
 def lost_motion_um(enabled: dict, position_mm, conditions) -> np.ndarray:
