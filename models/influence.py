@@ -112,23 +112,9 @@ def effect_paths(inputs) -> dict[str, Path]:
 
 def _records():
     """(name, kind, inputs, reading) of every effect record."""
-    from models.physics import effects
+    from models.physics.effects import RECORDS
 
-    records = getattr(effects, "RECORDS", None)
-    if records is not None:
-        return [(r.name, r.kind, tuple(r.inputs), r.reading) for r in records.values()]
-    # Effect library without records: lost-motion names, the conditions each effect needs
-    # (position for all of them) and the first docstring sentence as the reading.
-    out = []
-    for name, function in effects.EFFECTS.items():
-        kind = "lost_motion" if name in effects.LOST_MOTION else "position"
-        needs = effects.NEEDS.get(name, ())
-        if name in ("backlash_position", "lead_error_linear", "lead_error_periodic", "abbe",
-                    "thermal_expansion", "air_refraction"):
-            needs = ("target", *needs)
-        doc = " ".join((function.__doc__ or name).split())
-        out.append((name, kind, tuple(needs), doc.split(". ")[0].rstrip(".") + "."))
-    return out
+    return [(r.name, r.kind, tuple(r.inputs), r.reading) for r in RECORDS.values()]
 
 
 # --- design: strata, variance shares, confounding -------------------------------------------

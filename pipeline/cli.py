@@ -11,7 +11,7 @@ import sys
 from features.readings.errors import InputError
 
 # Order is the order shown in --help.
-COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "drift", "discover", "hidden-effects", "run")
+COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "replicate", "drift", "discover", "hidden-effects", "run")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -62,12 +62,15 @@ def test_final_rank_and_influence_follow_the_truth(truth):
 def test_physical_readings_come_from_the_effect_records(truth):
     """The physics of each verdict is the effect records' reading (models.influence)."""
     from models.influence import conditional_influence
+    from models.physics.effects import RECORDS
 
     X, y, result = truth
     table = conditional_influence(X, y, association=result.table["influence"], n_boot=20).table
     assert "no measurable influence" in table.loc["humidity_pct", "physical_reading"]
     assert "backlash_feed" in table.loc["feed_mm_min", "physical_reading"]
-    assert "wear" in table.loc["target", "physical_reading"]
+    assert RECORDS["backlash_feed"].reading in table.loc["feed_mm_min", "physical_reading"]
+    assert "worn" in table.loc["target", "physical_reading"]  # local wear of screw and nut
+    assert RECORDS["backlash_position"].reading in table.loc["target", "physical_reading"]
     assert "air_refraction" in table.loc["humidity_pct", "physical_reading"]
     assert list(table.loc[list(DRIVERS), "verdict"]) == ["driver", "driver"]
     assert set(table.loc[list(NON_DRIVERS), "verdict"]) == {"none"}
@@ -321,3 +324,59 @@ def test_rank_command_refuses_negative_boot(tmp_path, capsys):
     code = main(["rank", "missing.csv", "--out", str(tmp_path), "--boot", "-1"])
     assert code == 2
     assert "--boot must be 0 or more" in capsys.readouterr().err
+
+
+def test_paper_replication_experiment_names_only_known_options():
+    """Every step of the replication experiment is a backlash subcommand and every option it
+    sets is one of that command's argparse destinations; outputs lie inside {out}."""
+    import argparse
+    import tomllib
+    from pathlib import Path
+
+    from pipeline.cli import build_parser
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "paper_replication.toml"
+    spec = tomllib.loads(path.read_text(encoding="utf-8"))
+    subs = next(a for a in build_parser()._actions
+                if isinstance(a, argparse._SubParsersAction))
+    commands = [step["command"] for step in spec["steps"]]
+    assert commands == ["simulate", "replicate", "rank"]
+    for step in spec["steps"]:
+        dests = {a.dest for a in subs.choices[step["command"]]._actions}
+        assert set(step["with"]) <= dests, (step["command"], set(step["with"]) - dests)
+        assert step["with"]["out"].startswith("{out}/")
+    config = path.parent / spec["steps"][0]["with"]["config"].replace("{here}/", "")
+    assert config.is_file()
+
+
+def test_replication_table_on_a_small_twin(tmp_path):
+    """Paper plan with backlash growing along the axis: the ANOVA order is the paper's
+    (position and deviations, then feed, then environment), the deviations are left out in
+    the second column, and the notes say why."""
+    from features.table import PAPER_FEATURES, feature_table
+    from models.physics.campaign import load_config, simulate
+    from pipeline import replication
+
+    here = __import__("pathlib").Path(__file__).resolve().parents[1]
+    config = load_config(here / "experiments/data/paper_replication_twin.toml", preset="paper")
+    table = feature_table(simulate(config, seed=7).readings, target="paper",
+                          features=list(PAPER_FEATURES))
+    from sklearn.linear_model import LinearRegression
+
+    results = replication.replicate(table.X, table.y, table.meta, n_boot=5,
+                                    estimator=LinearRegression())
+    order = results["with deviations"]["anova_order"]
+    # position and the deviations (which follow position through the lead error) lead,
+    # in either order, then feed, then the environment
+    assert set(order[:3]) == {"target", *replication.DEVIATIONS}
+    assert order[3] == "feed_mm_min"
+    assert "deviation_up_um" not in results["without deviations"]["anova_order"]
+    for case in results.values():
+        assert case["verdict"]["target"] == "driver"
+        assert 0 < case["network"]["best_epoch"] <= case["network"]["epochs"]
+        assert case["network"]["regression_r"]["all"] > 0.8
+    assert results["with deviations"]["verdict"]["deviation_up_um"] == "proxy"
+    paths = replication.write_replication(results, tmp_path)
+    text = paths["md"].read_text(encoding="utf-8")
+    assert "| best epoch / total epochs (Fig. 10) | 27 / 33 |" in text
+    assert "left out" in text and "carries the target" in text
