@@ -237,6 +237,9 @@ def separating_test(a: str, b: str, level_a: str, level_b: str) -> str:
     if a in TARGET_DERIVED or b in TARGET_DERIVED:
         return (f"{la} and {lb} move together over this axis; the deviations are measured, "
                 "not set: compare axes or machines with different error profiles")
+    if level_a in ("visit", "unit") and level_b in ("visit", "unit"):
+        return (f"{la} and {lb} changed together between visits: more visits in which they "
+                "move independently, or a change of one of them within a visit")
     where = {"point": "along the run", "run": "from run to run", "visit": "from visit to visit",
              "unit": "between machines"}
     return (f"{la} and {lb} moved together ({where[level_a]}): add runs in which {la.lower()} "
@@ -414,7 +417,8 @@ class Influence:
                 "effect_interval_um": [_num(low), _num(high)],
                 "effect_shape": r["effect_shape"], "proxy_for": r["proxy_for"],
                 "physical_path": list(r["physical_path"]), "p_conditional": _num(r["p_value"]),
-                "p_marginal": _num(r["p_marginal"]), "tested": r["tested"],
+                "p_marginal": _num(r["p_marginal"]),
+                "tested": r["tested"] if isinstance(r["tested"], str) else None,
                 "level": r["level"], "dropcolumn_um": _num(r.get("dropcolumn_um")),
                 "dropcolumn_std_um": _num(r.get("dropcolumn_std_um")),
                 "physical_reading": r["physical_reading"]}
@@ -530,7 +534,7 @@ def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
     by_level = {s.level: s for s in layers}
     models = {}
     for c, row in table.iterrows():
-        if row["tested"] is not None:
+        if isinstance(row["tested"], str):
             key = (row["tested"], tuple(sorted(row["degrees"].items())))
             models.setdefault(key, []).append(c)
     out = {c: (np.nan, np.nan, np.nan, "") for c in table.index}
@@ -598,7 +602,7 @@ def _proxy_targets(table, layers, X, fits, ranges) -> list:
         if row["proxy_for"] != "?":
             out.append(row["proxy_for"] if isinstance(row["proxy_for"], str) else None)
             continue
-        level = row["tested"] or row["level"]
+        level = row["tested"] if isinstance(row["tested"], str) else row["level"]
         best, best_r = None, 0.0
         s = by_level.get(level)
         if s is not None:
@@ -683,8 +687,10 @@ def _p_text(p) -> str:
 
 
 def _separation(name: str, design: Design) -> str:
-    tests = [c["separating_test"] for c in design.confounded if name in c["inputs"]]
-    return tests[0] + "." if tests else "vary it independently of the other inputs."
+    tests = sorted((c for c in design.confounded if name in c["inputs"]),
+                   key=lambda c: "visit" not in c["inputs"])
+    return tests[0]["separating_test"] + "." if tests else \
+        "vary it independently of the other inputs."
 
 
 # --- non-parametric check: drop-column importance of gradient boosting -----------------------

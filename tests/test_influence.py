@@ -89,8 +89,8 @@ def test_visit_constant_inputs_are_proxies_for_the_visit_not_drivers():
     for name in ("pressure_hpa", "humidity_pct"):
         assert table.loc[name, "verdict"] == "proxy"
         assert table.loc[name, "proxy_for"] in ("visit", "operating_hours")
-        assert "varies only" in result.design.to_json()["confounded"][0]["separating_test"] \
-            or "changed only between visits" in _tests_for(result, name)
+        assert "changed only between visits" in _tests_for(result, name)
+        assert "vary it within a visit" in _tests_for(result, name)
 
 
 def _tests_for(result, name):
@@ -212,3 +212,14 @@ def test_bad_inputs():
     bad.iloc[3, 0] = np.nan
     with pytest.raises(InputError, match="NaN"):
         influence.conditional_influence(bad, y, meta)
+
+
+def test_an_input_the_design_cannot_test_is_undecided():
+    """Two visits: operating hours change once, with no visit left to estimate the error of
+    a between-visit effect: the verdict is undecided, not none and not driver."""
+    X, y, meta, _ = independent_campaign(4, visits=2)
+    result = influence.conditional_influence(X, y, meta, n_boot=0)
+    row = result.table.loc["operating_hours"]
+    assert row["verdict"] == "undecided"
+    assert "cannot be decided" in row["physical_reading"]
+    assert "vary it within a visit" in row["physical_reading"]
