@@ -60,7 +60,8 @@ import pandas as pd
 from features.readings.errors import InputError
 
 ALPHA = 0.01                 # family-wise level of the partial F-test per input
-MIN_SHARE = 0.05             # share of an input's variance a stratum needs to test it there
+MIN_SHARE = 0.10             # share of an input's variance a stratum needs to test it there
+                             # (above what run-to-run scatter leaves in visit means by chance)
 MAX_DEGREE = 4               # largest polynomial degree of one input's partial effect
 MIN_RESIDUAL_DF = 3          # a higher degree needs this many and twice its parameters left
 LEVELS = ("point", "run", "visit", "unit")

@@ -331,7 +331,7 @@ The paper reports 98.8 %.</p>
 <li><b>Effect model</b>: each input as Legendre polynomials (degree by BIC) in a least-squares
 model per stratum of the design (within runs with run fixed effects, between runs with visit
 fixed effects, between visits with machine-axis fixed effects); an input is tested in every
-stratum that holds at least 5 % of its variance, against that stratum's error, and its p-value
+stratum that holds at least 10 % of its variance, against that stratum's error, and its p-value
 is the smallest over those strata times their number.</li>
 <li><b>Physical paths</b> come from the effect records: the inputs of the lost-motion effects,
 and operating hours through wear.</li>
