@@ -473,33 +473,8 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
     physics = [c for c in X.columns if paths[c].paths]
     rng = np.random.default_rng(random_state)
 
-    rows = {c: {"p": [], "p_marg": []} for c in X.columns}
-    fits = {}
-    for s in layers:
-        phys = [c for c in physics if c in s.inputs]
-        degrees = choose_degrees(s, phys, ranges)
-        fits[s.level] = degrees
-        for c in phys:
-            _, p, df = partial_f(s, degrees, c, ranges)
-            rows[c]["p"].append((p, s.level, df, degrees))
-        for c in (c for c in s.inputs if c not in physics):
-            extra = choose_degrees(s, [c], ranges, fixed=degrees)
-            _, p, df = partial_f(s, extra, c, ranges)
-            rows[c]["p"].append((p, s.level, df, extra))
-        for c in s.inputs:
-            alone = choose_degrees(s, [c], ranges)
-            rows[c]["p_marg"].append(partial_f(s, alone, c, ranges)[1])
-
-    records = []
-    for c in X.columns:
-        tested = [t for t in rows[c]["p"] if np.isfinite(t[0])]
-        p_adj = min(1.0, min(t[0] for t in tested) * len(tested)) if tested else np.nan
-        best = min(tested, key=lambda t: t[0]) if tested else None
-        marg = [p for p in rows[c]["p_marg"] if np.isfinite(p)]
-        p_marg = min(1.0, min(marg) * len(marg)) if marg else np.nan
-        records.append({"name": c, "p_value": p_adj, "p_marginal": p_marg,
-                        "tested": best[1] if best else None, "df": best[2] if best else 0,
-                        "degrees": best[3] if best else None})
+    rows, fits = stratum_tests(layers, list(X.columns), physics, ranges)
+    records = [{"name": c, **combine_strata(rows[c])} for c in X.columns]
     table = pd.DataFrame(records).set_index("name")
     table["level"] = design.level
     table["physical_path"] = [tuple(n for n, _ in paths[c].paths) for c in table.index]
@@ -526,6 +501,37 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
     notes = [(f"partial F-tests in the effect model by stratum, family-wise level {alpha:g} per "
               f"input; effect intervals from {n_boot} bootstrap resamples of the stratum's cells")]
     return Influence(table, design, alpha, n_boot, notes)
+
+
+def stratum_tests(layers, inputs, physics, ranges) -> tuple[dict, dict]:
+    """Per input and stratum: (p given the others, level, residual df, degrees) and the
+    marginal p (block fixed effects only). Inputs with a path are tested in the physics model,
+    the others by adding them to it. Also returns the physics degrees per level."""
+    rows = {c: {"p": [], "p_marg": []} for c in inputs}
+    fits = {}
+    for s in layers:
+        phys = [c for c in physics if c in s.inputs]
+        degrees = choose_degrees(s, phys, ranges)
+        fits[s.level] = degrees
+        for c in s.inputs:
+            model = degrees if c in phys else choose_degrees(s, [c], ranges, fixed=degrees)
+            _, p, df = partial_f(s, model, c, ranges)
+            rows[c]["p"].append((p, s.level, df, model))
+            alone = choose_degrees(s, [c], ranges)
+            rows[c]["p_marg"].append(partial_f(s, alone, c, ranges)[1])
+    return rows, fits
+
+
+def combine_strata(row: dict) -> dict:
+    """Smallest p over the strata that could test the input, times their number
+    (Bonferroni), and the stratum that gave it."""
+    tested = [t for t in row["p"] if np.isfinite(t[0])]
+    best = min(tested, key=lambda t: t[0]) if tested else None
+    marg = [p for p in row["p_marg"] if np.isfinite(p)]
+    return {"p_value": min(1.0, best[0] * len(tested)) if best else np.nan,
+            "p_marginal": min(1.0, min(marg) * len(marg)) if marg else np.nan,
+            "tested": best[1] if best else None, "df": best[2] if best else 0,
+            "degrees": best[3] if best else None}
 
 
 def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
