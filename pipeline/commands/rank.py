@@ -19,8 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory; its predictor gives the permutation "
-                             "importance (default: a gradient boosting regressor fitted per "
-                             "cross-validation fold)")
+                             "importance of the association views (default: a gradient "
+                             "boosting regressor fitted per cross-validation fold)")
     parser.add_argument("--json", action="store_true",
                         help="print the ranking as JSON on stdout")
     parser.add_argument("--bins", default="4",
@@ -32,8 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="backlash definition (default: the model's, else auto)")
     parser.add_argument("--k", type=int, default=5, help="k-NN neighbours (default 5)")
     parser.add_argument("--rank-by", choices=("consensus", "anova"), default="consensus",
-                        help="final rank: mean rank of ANOVA, permutation and mutual "
-                             "information (default), or the ANOVA score as in the paper")
+                        help="order of the association views: mean rank of ANOVA, "
+                             "permutation and mutual information (default), or the ANOVA "
+                             "score as in the paper; the report lists drivers first either way")
     parser.add_argument("--boot", type=int, default=200,
                         help="bootstrap resamples of the effect intervals and ANOVA spreads "
                              "(default 200)")
