@@ -7,7 +7,7 @@ import argparse
 import os
 
 from features.readings.errors import InputError
-from pipeline.commands.common import parse_features
+from pipeline.commands.common import FORMATS, parse_features
 
 HELP = ("Which inputs drive backlash given the others (driver with its effect in um, proxy, "
         "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="skip the drop-column importance of gradient boosting (faster)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--format", default="auto",
-                        choices=("auto", "canonical", "paper", "ecmc"),
+                        choices=FORMATS,
                         help="input layout (default: detect)")
 
 

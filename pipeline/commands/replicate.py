@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.common import FORMATS
+
 HELP = ("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, k-NN "
         "accuracy) on paired tests, with and without the deviation inputs.")
 
@@ -13,7 +15,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", help="readings file with paired linear and pendulum tests")
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--format", default="auto",
-                        choices=("auto", "canonical", "paper", "ecmc"),
+                        choices=FORMATS,
                         help="input layout (default: detect)")
     parser.add_argument("--truth", metavar="FILE",
                         help="twin truth table: also the k-NN accuracy the true backlash "
