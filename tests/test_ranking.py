@@ -380,3 +380,12 @@ def test_replication_table_on_a_small_twin(tmp_path):
     text = paths["md"].read_text(encoding="utf-8")
     assert "| best epoch / total epochs (Fig. 10) | 27 / 33 |" in text
     assert "left out" in text and "carries the target" in text
+
+
+def test_replicate_command_refuses_negative_boot(tmp_path, capsys):
+    from pipeline.cli import main
+
+    code = main(["replicate", "missing.csv", "--out", str(tmp_path), "--boot", "-2"])
+    assert code == 2
+    assert "--boot must be 0 or more" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # nothing written
