@@ -113,6 +113,9 @@ def _twin(preset: str, seed: int, overrides: dict | None = None):
 PRESETS = {
     "paper": ({}, ("target", "feed_mm_min")),
     "demo": ({}, ("target", "feed_mm_min", "machine_temp_c", "operating_hours")),
+    # indirect axis, ISO target, adjustment and failure; one run per visit leaves the
+    # preload effect of machine temperature unresolvable, so it is not asserted
+    "drift": ({}, ("target", "operating_hours")),
     # the fleet (4 machines x 3 axes x 8 visits, adjustment at visit 5), one dwell and one
     # repeat per feed to keep the sweep fast
     "fleet": ({"plan": {"repeats": 1, "dwells_s": [5.0]}},
@@ -134,7 +137,7 @@ def test_twin_presets_over_ten_seeds(preset):
         for name in drivers:
             found[name] += result.loc[name, "verdict"] == "driver"
         for name in ("deviation_down_um", "deviation_up_um"):
-            if result.loc[name, "verdict"] == "proxy":
+            if name in result.index and result.loc[name, "verdict"] == "proxy":
                 assert result.loc[name, "proxy_for"] == "backlash_um"
     assert min(found.values()) >= 9, (preset, found)
 
