@@ -42,7 +42,8 @@ and the input's p-value is the smallest over its strata times their number (Bonf
 Drivers are tested within the *physics model* (the inputs with a path only); an input without
 a path is tested by adding it to the physics model. The effect [um] is the peak-to-peak of the
 fitted partial effect over the observed values; its interval is the 2.5-97.5 % percentile of a
-bootstrap that resamples the stratum's cells (points, runs or visits) within their blocks.
+bootstrap that resamples the stratum's cells (points, runs or visits) within their blocks, or,
+where the stratum has too few cells for that, of draws from the coefficients' t distribution.
 
 A second, non-parametric opinion (``dropcolumn_importance``): the increase of the
 cross-validated RMSE [um] of a gradient boosting regressor when the input is dropped, with
@@ -63,6 +64,7 @@ ALPHA = 0.01                 # family-wise level of the partial F-test per input
 MIN_SHARE = 0.10             # share of an input's variance a stratum needs to test it there
                              # (above what run-to-run scatter leaves in visit means by chance)
 MAX_DEGREE = 4               # largest polynomial degree of one input's partial effect
+FEW_CELLS = 12               # below this many cells (beyond blocks) the interval is parametric
 MIN_RESIDUAL_DF = 3          # a higher degree needs this many and twice its parameters left
 LEVELS = ("point", "run", "visit", "unit")
 VERDICTS = ("driver", "proxy", "none", "undecided")
@@ -537,7 +539,10 @@ def combine_strata(row: dict) -> dict:
 def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
     """Peak-to-peak effect [um] over the observed range at the stratum that tested the input,
     with a percentile interval from resampling that stratum's cells within their blocks (one
-    refit per resample serves every input tested with the same model)."""
+    refit per resample serves every input tested with the same model). With fewer than
+    ``FEW_CELLS`` cells beyond the blocks a resample repeats the same few cells, so the
+    coefficients are drawn from their multivariate t distribution instead (parametric
+    bootstrap with the stratum's residual degrees of freedom)."""
     by_level = {s.level: s for s in layers}
     models = {}
     for c, row in table.iterrows():
@@ -555,8 +560,12 @@ def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
                     for c in names}
 
         point = effects()
-        boot = [{c: np.ptp(f) for c, f in effects(_resample_within(s.blocks, rng)).items()}
-                for _ in range(n_boot)]
+        if s.n - s.n_blocks >= FEW_CELLS:
+            boot = [{c: np.ptp(f) for c, f in effects(_resample_within(s.blocks, rng)).items()}
+                    for _ in range(n_boot)]
+        else:
+            boot = [{c: np.ptp(partial_effect(coef[c], degrees[c], grids[c], *ranges[c]))
+                     for c in names} for coef in _coef_draws(s, degrees, ranges, n_boot, rng)]
         for c in names:
             lo, hi = (np.percentile([b[c] for b in boot], [2.5, 97.5]) if boot
                       else (np.nan, np.nan))
@@ -564,6 +573,24 @@ def _effects(table, layers, ranges, X, n_boot, rng) -> pd.DataFrame:
     return pd.DataFrame.from_dict(out, orient="index",
                                   columns=["effect_um", "effect_low_um", "effect_high_um",
                                            "effect_shape"])
+
+
+def _coef_draws(s: Stratum, degrees: dict, ranges: dict, n: int, rng) -> list[dict]:
+    """``n`` coefficient sets beta + L z sqrt(df / chi2_df), L L^T = s^2 (A^T A)^-1."""
+    fit = fit_stratum(s, degrees, ranges)
+    names = list(degrees)
+    design = np.hstack([legendre_basis(s.X[c].to_numpy(), *ranges[c], degrees[c])
+                        for c in names])
+    A = _demean(design, s.blocks)
+    if fit.df < 1 or not n:
+        return []
+    cov = fit.rss / fit.df * np.linalg.pinv(A.T @ A)
+    beta = np.concatenate([fit.coef[c] for c in names])
+    z = rng.multivariate_normal(np.zeros(beta.size), cov, size=n, method="eigh")
+    draws = beta + z * np.sqrt(fit.df / rng.chisquare(fit.df, size=(n, 1)))
+    edges = np.cumsum([0] + [degrees[c] for c in names])
+    return [{c: d[a:b] for c, a, b in zip(names, edges[:-1], edges[1:], strict=True)}
+            for d in draws]
 
 
 def _resample_within(blocks: np.ndarray, rng) -> np.ndarray:
