@@ -290,7 +290,8 @@ points, {len(t)} inputs{target_line}.</p>
 <p><b>driver</b>: a physical path to lost motion (an effect record) and a significant partial
 F-test in the effect model (family-wise level {inf.alpha:g}); the effect is the peak-to-peak of
 its fitted partial effect over the observed range, with a 95 % interval from {inf.n_boot}
-bootstrap resamples of runs, visits or points (the level it was tested at). <b>proxy</b>: it
+bootstrap resamples of runs, visits or points (the level it was tested at; draws from the
+coefficients' t distribution where that level has fewer than 12 cells). <b>proxy</b>: it
 moves with backlash but stands in for something else (column <i>stands in for</i>).
 <b>none</b>: no influence measurable given the others. An input without a physical path is
 never a driver.</p>
