@@ -1,4 +1,10 @@
-"""Which conditions drive backlash: four views of input importance, a final rank and a reading.
+"""Association of each input with backlash: the paper's marginal views and two checks.
+
+Everything here is *association*, not influence: each view looks at one input at a time (or
+at a predictor's use of it), so an input that merely moves with a driver over the test plan
+(run order, visits, warm-up with feed) scores like the driver, and a real driver can hide
+behind a larger one. Which inputs *drive* backlash, given the others, is decided in
+``models.influence`` from the effect records; this module gives the paper's views beside it.
 
 The backlash paper (seed 004, section 5) ranks its eight inputs with a distance-weighted
 k-nearest-neighbour classifier on backlash classes (validation accuracy 98.8 %) and a one-way
@@ -26,9 +32,9 @@ mutual information  ``mutual_info_regression`` [nat], seeded; spread = std over 
                     null level = mean + 3 std of the MI with the backlash shuffled.
 ==================  =========================================================================
 
-An input has a *measurable influence* when at least one view separates it from noise: ANOVA
-p < 0.001, permutation mean above twice its spread and above 2 % of the strongest input's, or
-MI above its null level.
+An input has a *measurable association* (column ``influence``, kept under its old name) when
+at least one view separates it from noise: ANOVA p < 0.001, permutation mean above twice its
+spread and above 2 % of the strongest input's, or MI above its null level.
 
 Final rank (default ``rank_by="consensus"``): inputs with a measurable influence first; within
 each group the mean of the three per-view ranks (ANOVA score, permutation importance, MI),
@@ -77,37 +83,6 @@ LABELS = {
     "dwell_s": "Dwell time",
     "operating_hours": "Operating hours",
 }
-
-# How each input can act on measured lost motion when it does (DESIGN.md domain notes).
-MECHANISMS = {
-    "target": "local wear of the screw and nut makes the clearance differ along the axis, "
-              "largest where the axis works most (backlash_position)",
-    "feed_mm_min": "friction windup, the drive's friction force over the axial stiffness, adds "
-                   "lost motion that grows with feed (backlash_feed)",
-    "machine_temp_c": "the ball-nut preload changes with screw temperature "
-                      "(backlash_temperature), or thermal expansion leaks into the target when "
-                      "the temperature changed between the linear and the pendulum run",
-    "ambient_temp_c": "it acts through the laser's air compensation (Edlen about -0.93 ppm/K) "
-                      "and through heat flowing into the machine, so it mostly repeats the "
-                      "machine temperature",
-    "pressure_hpa": "it acts only through the laser's air compensation (Edlen about "
-                    "+0.27 ppm/hPa of the measured length), not on the mechanics, so its score "
-                    "means an uncompensated refraction error or a correlation with another input",
-    "humidity_pct": "it acts only through the laser's air compensation (Edlen about "
-                    "-0.0085 ppm/%RH, far below a micrometre over an axis), so its score means "
-                    "a correlation with another input",
-    "deviation_down_um": "it carries the measured lost motion itself (the linear test's "
-                         "reversal error), so it predicts backlash without causing it",
-    "deviation_up_um": "it carries the measured lost motion itself (the linear test's "
-                       "reversal error), so it predicts backlash without causing it",
-    "dwell_s": "the approach-dependent settling offset decays with dwell at the target "
-               "(dwell_settling)",
-    "operating_hours": "wear with running time since the last adjustment opens the clearance "
-                       "of screw and nut",
-}
-MEASUREMENT_ONLY = ("pressure_hpa", "humidity_pct", "ambient_temp_c")
-CARRIES_BACKLASH = ("deviation_down_um", "deviation_up_um")
-
 
 @dataclass
 class KnnResult:
@@ -491,27 +466,22 @@ def final_rank(table: pd.DataFrame, rank_by: str = "consensus") -> pd.Series:
     return pd.Series(np.arange(1, len(order) + 1), index=order, name="rank").reindex(table.index)
 
 
-def physical_reading(name: str, row: pd.Series) -> str:
-    """One sentence: what the input's scores mean physically."""
+def association_reading(name: str, row: pd.Series) -> str:
+    """One sentence on what the marginal views see (association only, no causal claim)."""
     label = LABELS.get(name, name)
-    mechanism = MECHANISMS.get(name, "no physical mechanism is recorded for this input")
-    if row["proxy_for_visit"] and name not in ("target", *CARRIES_BACKLASH):
+    if row["proxy_for_visit"]:
         return (f"{label} stands in for the visit: it was constant within each visit and "
-                "differed between visits, so its score measures whatever else changed between "
-                "visits (wear, adjustment, other conditions), not an effect of its own.")
+                "differed between visits, so its association measures whatever else changed "
+                "between visits.")
     p_text = format_p(row["anova_score"])
     if not row["influence"]:
-        return (f"{label} has no measurable influence on backlash in these data (ANOVA "
-                f"{p_text}, permutation {row['permutation_um']:.2g} ± "
-                f"{row['permutation_std_um']:.2g} um, MI at noise level).")
-    if name in CARRIES_BACKLASH:
-        return f"{label} ranks high because {mechanism}."
-    if name in MEASUREMENT_ONLY:
-        return f"{label} shows an influence (ANOVA {p_text}), but {mechanism}."
+        return (f"{label} shows no measurable association with backlash (ANOVA {p_text}, "
+                f"permutation {row['permutation_um']:.2g} ± {row['permutation_std_um']:.2g} um, "
+                "MI at noise level).")
     hidden = (row["anova_score"] <= -np.log(ANOVA_ALPHA))
-    tail = ("; its effect is not monotone, so the ANOVA of class means misses what "
+    tail = ("; the association is not monotone, so the ANOVA of class means misses what "
             "permutation or mutual information see") if hidden else ""
-    return f"{label} drives backlash (ANOVA {p_text}): {mechanism}{tail}."
+    return f"{label} is associated with backlash (ANOVA {p_text}){tail}."
 
 
 def format_p(neg_log_p: float) -> str:
@@ -530,7 +500,7 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
                   prefit: bool = False, rank_by: str = "consensus", n_boot: int = 200,
                   n_repeats: int = 5, random_state: int = 0,
                   source: str = "features") -> Ranking:
-    """Rank the inputs of a feature table by how much they drive backlash.
+    """Rank the inputs of a feature table by their association with backlash (marginal views).
 
     Parameters
     ----------
@@ -572,7 +542,7 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
     table["influence"] = influence(table)
     table["rank"] = final_rank(table, rank_by)
     table.insert(0, "label", [LABELS.get(c, c) for c in table.index])
-    table["reading"] = [physical_reading(name, row) for name, row in table.iterrows()]
+    table["reading"] = [association_reading(name, row) for name, row in table.iterrows()]
     table = table.sort_values("rank")
     table.index.name = "feature"
     if prefit:

@@ -19,7 +19,9 @@ from features.readings.errors import InputError
 from pipeline.commands.common import check_outputs, remove_created
 
 # Order is the order shown in --help.
-COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank", "drift", "discover", "hidden-effects", "compensate", "run")
+COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
+            "replicate", "drift", "discover", "hidden-effects", "compensate", "run")
+
 
 class Parser(argparse.ArgumentParser):
     """argparse with a one-line error (no usage block) and exit code 2."""

@@ -1,18 +1,21 @@
-"""Feature-ranking report: one HTML page with its PNG figures, a CSV table and a JSON summary.
+"""Feature report: verdicts given the other inputs first, then the paper's association views.
 
 Files written to the output folder (images are referenced by relative file name, so the
 folder can be moved or zipped as a whole):
 
-====================  ==================================================================
-``rank_report.html``  the report
-``rank_anova.png``    ANOVA score -ln(p) per input with bootstrap error bars (seed 004,
-                      Fig. 14)
-``rank_views.png``    permutation importance, mutual information and k-NN drop-column
-                      loss per input, with their spreads
+======================  ================================================================
+``rank_report.html``    the report: headline (drivers only), verdict table, design
+                        diagnostics, then the association views of the paper
+``rank_effects.png``    effect [um] of each input over its observed range with its
+                        bootstrap interval, coloured by verdict
+``rank_anova.png``      association: ANOVA score -ln(p) per input with bootstrap error bars
+                        (seed 004, Fig. 14)
+``rank_views.png``      association: permutation importance, mutual information, k-NN
+                        drop-column loss; and the drop-column importance of gradient boosting
 ``rank_confusion.png``  cross-validated confusion matrix of the weighted k-NN
-``rank_table.csv``    every score per input, ordered by rank
-``rank.json``         the ``--json`` summary
-====================  ==================================================================
+``rank_table.csv``      every score and verdict per input, in report order
+``rank.json``           the ``--json`` summary
+======================  ================================================================
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from features.readings.fileio import atomic_path, clean_nan, write_json, write_text
+from features.readings.fileio import atomic_path, clean_nan, write_json
+from pipeline.report_page import new_figure, save_figure, write_page
 
 # Seed 004, Table 5: ANOVA scores -log(p) on the FM38 X axis, for comparison only.
 PAPER_TABLE5 = {
@@ -31,14 +35,18 @@ PAPER_TABLE5 = {
     "pressure_hpa": 0.417, "humidity_pct": 0.108,
 }
 FILES = {
-    "html": "rank_report.html", "anova": "rank_anova.png", "views": "rank_views.png",
-    "confusion": "rank_confusion.png", "csv": "rank_table.csv", "json": "rank.json",
+    "html": "rank_report.html", "effects": "rank_effects.png", "anova": "rank_anova.png",
+    "views": "rank_views.png", "confusion": "rank_confusion.png", "csv": "rank_table.csv",
+    "json": "rank.json",
 }
+COLOURS = {"driver": "#1f5f99", "proxy": "#d08a2c", "undecided": "#8e6bb0", "none": "#9aa7b4"}
+LEVEL_WORDS = {"point": "within runs", "run": "between runs", "visit": "between visits",
+               "unit": "between machines/axes", None: "not tested"}
 
 
-def write_rank_report(ranking, out_dir, *, source: str = "", target_kind: str = "",
+def write_rank_report(result, out_dir, *, source: str = "", target_kind: str = "",
                       notes: list[str] | tuple = ()) -> dict[str, Path]:
-    """Write the report files (module docstring) for a ``features.ranking.Ranking``.
+    """Write the report files (module docstring) for a ``models.influence.Explanation``.
 
     Returns
     -------
@@ -48,65 +56,81 @@ def write_rank_report(ranking, out_dir, *, source: str = "", target_kind: str = 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {role: out / name for role, name in FILES.items()}
-    plot_anova(ranking, paths["anova"])
-    plot_views(ranking, paths["views"])
-    plot_confusion(ranking, paths["confusion"])
+    plot_effects(result, paths["effects"])
+    plot_anova(result, paths["anova"])
+    plot_views(result, paths["views"])
+    plot_confusion(result, paths["confusion"])
+    table = result.table.drop(columns=["degrees"], errors="ignore").copy()
+    table["physical_path"] = [",".join(p) for p in table["physical_path"]]
     with atomic_path(paths["csv"]) as tmp:
-        ranking.table.to_csv(tmp)
-    write_json(paths["json"], clean_nan(ranking.to_json()))
-    all_notes = [*ranking.notes, *notes]
-    write_text(paths["html"], render_html(ranking, source=source, target_kind=target_kind,
-                                          notes=all_notes))
+        table.to_csv(tmp)
+    write_json(paths["json"], clean_nan(result.to_json()))
+    all_notes = [*result.ranking.notes, *result.notes, *notes]
+    write_page(paths["html"], "Which conditions drive backlash",
+               render_body(result, source=source, target_kind=target_kind, notes=all_notes))
     return paths
 
 
 # --- figures --------------------------------------------------------------------------------
 
-def _figure(width_in: float, height_in: float):
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(width_in, height_in), dpi=110, layout="constrained")
-
-
-def _save(fig, path: Path) -> None:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-
-
-def plot_anova(ranking, path) -> None:
-    """Bar chart of -ln(p) per input in rank order, error bars = bootstrap std (Fig. 14)."""
-    from features.ranking import ANOVA_ALPHA
-
-    t = ranking.table
-    fig = _figure(7.5, 4.2)
+def plot_effects(result, path) -> Path:
+    """Effect [um] over the observed range with its 95 % bootstrap interval, per verdict."""
+    t = result.table
+    fig = new_figure(7.5, 4.2)
     ax = fig.add_subplot()
     x = np.arange(len(t))
-    colours = np.where(t["influence"], "#1f5f99", "#9aa7b4")
-    ax.bar(x, t["anova_score"], yerr=t["anova_score_std"], color=colours, capsize=3)
+    effect = t["effect_um"].fillna(0.0).to_numpy(float)
+    low = np.nan_to_num(effect - t["effect_low_um"].to_numpy(float)).clip(0, None)
+    high = np.nan_to_num(t["effect_high_um"].to_numpy(float) - effect).clip(0, None)
+    ax.bar(x, effect, yerr=[low, high], capsize=3,
+           color=[COLOURS.get(v, "#9aa7b4") for v in t["verdict"]])
+    ax.set_xticks(x, t["label"], rotation=30, ha="right")
+    ax.set_ylabel("effect over the observed range [um]")
+    ax.set_title("Effect of each input given the others (colour: driver, proxy, "
+                 "undecided, none)", fontsize=9)
+    ax.set_ylim(bottom=0)
+    return save_figure(fig, path)
+
+
+def plot_anova(result, path) -> Path:
+    """Association: -ln(p) per input in report order, error bars = bootstrap std (Fig. 14)."""
+    from features.ranking import ANOVA_ALPHA
+
+    t = result.table
+    fig = new_figure(7.5, 4.2)
+    ax = fig.add_subplot()
+    x = np.arange(len(t))
+    ax.bar(x, t["anova_score"], yerr=t["anova_score_std"], capsize=3,
+           color=np.where(t["influence"], "#1f5f99", "#9aa7b4"))
     ax.axhline(-np.log(ANOVA_ALPHA), color="#b03a2e", ls="--", lw=1)
     ax.annotate(f"p = {ANOVA_ALPHA:g}", (len(t) - 0.5, -np.log(ANOVA_ALPHA)), ha="right",
                 va="bottom", color="#b03a2e", fontsize=8)
     ax.set_xticks(x, t["label"], rotation=30, ha="right")
     ax.set_ylabel("ANOVA score  -ln(p)")
-    ax.set_title("Influence of the inputs on backlash classes (one-way ANOVA)")
+    ax.set_title("Association with backlash classes (one-way ANOVA, the paper's Fig. 14)",
+                 fontsize=9)
     ax.set_ylim(bottom=0)
-    _save(fig, path)
+    return save_figure(fig, path)
 
 
-def plot_views(ranking, path) -> None:
-    """Permutation importance [um], mutual information [nat] and k-NN drop-column loss."""
-    t = ranking.table
-    fig = _figure(7.5, 7.5)
-    axes = fig.subplots(3, 1, sharex=True)
-    x = np.arange(len(t))
+def plot_views(result, path) -> Path:
+    """Permutation importance, mutual information, k-NN drop-column loss and the drop-column
+    importance of gradient boosting (when computed)."""
+    t = result.table
     panels = [
         ("permutation_um", "permutation_std_um", "RMSE increase [um]",
-         f"Permutation importance ({ranking.permutation_model})"),
+         f"Association: permutation importance ({result.ranking.permutation_model})"),
         ("mutual_info", "mutual_info_std", "mutual information [nat]",
-         "Mutual information (bars) and noise level (markers)"),
+         "Association: mutual information (bars) and noise level (markers)"),
         ("knn_drop", "knn_drop_std", "accuracy loss [-]",
-         "k-NN drop-column accuracy loss"),
+         "Association: k-NN drop-column accuracy loss"),
     ]
+    if "dropcolumn_um" in t:
+        panels.append(("dropcolumn_um", "dropcolumn_std_um", "RMSE increase [um]",
+                       ("Given the others: drop-column importance of gradient boosting, "
+                        "CV grouped by visit or run")))
+    fig, axes = new_figure(7.5, 2.5 * len(panels), nrows=len(panels), ncols=1, sharex=True)
+    x = np.arange(len(t))
     for ax, (col, err, ylabel, title) in zip(axes, panels, strict=True):
         ax.bar(x, t[col], yerr=t[err], color="#1f5f99", capsize=3)
         ax.axhline(0.0, color="black", lw=0.6)
@@ -114,14 +138,14 @@ def plot_views(ranking, path) -> None:
         ax.set_title(title, fontsize=9)
     axes[1].plot(x, t["mutual_info_null"], "_", color="#b03a2e", ms=18, mew=2)
     axes[-1].set_xticks(x, t["label"], rotation=30, ha="right")
-    _save(fig, path)
+    return save_figure(fig, path)
 
 
-def plot_confusion(ranking, path) -> None:
+def plot_confusion(result, path) -> Path:
     """Confusion matrix of the cross-validated weighted k-NN, counts in every cell."""
-    knn = ranking.knn
+    knn = result.knn
     matrix = knn.confusion
-    fig = _figure(5.6, 4.8)
+    fig = new_figure(5.6, 4.8)
     ax = fig.add_subplot()
     image = ax.imshow(matrix, cmap="Blues")
     fig.colorbar(image, ax=ax, label="points")
@@ -136,24 +160,10 @@ def plot_confusion(ranking, path) -> None:
     for (i, j), count in np.ndenumerate(matrix):
         ax.text(j, i, str(count), ha="center", va="center",
                 color="white" if count > threshold else "black")
-    _save(fig, path)
+    return save_figure(fig, path)
 
 
 # --- HTML -----------------------------------------------------------------------------------
-
-CSS = """
-body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 1.5em auto;
-       padding: 0 1em; color: #1d2329; line-height: 1.45; }
-h1 { font-size: 1.6em; } h2 { margin-top: 1.6em; border-bottom: 1px solid #ccd; }
-table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em; }
-th, td { border: 1px solid #ccd; padding: 0.25em 0.55em; vertical-align: top; }
-th { background: #eef1f5; }
-td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-tr.weak td { color: #69737d; }
-img { max-width: 100%; border: 1px solid #dde; margin: 0.4em 0; }
-.summary { background: #f4f7fa; padding: 0.6em 1em; border-left: 4px solid #1f5f99; }
-"""
-
 
 def _pm(value, spread, fmt: str = ".3g") -> str:
     """``value ± spread`` for HTML; the spread with two significant digits."""
@@ -163,43 +173,88 @@ def _pm(value, spread, fmt: str = ".3g") -> str:
     return f"{text} &plusmn; {spread:.2g}" if np.isfinite(spread) else text
 
 
-def _summary(table) -> str:
-    groups = {
-        "Drivers, strongest first": table[table["influence"] & ~table["proxy_for_visit"]],
-        "Proxies for the visit": table[table["proxy_for_visit"]],
-        "No measurable influence": table[~table["influence"] & ~table["proxy_for_visit"]],
-    }
-    lines = [f"<li><b>{name}:</b> {html.escape(', '.join(rows['label'])) or 'none'}</li>"
-             for name, rows in groups.items()]
-    return "<ul>" + "".join(lines) + "</ul>"
+def _effect(r) -> str:
+    if not np.isfinite(r["effect_um"]):
+        return "n/a"
+    interval = (f" [{r['effect_low_um']:.2f}, {r['effect_high_um']:.2f}]"
+                if np.isfinite(r["effect_low_um"]) else "")
+    return f"{r['effect_um']:.2f}{interval}"
 
 
-def _ranking_rows(table) -> str:
+def _p(p) -> str:
+    if p is None or not np.isfinite(p):
+        return "n/a"
+    return f"{p:.2g}" if p >= 1e-4 else "&lt; 1e-4"
+
+
+def _headline(t) -> str:
+    drivers = t[t["verdict"] == "driver"]
+    if drivers.empty:
+        return ("<p><b>Drivers:</b> none measurable given the other inputs. The verdict "
+                "table says what each input's association stands for.</p>")
+    items = "".join(
+        f"<li><b>{html.escape(r['label'])}</b>: {r['effect_um']:.2f} um over the observed "
+        f"range (95 % interval {r['effect_low_um']:.2f}-{r['effect_high_um']:.2f} um, "
+        f"{html.escape(r['effect_shape'])})</li>" for _, r in drivers.iterrows())
+    return f"<p><b>Drivers, given the other inputs</b> (largest effect first):</p><ul>{items}</ul>"
+
+
+def _verdict_rows(t) -> str:
+    rows = []
+    for name, r in t.iterrows():
+        weak = "" if r["verdict"] == "driver" else ' class="weak"'
+        proxy = r["proxy_for"] if isinstance(r["proxy_for"], str) else ""
+        drop = (_pm(r["dropcolumn_um"], r["dropcolumn_std_um"])
+                if "dropcolumn_um" in r else "n/a")
+        rows.append(
+            f"<tr{weak}><td>{html.escape(r['label'])}<br><code>{html.escape(name)}</code></td>"
+            f"<td><b>{html.escape(r['verdict'])}</b></td>"
+            f"<td class='num'>{_effect(r)}</td><td>{html.escape(proxy)}</td>"
+            f"<td>{LEVEL_WORDS.get(r['tested'], 'not tested')}</td>"
+            f"<td class='num'>{_p(r['p_value'])}</td><td class='num'>{drop}</td>"
+            f"<td>{html.escape(r['physical_reading'])}</td></tr>")
+    return "".join(rows)
+
+
+def _design_section(design) -> str:
+    shares = design.shares
+    head = "".join(f"<th>{LEVEL_WORDS[c]}</th>" for c in shares.columns)
+    body = "".join(
+        f"<tr><td><code>{html.escape(name)}</code></td>"
+        + "".join(f"<td class='num'>{100 * v:.0f} %</td>" for v in row)
+        + "</tr>" for name, row in shares.iterrows())
+    pairs = "".join(
+        f"<li><b>{html.escape(' / '.join(c['inputs']))}</b>"
+        + (f" (r = {c['r']:.2f})" if c["r"] is not None else "")
+        + f": {html.escape(c['separating_test'])}</li>" for c in design.confounded)
+    counts = design.counts
+    return (f"<p>{counts['points']} points in {counts['runs']} runs, {counts['visits']} visits, "
+            f"{counts['units']} machine axes. Share of each input's variance at each level: an "
+            "input that varies only between visits is tested against the visits alone, and "
+            "cannot be told apart from anything else that changed between them.</p>"
+            f"<table><tr><th>input</th>{head}</tr>{body}</table>"
+            f"<p>Confounded inputs and the test that would separate them:</p>"
+            f"<ul>{pairs or '<li>none: no two inputs move together (|r| &lt; 0.7)</li>'}</ul>")
+
+
+def _association_rows(t) -> str:
     from features.ranking import format_p
 
     rows = []
-    for name, r in table.iterrows():
+    for name, r in t.iterrows():
         cls = "" if r["influence"] else ' class="weak"'
+        paper = PAPER_TABLE5.get(name)
         rows.append(
             f"<tr{cls}><td class='num'>{int(r['rank'])}</td>"
-            f"<td>{html.escape(r['label'])}<br><code>{html.escape(name)}</code></td>"
+            f"<td>{html.escape(r['label'])}</td>"
             f"<td class='num'>{_pm(r['anova_score'], r['anova_score_std'], '.3f')}<br>"
             f"{html.escape(format_p(r['anova_score']))}</td>"
+            f"<td class='num'>{'' if paper is None else f'{paper:.3f}'}</td>"
             f"<td class='num'>{_pm(r['permutation_um'], r['permutation_std_um'])}</td>"
             f"<td class='num'>{_pm(r['mutual_info'], r['mutual_info_std'])}<br>"
             f"noise {r['mutual_info_null']:.2g}</td>"
             f"<td class='num'>{_pm(r['knn_drop'], r['knn_drop_std'])}</td>"
             f"<td>{html.escape(r['reading'])}</td></tr>")
-    return "".join(rows)
-
-
-def _table5_rows(table) -> str:
-    rows = []
-    for name, r in table.iterrows():
-        paper = PAPER_TABLE5.get(name)
-        rows.append(f"<tr><td>{html.escape(r['label'])}</td>"
-                    f"<td class='num'>{_pm(r['anova_score'], r['anova_score_std'], '.3f')}</td>"
-                    f"<td class='num'>{'' if paper is None else f'{paper:.3f}'}</td></tr>")
     return "".join(rows)
 
 
@@ -210,79 +265,83 @@ def _confusion_table(knn) -> str:
         f"<tr><th>{labels[i]} ({knn.class_counts[i]})</th>"
         + "".join(f"<td class='num'>{v}</td>" for v in row) + "</tr>"
         for i, row in enumerate(knn.confusion))
-    return (f"<table><tr><th>true \\ predicted</th>{head}</tr>{body}</table>")
+    return f"<table><tr><th>true \\ predicted</th>{head}</tr>{body}</table>"
 
 
-def render_html(ranking, *, source: str = "", target_kind: str = "",
+def render_body(result, *, source: str = "", target_kind: str = "",
                 notes: list[str] | tuple = ()) -> str:
-    """The report page; images are the relative PNG files of ``FILES``."""
-    from features import ranking as rk
-
-    t = ranking.table
-    knn = ranking.knn
+    """The report's HTML body; images are the relative PNG files of ``FILES``."""
+    t = result.table
+    knn = result.knn
+    inf = result.influence
     folds = ", ".join(f"{100 * a:.1f}" for a in knn.fold_accuracy)
     note_items = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
-    target_line = f", backlash target <code>{html.escape(target_kind)}</code>" \
-        if target_kind else ""
-    rule = ("mean of the per-view ranks of ANOVA score, permutation importance and mutual "
-            "information; ties broken by the ANOVA score" if ranking.rank_by == "consensus"
-            else "ANOVA score (three decimals, as the paper's Table 5); ties broken by the "
-                 "permutation importance")
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<title>Backlash feature ranking</title><style>{CSS}</style></head>
-<body>
-<h1>Which conditions drive backlash</h1>
-<p>Data: <code>{html.escape(source)}</code> &mdash; {ranking.n_points} backlash points,
-{len(t)} inputs{target_line}.</p>
-<div class="summary">{_summary(t)}</div>
+    target_line = (f", backlash target <code>{html.escape(target_kind)}</code>"
+                   if target_kind else "")
+    derived = [n for n in ("deviation_down_um", "deviation_up_um") if n in t.index]
+    derived_note = ("<p>The deviation inputs come from the same linear test the backlash "
+                    "target is computed from: they predict it without causing it, and their "
+                    "association scores say so.</p>" if derived else "")
+    return f"""<p>Data: <code>{html.escape(source)}</code> &mdash; {result.n_points} backlash
+points, {len(t)} inputs{target_line}.</p>
+<div class="summary">{_headline(t)}</div>
 
-<h2>Ranking</h2>
-<p>Rank rule: {rule}. Grey rows: no measurable influence (ANOVA p &ge; {rk.ANOVA_ALPHA:g},
-permutation importance within twice its spread or below {100 * rk.PERMUTATION_FLOOR:g} % of the
-strongest input's, and mutual information at noise level).</p>
+<h2>Verdicts given the other inputs</h2>
+<p><b>driver</b>: a physical path to lost motion (an effect record) and a significant partial
+F-test in the effect model (family-wise level {inf.alpha:g}); the effect is the peak-to-peak of
+its fitted partial effect over the observed range, with a 95 % interval from {inf.n_boot}
+bootstrap resamples of runs, visits or points (the level it was tested at; draws from the
+coefficients' t distribution where that level has fewer than 12 cells). <b>proxy</b>: it
+moves with backlash but stands in for something else (column <i>stands in for</i>).
+<b>none</b>: no influence measurable given the others. An input without a physical path is
+never a driver.</p>
 <table>
-<tr><th>rank</th><th>input</th><th>ANOVA score -ln(p)</th><th>permutation [um]</th>
-<th>mutual information [nat]</th><th>k-NN drop-column</th><th>physical reading</th></tr>
-{_ranking_rows(t)}
+<tr><th>input</th><th>verdict</th><th>effect [um] [95 % interval]</th><th>stands in for</th>
+<th>tested</th><th>p given the others</th><th>drop-column [um]</th><th>physical reading</th></tr>
+{_verdict_rows(t)}
 </table>
+<img src="{FILES['effects']}" alt="effect of each input over its observed range">
 
-<h2>ANOVA scores (paper Fig. 14 and Table 5)</h2>
+<h2>Design</h2>
+{_design_section(inf.design)}
+
+<h2>Association: the paper's views (Fig. 14, Table 5, k-NN)</h2>
+<p>These scores look at one input at a time: they measure association, not influence. An input
+that moves with a driver over the test plan scores like the driver.</p>
+{derived_note}
+<table>
+<tr><th>association rank</th><th>input</th><th>ANOVA score -ln(p)</th>
+<th>paper, FM38 X axis</th><th>permutation [um]</th><th>mutual information [nat]</th>
+<th>k-NN drop-column</th><th>association</th></tr>
+{_association_rows(t)}
+</table>
+<p>The paper's column is the published Table 5 of a different machine, shown for scale only.
+Scores grow with the number of points, so compare the order, not the values.</p>
 <img src="{FILES['anova']}" alt="ANOVA score per input with bootstrap error bars">
-<table><tr><th>parameter</th><th>ANOVA score -ln(p), these data</th>
-<th>paper, FM38 X axis</th></tr>
-{_table5_rows(t)}
-</table>
-<p>The paper's column is the published Table 5 of a different machine, shown for scale
-only. Scores grow with the number of points, so compare the order, not the values.</p>
-
-<h2>Weighted k-NN classification</h2>
-<p>Backlash split into {len(knn.class_counts)} classes; weighted k-NN (k = {knn.n_neighbors},
-weights 1/distance, standardised inputs), {knn.n_splits}-fold stratified cross-validation:
+<p>Weighted k-NN (k = {knn.n_neighbors}, weights 1/distance, standardised inputs) on
+{len(knn.class_counts)} backlash classes, {knn.n_splits}-fold stratified cross-validation:
 validation accuracy <b>{100 * knn.accuracy:.1f} &plusmn; {100 * knn.accuracy_std:.1f} %</b>
 (folds: {folds} %; always guessing the largest class: {100 * knn.majority_rate:.1f} %).
 The paper reports 98.8 %.</p>
 <img src="{FILES['confusion']}" alt="k-NN confusion matrix">
 {_confusion_table(knn)}
-
-<h2>Permutation importance, mutual information, k-NN drop-column</h2>
-<img src="{FILES['views']}" alt="permutation importance, mutual information and k-NN loss">
+<img src="{FILES['views']}" alt="permutation importance, mutual information, k-NN loss and drop-column importance">
 
 <h2>Method</h2>
 <ul>
-<li><b>ANOVA score</b>: -ln(p) of the one-way F-test of each input across the backlash
-classes, from the log survival function so that tiny p stays finite; &plusmn; is the std over
-bootstrap resamples of the points.</li>
-<li><b>Permutation importance</b>: increase of the held-out RMSE [um] when the input is
-shuffled; predictor: {html.escape(ranking.permutation_model)}; &plusmn; is the std over folds
-and shuffles (over shuffles only for a given fitted predictor).</li>
-<li><b>Mutual information</b> (k-neighbour estimator, seeded): &plusmn; is the std over random
-80 % subsamples; the noise level is the mean + 3 std with the backlash shuffled.</li>
-<li><b>k-NN drop-column</b>: validation accuracy with all inputs minus accuracy without the
-input, per fold; &plusmn; is the std over folds.</li>
-<li>An input constant within each visit but varying between visits is a <b>proxy for the
-visit</b>: its score cannot be told apart from anything else that changed between visits.</li>
+<li><b>Effect model</b>: each input as Legendre polynomials (degree by BIC) in a least-squares
+model per stratum of the design (within runs with run fixed effects, between runs with visit
+fixed effects, between visits with machine-axis fixed effects); an input is tested in every
+stratum that holds at least 10 % of its variance, against that stratum's error, and its p-value
+is the smallest over those strata times their number.</li>
+<li><b>Physical paths</b> come from the effect records: the inputs of the lost-motion effects,
+and operating hours through wear.</li>
+<li><b>Drop-column importance</b>: gradient boosting, cross-validation grouped by visit (or
+run), increase of the held-out RMSE when the input is left out.</li>
+<li><b>Association</b>: ANOVA -ln(p) across backlash classes (log survival function, so tiny p
+stays finite; &plusmn; bootstrap std); permutation importance ({html.escape(
+    result.ranking.permutation_model)}); mutual information (&plusmn; std over 80 %
+subsamples, noise level = mean + 3 std with backlash shuffled); k-NN drop-column loss.</li>
 </ul>
 {f"<h2>Notes</h2><ul>{note_items}</ul>" if note_items else ""}
-</body></html>
 """

@@ -29,7 +29,7 @@ def report(tmp_path_factory) -> Path:
     if reason:
         print(f"\nbrowser test skipped: {reason}")
         pytest.skip(reason)
-    from features.ranking import rank_features
+    from models.influence import explain
     from pipeline.rank_report import write_rank_report
 
     rng = np.random.default_rng(0)
@@ -39,7 +39,7 @@ def report(tmp_path_factory) -> Path:
                       "pressure_hpa": rng.normal(1013, 5, n),
                       "humidity_pct": rng.normal(45, 8, n)})
     y = 2 + 0.008 * X["target"] + 0.0015 * X["feed_mm_min"] + rng.normal(0, 0.3, n)
-    result = rank_features(X, y, n_boot=50, n_repeats=2)
+    result = explain(X, y, n_boot=50, n_repeats=2, dropcolumn=False)
     out = tmp_path_factory.mktemp("rank_report")
     return write_rank_report(result, out, source="synthetic")["html"]
 
@@ -47,7 +47,7 @@ def report(tmp_path_factory) -> Path:
 def test_every_image_in_the_page_exists(report):
     page = report.read_text(encoding="utf-8")
     sources = re.findall(r'<img[^>]*\bsrc="([^"]+)"', page)
-    assert len(sources) == 3
+    assert len(sources) == 4  # effects, ANOVA, confusion matrix, the other views
     for src in sources:
         if src.startswith("data:image/png;base64,"):
             continue
@@ -69,12 +69,12 @@ def test_headless_chromium_screenshot_is_not_blank(report, tmp_path):
 
     pixels = imread(shot)[..., :3]
     assert pixels.shape[:2] == (2000, 1200)
-    # A page with text, tables and three figures: many distinct colours, and a good share
+    # A page with text, tables and four figures: many distinct colours, and a good share
     # of the page is not background white.
     distinct = np.unique((pixels * 255).astype(np.uint8).reshape(-1, 3), axis=0)
     assert len(distinct) > 200
     assert (pixels.mean(axis=2) < 0.9).mean() > 0.05
-    # The figures drew: the bars of the ANOVA chart (#1f5f99) cover thousands of pixels,
-    # far more than the page's own use of that colour (a 4-pixel border).
+    # The figures drew: the driver bars of the effect chart (#1f5f99) cover thousands of
+    # pixels, far more than the page's own use of that colour (a 4-pixel border).
     bar = np.abs(pixels * 255 - np.array([31, 95, 153])).max(axis=2) < 12
     assert bar.sum() > 5000

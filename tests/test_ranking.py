@@ -53,9 +53,27 @@ def test_final_rank_and_influence_follow_the_truth(truth):
     assert list(table["rank"]) == [1, 2, 3, 4, 5]
     assert table.loc[list(DRIVERS), "influence"].all()
     assert not table.loc[list(NON_DRIVERS), "influence"].any()
-    assert "no measurable influence" in table.loc["humidity_pct", "reading"]
-    assert "backlash_feed" in table.loc["feed_mm_min", "reading"]
-    assert "wear" in table.loc["target", "reading"]
+    assert "no measurable association" in table.loc["humidity_pct", "reading"]
+    assert "is associated with backlash" in table.loc["feed_mm_min", "reading"]
+    for reading in table["reading"]:  # association only: no physics claimed here
+        assert "drives" not in reading and "Edlen" not in reading
+
+
+def test_physical_readings_come_from_the_effect_records(truth):
+    """The physics of each verdict is the effect records' reading (models.influence)."""
+    from models.influence import conditional_influence
+    from models.physics.effects import RECORDS
+
+    X, y, result = truth
+    table = conditional_influence(X, y, association=result.table["influence"], n_boot=20).table
+    assert "no measurable influence" in table.loc["humidity_pct", "physical_reading"]
+    assert "backlash_feed" in table.loc["feed_mm_min", "physical_reading"]
+    assert RECORDS["backlash_feed"].reading in table.loc["feed_mm_min", "physical_reading"]
+    assert "worn" in table.loc["target", "physical_reading"]  # local wear of screw and nut
+    assert RECORDS["backlash_position"].reading in table.loc["target", "physical_reading"]
+    assert "air_refraction" in table.loc["humidity_pct", "physical_reading"]
+    assert list(table.loc[list(DRIVERS), "verdict"]) == ["driver", "driver"]
+    assert set(table.loc[list(NON_DRIVERS), "verdict"]) == {"none"}
 
 
 def test_each_score_carries_a_finite_spread(truth):
@@ -266,3 +284,110 @@ def test_twin_drivers_rank_above_inputs_without_effect():
     for idle in ("humidity_pct", "pressure_hpa", "ambient_temp_c", "dwell_s"):
         assert rank[idle] > drivers, (idle, rank.to_dict())
     assert not result.table.loc[["humidity_pct", "dwell_s"], "influence"].any()
+
+
+# --- the command ----------------------------------------------------------------------------
+
+def test_rank_command_json_has_verdicts_and_headline_lists_only_drivers(tmp_path, capsys):
+    """Twin data (paper plan, one repeat): JSON keeps the association keys and adds the
+    verdicts; the report's headline names the drivers and nothing else."""
+    from models.physics.campaign import load_config, simulate
+    from pipeline.cli import main
+    from pipeline.commands.simulate import write
+
+    write(simulate(load_config({"plan": {"repeats": 1}}, preset="paper"), seed=3), tmp_path / "t")
+    code = main(["rank", str(tmp_path / "t" / "readings.csv"), "--out", str(tmp_path / "r"),
+                 "--boot", "10", "--no-dropcolumn", "--json"])
+    assert code == 0
+    payload = json.loads(capsys.readouterr().out)
+    features = {f["name"]: f for f in payload["features"]}
+    for f in features.values():
+        assert {"anova_score", "permutation", "mutual_info", "rank", "reading", "verdict",
+                "effect_um", "effect_interval_um", "proxy_for"} <= set(f)
+        assert f["verdict"] in ("driver", "proxy", "none", "undecided")
+    for idle in ("pressure_hpa", "humidity_pct", "ambient_temp_c", "dwell_s"):
+        assert features[idle]["verdict"] != "driver"
+    assert features["feed_mm_min"]["verdict"] == "driver"
+    low, high = features["feed_mm_min"]["effect_interval_um"]
+    assert low < 1.2 < high  # backlash_feed: 1.2 um per m/min over 0.2-1.2 m/min
+    assert payload["drivers"] == [f["name"] for f in payload["features"]
+                                  if f["verdict"] == "driver"]
+    page = (tmp_path / "r" / "rank_report.html").read_text(encoding="utf-8")
+    headline = page.split('<div class="summary">')[1].split("</div>")[0]
+    for name, f in features.items():
+        assert (f"<b>{f['label']}</b>" in headline) == (f["verdict"] == "driver"), name
+
+
+def test_rank_command_refuses_negative_boot(tmp_path, capsys):
+    from pipeline.cli import main
+
+    with pytest.raises(SystemExit) as stop:  # refused by the option's type, before any work
+        main(["rank", "missing.csv", "--out", str(tmp_path), "--boot", "-1"])
+    assert stop.value.code == 2
+    assert "--boot" in (err := capsys.readouterr().err) and "expected a whole number >= 0" in err
+
+
+def test_paper_replication_experiment_names_only_known_options():
+    """Every step of the replication experiment is a backlash subcommand and every option it
+    sets is one of that command's argparse destinations; outputs lie inside {out}."""
+    import argparse
+    import tomllib
+    from pathlib import Path
+
+    from pipeline.cli import build_parser
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "paper_replication.toml"
+    spec = tomllib.loads(path.read_text(encoding="utf-8"))
+    subs = next(a for a in build_parser()._actions
+                if isinstance(a, argparse._SubParsersAction))
+    commands = [step["command"] for step in spec["steps"]]
+    assert commands == ["simulate", "replicate", "rank"]
+    for step in spec["steps"]:
+        dests = {a.dest for a in subs.choices[step["command"]]._actions}
+        assert set(step["with"]) <= dests, (step["command"], set(step["with"]) - dests)
+        assert step["with"]["out"].startswith("{out}/")
+    config = path.parent / spec["steps"][0]["with"]["config"].replace("{here}/", "")
+    assert config.is_file()
+
+
+def test_replication_table_on_a_small_twin(tmp_path):
+    """Paper plan with backlash growing along the axis: the ANOVA order is the paper's
+    (position and deviations, then feed, then environment), the deviations are left out in
+    the second column, and the notes say why."""
+    from features.table import PAPER_FEATURES, feature_table
+    from models.physics.campaign import load_config, simulate
+    from pipeline import replication
+
+    here = __import__("pathlib").Path(__file__).resolve().parents[1]
+    config = load_config(here / "experiments/data/paper_replication_twin.toml", preset="paper")
+    table = feature_table(simulate(config, seed=7).readings, target="paper",
+                          features=list(PAPER_FEATURES))
+    from sklearn.linear_model import LinearRegression
+
+    results = replication.replicate(table.X, table.y, table.meta, n_boot=5,
+                                    estimator=LinearRegression())
+    order = results["with deviations"]["anova_order"]
+    # position and the deviations (which follow position through the lead error) lead,
+    # in either order, then feed, then the environment
+    assert set(order[:3]) == {"target", *replication.DEVIATIONS}
+    assert order[3] == "feed_mm_min"
+    assert "deviation_up_um" not in results["without deviations"]["anova_order"]
+    for case in results.values():
+        assert case["verdict"]["target"] == "driver"
+        assert 0 < case["network"]["best_epoch"] <= case["network"]["epochs"]
+        assert case["network"]["regression_r"]["all"] > 0.8
+    assert results["with deviations"]["verdict"]["deviation_up_um"] == "proxy"
+    paths = replication.write_replication(results, tmp_path)
+    text = paths["md"].read_text(encoding="utf-8")
+    assert "| best epoch / total epochs (Fig. 10) | 27 / 33 |" in text
+    assert "left out" in text and "carries the target" in text
+
+
+def test_replicate_command_refuses_negative_boot(tmp_path, capsys):
+    from pipeline.cli import main
+
+    with pytest.raises(SystemExit) as stop:  # refused by the option's type, before any work
+        main(["replicate", "missing.csv", "--out", str(tmp_path), "--boot", "-2"])
+    assert stop.value.code == 2
+    assert "--boot" in (err := capsys.readouterr().err) and "expected a whole number >= 0" in err
+    assert not any(tmp_path.iterdir())  # nothing written

@@ -106,6 +106,14 @@ def count(text: str) -> int:
     return value
 
 
+def zero_or_more(text: str) -> int:
+    """An integer option where 0 means "none" (e.g. bootstrap resamples): a whole number >= 0."""
+    value = _whole(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 0")
+    return value
+
+
 def seed(text: str) -> int:
     """A random seed: a whole number from 0 to 2**32 - 1."""
     value = _whole(text)

@@ -1,4 +1,5 @@
-"""``backlash rank``: which conditions drive backlash, as an HTML report logged to MLflow."""
+"""``backlash rank``: which conditions drive backlash given the others (driver, proxy, none),
+beside the paper's association views, as an HTML report logged to MLflow."""
 
 from __future__ import annotations
 
@@ -6,10 +7,11 @@ import argparse
 import os
 
 from features.readings.errors import InputError
-from pipeline.commands.common import FORMATS, parse_features
+from pipeline.commands.common import FORMATS, parse_features, zero_or_more
 
-HELP = ("Rank the inputs by how much they drive backlash (weighted k-NN, ANOVA -ln(p), "
-        "permutation importance, mutual information) and write an HTML report.")
+HELP = ("Which inputs drive backlash given the others (driver with its effect in um, proxy, "
+        "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
+        "permutation importance, mutual information); writes an HTML report.")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,8 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory; its predictor gives the permutation "
-                             "importance (default: a gradient boosting regressor fitted per "
-                             "cross-validation fold)")
+                             "importance of the association views (default: a gradient "
+                             "boosting regressor fitted per cross-validation fold)")
     parser.add_argument("--json", action="store_true",
                         help="print the ranking as JSON on stdout")
     parser.add_argument("--bins", default="4",
@@ -30,8 +32,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="backlash definition (default: the model's, else auto)")
     parser.add_argument("--k", type=int, default=5, help="k-NN neighbours (default 5)")
     parser.add_argument("--rank-by", choices=("consensus", "anova"), default="consensus",
-                        help="final rank: mean rank of ANOVA, permutation and mutual "
-                             "information (default), or the ANOVA score as in the paper")
+                        help="order of the association views: mean rank of ANOVA, "
+                             "permutation and mutual information (default), or the ANOVA "
+                             "score as in the paper; the report lists drivers first either way")
+    parser.add_argument("--boot", type=zero_or_more, default=200,
+                        help="bootstrap resamples of the effect intervals and ANOVA spreads "
+                             "(default 200)")
+    parser.add_argument("--no-dropcolumn", action="store_true",
+                        help="skip the drop-column importance of gradient boosting (faster)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--format", default="auto",
                         choices=FORMATS,
@@ -60,10 +68,10 @@ def _bad_bins(text):
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.ranking import rank_features
     from features.readings import read_readings
     from features.readings.fileio import clean_nan, dumps
     from features.table import feature_table
+    from models.influence import explain
     from pipeline import tracking
     from pipeline.rank_report import write_rank_report
 
@@ -91,13 +99,14 @@ def run(args: argparse.Namespace) -> int:
                      "cross-validation fold for the permutation importance")
     if table.reason:
         notes.append(f"backlash target {table.target_kind}: {table.reason}")
-    groups = _visits(table.meta)
-    if groups is None:
-        notes.append("a single visit: the proxy-for-visit check needs two or more")
+    if _visits(table.meta) is None:
+        notes.append("a single visit: no input can be told apart from the visit, and "
+                     "operating hours cannot be tested")
 
-    result = rank_features(table.X, table.y, groups=groups, bins=bins, n_neighbors=args.k,
-                           estimator=model, prefit=model is not None, rank_by=args.rank_by,
-                           random_state=args.seed, source=str(args.data))
+    result = explain(table.X, table.y, table.meta, bins=bins, n_neighbors=args.k,
+                     estimator=model, prefit=model is not None, rank_by=args.rank_by,
+                     n_boot=args.boot, dropcolumn=not args.no_dropcolumn,
+                     random_state=args.seed, source=str(args.data))
     result.notes.extend(notes)
     paths = write_rank_report(result, args.out, source=str(args.data),
                               target_kind=table.target_kind)
@@ -134,14 +143,20 @@ def log_to_mlflow(result, paths, args, table, readings) -> None:
         mlflow.log_params(tracking.params({
             "data": str(args.data), "data_sha256": tracking.data_hash(readings),
             "n_points": result.n_points, "features": ",".join(t.index),
-            "bins": args.bins, "k": args.k, "rank_by": result.rank_by, "seed": args.seed,
+            "bins": args.bins, "k": args.k, "rank_by": result.ranking.rank_by, "seed": args.seed,
+            "boot": args.boot,
             "target_kind": table.target_kind, "model": args.model or "",
-            "permutation_model": result.permutation_model[:500],
+            "permutation_model": result.ranking.permutation_model[:500],
         }))
         metrics = {"knn_accuracy": result.knn.accuracy,
-                   "knn_accuracy_std": result.knn.accuracy_std}
+                   "knn_accuracy_std": result.knn.accuracy_std,
+                   "n_drivers": float(len(result.drivers()))}
         for name, row in t.iterrows():
-            metrics.update({f"anova_score_{name}": row["anova_score"],
+            metrics.update({f"driver_{name}": float(row["verdict"] == "driver"),
+                            f"effect_um_{name}": row["effect_um"],
+                            f"effect_low_um_{name}": row["effect_low_um"],
+                            f"effect_high_um_{name}": row["effect_high_um"],
+                            f"anova_score_{name}": row["anova_score"],
                             f"anova_score_std_{name}": row["anova_score_std"],
                             f"permutation_um_{name}": row["permutation_um"],
                             f"mutual_info_{name}": row["mutual_info"],
@@ -155,14 +170,17 @@ def log_to_mlflow(result, paths, args, table, readings) -> None:
 def print_table(result, html_path, file) -> None:
     t = result.table
     knn = result.knn
-    print(f"weighted k-NN validation accuracy {100 * knn.accuracy:.1f} +- "
-          f"{100 * knn.accuracy_std:.1f} % ({knn.n_splits}-fold, k = {knn.n_neighbors}, "
-          f"{len(knn.class_counts)} classes)", file=file)
-    print(f"{'rank':>4}  {'input':<20} {'ANOVA -ln(p)':>14} {'perm [um]':>10} "
-          f"{'MI [nat]':>9}  influence", file=file)
+    drivers = ", ".join(t.loc[n, "label"] for n in result.drivers()) or "none measurable"
+    print(f"drivers given the other inputs: {drivers}", file=file)
+    print(f"{'input':<20} {'verdict':<9} {'effect [um] (95 %)':<22} {'stands in for':<16} "
+          f"{'ANOVA -ln(p)':>12}", file=file)
     for name, r in t.iterrows():
-        flag = "proxy for visit" if r["proxy_for_visit"] else ("yes" if r["influence"] else "no")
-        print(f"{int(r['rank']):>4}  {name:<20} {r['anova_score']:>14.3f} "
-              f"{r['permutation_um']:>10.3f} {r['mutual_info']:>9.3f}  {flag}", file=file)
+        effect = (f"{r['effect_um']:.2f} ({r['effect_low_um']:.2f}-{r['effect_high_um']:.2f})"
+                  if r["effect_um"] == r["effect_um"] else "n/a")
+        proxy = r["proxy_for"] if isinstance(r["proxy_for"], str) else ""
+        print(f"{name:<20} {r['verdict']:<9} {effect:<22} {proxy:<16} "
+              f"{r['anova_score']:>12.3f}", file=file)
+    print(f"association (paper's views): weighted k-NN validation accuracy "
+          f"{100 * knn.accuracy:.1f} +- {100 * knn.accuracy_std:.1f} % ({knn.n_splits}-fold, "
+          f"k = {knn.n_neighbors}, {len(knn.class_counts)} classes)", file=file)
     print(f"report: {html_path}", file=file)
-
