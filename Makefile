@@ -32,4 +32,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check pipeline features models experiments tests bench
 
 clean:
-	rm -rf $(VENV) mlruns mlflow.db mlartifacts .pytest_cache
+	rm -rf $(VENV) mlruns mlflow.db mlflow.db.lock mlartifacts .pytest_cache

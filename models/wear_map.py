@@ -6,7 +6,7 @@ that varies along the axis (DESIGN.md, wear). The model, linear in its coefficie
     b(x, h, c) = b0(x) + w(x) h / 1000 + k_f f / 1000 + k_T (T - 20 degC)
 
 - x [mm] the target, h [h] the operating hours since the last mechanical adjustment
-  (SCHEMA.md section 1), f [mm/min] the feed and T [degC] the machine temperature: the condition
+  (docs/data-contract.md, section 1), f [mm/min] the feed and T [degC] the machine temperature: the condition
   terms of the ``backlash_feed`` and ``backlash_temperature`` effects, each evaluated with unit
   amplitude (``models.physics.effects``);
 - b0(x) [um] and the wear-rate map w(x) [um per 1000 h] are B-splines over the position with

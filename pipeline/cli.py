@@ -52,9 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:  # named by the subcommand, like its other option errors
-        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
+    try:  # argparse exits on a bad option (one line, code 2) and after --help (code 0)
+        args, unknown = parser.parse_known_args(argv)
+        if unknown:  # named by the subcommand, like its other option errors
+            parser.commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
+    except SystemExit as stop:
+        return int(stop.code or 0)
     created = []
     try:
         created = check_outputs(args.command, args)

@@ -38,11 +38,11 @@ import pkgutil
 import shlex
 import string
 import sys
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from features.readings.errors import InputError
+from features.readings.fileio import read_toml
 from pipeline.commands import common
 from pipeline.commands.common import check_outputs, remove_created
 
@@ -117,14 +117,7 @@ def path_role(action: argparse.Action) -> str | None:
 def load(path, out: str | None = None) -> Experiment:
     """Read and check an experiment file completely; nothing runs and nothing is written."""
     path = Path(path)
-    try:
-        spec = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("cannot read experiment: no such file", file=path) from None
-    except (UnicodeDecodeError, IsADirectoryError) as err:
-        raise InputError(f"cannot read experiment: {err}", file=path) from None
-    except tomllib.TOMLDecodeError as err:
-        raise InputError(f"invalid TOML: {err}", file=path) from None
+    spec = read_toml(path, "experiment")
     _check_keys(spec, TOP_KEYS, "top-level key", path)
     for key in ("name", "description", "out"):
         if key in spec and not isinstance(spec[key], str):

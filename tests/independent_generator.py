@@ -58,7 +58,7 @@ def cycle_readings(method: str, t: np.ndarray, cycles: int) -> list[tuple]:
 
 
 def generate(scenario: dict) -> pd.DataFrame:
-    """Readings (SCHEMA.md columns) of one scenario, with this module's own physics."""
+    """Readings (docs/data-contract.md columns) of one scenario, with this module's own physics."""
     rng = np.random.default_rng(10_000 + scenario["seed"])
     plan = scenario["plan"]
     hidden = set(scenario["hidden"])

@@ -157,7 +157,7 @@ def test_foreign_csv_names_the_missing_effect(tmp_path, capsys, feed_effect, nam
 
 @pytest.mark.parametrize("baseline, words", [
     ("backlash,gremlins", "unknown effect 'gremlins'"),
-    ("", "empty --baseline"),
+    ("", "got an empty string"),
     (" , ", "empty --baseline"),
     ("backlash,backlash", "listed twice"),
 ])

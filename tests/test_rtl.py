@@ -121,7 +121,7 @@ BAD = [
     (lambda t: t.replace("3 2 -0.7", "3 1 -0.7"), "run 3 target 1 appears twice"),
     (lambda t: t.replace("4 1 3.0\r\n", ""), "no deviation for run 4 target 1"),
     (lambda t: t.replace("2 2 3.5", "2 5 3.5"), "target '5': expected a number from 1 to 3"),
-    (lambda t: t.replace("2 2 3.5", "2 2 abc"), "deviation 'abc' is not a number"),
+    (lambda t: t.replace("2 2 3.5", "2 2 abc"), "deviation: 'abc' is not a number"),
     (lambda t: t.replace("2 2 3.5", "2 2"), "expected 'run target deviation'"),
     (lambda t: t.replace("Targets :", "Positions :"), "no 'Targets :' line"),
     (lambda t: t.replace("Run Target Data:", "Data:"), "no 'Run Target Data:' line"),

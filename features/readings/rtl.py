@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.readings.validation import finite_number
 
 _SECTION = re.compile(r"^([A-Z][A-Z0-9 \-]*)::\s*$")
 
@@ -90,16 +91,6 @@ def _count(section: list[tuple[int, str]], key: str, name: str, path: Path) -> i
     raise InputError(f"section {name}:: has no {key}:", file=path)
 
 
-def _float(text: str, path: Path, row: int, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError(f"{what} {text!r} is not a number", file=path, row=row) from None
-    if not np.isfinite(value):
-        raise InputError(f"{what} {text!r} is not a finite number", file=path, row=row)
-    return value
-
-
 def _targets(section: list[tuple[int, str]], path: Path) -> np.ndarray:
     n = _count(section, "Target-count", "TARGET DATA", path)
     start = next((i for i, (_, line) in enumerate(section)
@@ -115,7 +106,7 @@ def _targets(section: list[tuple[int, str]], path: Path) -> np.ndarray:
         tokens = line.replace(",", " ").split()
         if len(values) + len(tokens) > n:
             raise InputError(f"more than Target-count {n} target positions", file=path, row=row)
-        values += [_float(token, path, row, "target position") for token in tokens]
+        values += [finite_number(token, path, row, "target position") for token in tokens]
     if len(values) != n:
         raise InputError(f"{len(values)} target positions; Target-count says {n}", file=path)
     targets = np.asarray(values)
@@ -138,7 +129,7 @@ def _deviations(section: list[tuple[int, str]], runs: int, n: int, path: Path) -
                        ((parts[0], runs, "run"), (parts[1], n, "target")))
         if not np.isnan(grid[run - 1, target - 1]):
             raise InputError(f"run {run} target {target} appears twice", file=path, row=row)
-        grid[run - 1, target - 1] = _float(parts[2], path, row, "deviation")
+        grid[run - 1, target - 1] = finite_number(parts[2], path, row, "deviation")
     missing = np.argwhere(np.isnan(grid))
     if len(missing):
         run, target = missing[0] + 1

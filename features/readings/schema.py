@@ -43,7 +43,7 @@ DIRECTION_ALIASES = {
 }
 METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "pend": "pendulum"}
 
-# Named physical effects (SCHEMA.md section 4); models.physics.effects.RECORDS has one record
+# Named physical effects (docs/data-contract.md, section 4); models.physics.effects.RECORDS has one record
 # per name (a test checks they agree).
 EFFECTS = (
     "backlash", "backlash_position", "backlash_feed", "backlash_temperature",

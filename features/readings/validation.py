@@ -375,3 +375,14 @@ def _check_structure(frame: pd.DataFrame, path: Path) -> None:
                          f"{frame['direction'].iloc[i]!r} of test {frame['test_id'].iloc[i]!r} "
                          "has 1 reading; expected at least 2 cycles", file=path,
                          row=row_of(frame[ROW], i), column="cycle")
+
+
+def finite_number(text: str, path, row: int, what: str) -> float:
+    """``text`` as a finite float; otherwise one ``InputError`` naming ``what`` and the row."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{what}: {text!r} is not a number", file=path, row=row) from None
+    if not np.isfinite(value):
+        raise InputError(f"{what}: {text!r} is not a finite number", file=path, row=row)
+    return value

@@ -64,7 +64,6 @@ paired linear/pendulum points per axis (324 at interior targets, i.e. 162 backla
 from __future__ import annotations
 
 import copy
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,6 +72,7 @@ import pandas as pd
 
 from features.readings import schema
 from features.readings.errors import InputError
+from features.readings.fileio import read_toml
 from features.readings.validation import PLAUSIBLE
 from models.physics import effects
 from models.physics.axis import SYSTEMS, simulate_tests
@@ -144,12 +144,7 @@ def load_config(source, preset: str | None = None) -> dict:
         overrides = source
     else:
         where = str(source)
-        try:
-            overrides = tomllib.loads(Path(source).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise InputError("cannot read config: no such file", file=source) from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-            raise InputError(f"invalid TOML: {err}", file=source) from None
+        overrides = read_toml(source, "config")
     base = _merge(BASE, PRESETS[preset], f"preset {preset}") if preset else BASE
     config = _merge(base, overrides, where)
     _validate(config, where)

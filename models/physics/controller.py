@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from features.readings.errors import InputError
+from features.readings.validation import finite_number
 
 LINUXCNC_MAX_LINES = 256
 CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "marlin", "reprap", "grblhal", "csv")
@@ -97,16 +98,6 @@ def _text(path) -> str:
         return data.decode("latin-1")
 
 
-def _number(text: str, path, row: int, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError(f"{what}: {text!r} is not a number", file=path, row=row) from None
-    if not np.isfinite(value):
-        raise InputError(f"{what}: {text!r} is not a finite number", file=path, row=row)
-    return value
-
-
 def _ascending(nominal: np.ndarray, path) -> None:
     if len(nominal) and np.any(np.diff(nominal) <= 0):
         row = int(np.argmax(np.diff(nominal) <= 0)) + 2
@@ -123,11 +114,11 @@ def linuxcnc(comp_path, ini_path=None) -> Compensation:
                 continue
             key, value = (p.strip() for p in line.split("=", 1))
             if key == "BACKLASH":
-                backlash = _number(value, ini_path, row, "BACKLASH")
+                backlash = finite_number(value, ini_path, row, "BACKLASH")
             elif key == "COMP_FILE":
                 comp_file = value
             elif key == "COMP_FILE_TYPE":
-                comp_type = int(_number(value, ini_path, row, "COMP_FILE_TYPE"))
+                comp_type = int(finite_number(value, ini_path, row, "COMP_FILE_TYPE"))
         if comp_type != 0:
             raise InputError(f"COMP_FILE_TYPE {comp_type}: only type 0 is modelled",
                              file=ini_path)
@@ -164,7 +155,7 @@ def siemens(eec_path, md_path=None) -> Compensation:
         line = line.split(";")[0].strip()
         if m := _EEC.fullmatch(line):
             kind, _, index, _, value = m.groups()
-            number = _number(value, eec_path, row, f"$AA_ENC_COMP{kind or ''}")
+            number = finite_number(value, eec_path, row, f"$AA_ENC_COMP{kind or ''}")
             if kind:
                 meta[kind] = number
             else:
@@ -185,7 +176,7 @@ def siemens(eec_path, md_path=None) -> Compensation:
         for row, line in enumerate(_text(md_path).splitlines(), start=1):
             line = line.split(";")[0].strip()
             if m := re.fullmatch(r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", line):
-                backlash = _number(m[1], md_path, row, "MD32450 BACKLASH")
+                backlash = finite_number(m[1], md_path, row, "MD32450 BACKLASH")
     # the EEC value is the error: the control takes it off the position
     return Compensation(nominal, -error, -error, backlash, "siemens EEC")
 
@@ -196,13 +187,13 @@ def fanuc(path) -> Compensation:
     for row, line in enumerate(_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := re.fullmatch(r"(\d{4})\s+\w+\s*=\s*(\S+)", line):
-            params[int(m[1])] = _number(m[2], path, row, f"parameter {m[1]}")
+            params[int(m[1])] = finite_number(m[2], path, row, f"parameter {m[1]}")
         elif m := re.fullmatch(r"PITCH\s+(\d+)\s*=\s*(\S+)", line):
-            pitch[int(m[1])] = _number(m[2], path, row, f"pitch error point {m[1]}")
+            pitch[int(m[1])] = finite_number(m[2], path, row, f"pitch error point {m[1]}")
         elif m := re.fullmatch(r"DETECTION UNIT\s*=\s*(\S+)\s*um", line):
-            unit_um = _number(m[1], path, row, "detection unit")
+            unit_um = finite_number(m[1], path, row, "detection unit")
         elif m := re.fullmatch(r"REFERENCE POSITION\s*=\s*(\S+)\s*mm", line):
-            reference = _number(m[1], path, row, "reference position")
+            reference = finite_number(m[1], path, row, "reference position")
     if unit_um is None or reference is None:
         raise InputError("missing 'DETECTION UNIT = ... um' or 'REFERENCE POSITION = ... mm'",
                          file=path)
@@ -232,7 +223,7 @@ def heidenhain(com_path, mp_path=None) -> Compensation:
     for row, line in enumerate(_text(com_path).splitlines(), start=1):
         parts = line.split(";")[0].split()
         if len(parts) == 3 and parts[0].isdigit():
-            rows.append([_number(p, com_path, row, "compensation value") for p in parts[1:]])
+            rows.append([finite_number(p, com_path, row, "compensation value") for p in parts[1:]])
     if not rows:
         raise InputError("no 'NR position error' lines", file=com_path)
     table = np.asarray(rows)
@@ -242,7 +233,7 @@ def heidenhain(com_path, mp_path=None) -> Compensation:
         for row, line in enumerate(_text(mp_path).splitlines(), start=1):
             line = line.split(";")[0].strip()
             if m := re.fullmatch(r"MP710\.\d+\s*=\s*(\S+)", line):
-                backlash = _number(m[1], mp_path, row, "MP710")
+                backlash = finite_number(m[1], mp_path, row, "MP710")
     return Compensation(table[:, 0], -table[:, 1], -table[:, 1], backlash, "heidenhain .COM")
 
 
@@ -251,7 +242,7 @@ def m425(path) -> Compensation:
     for row, line in enumerate(_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := re.match(r"M425\s+[XYZ](\S+)", line):
-            return Compensation(backlash_mm=_number(m[1], path, row, "M425"), source="M425")
+            return Compensation(backlash_mm=finite_number(m[1], path, row, "M425"), source="M425")
     raise InputError("no 'M425 X|Y|Z<mm>' line", file=path)
 
 
@@ -260,7 +251,7 @@ def grblhal(path) -> Compensation:
     for row, line in enumerate(_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := re.fullmatch(r"\$16[0-2]\s*=\s*(\S+)", line):
-            return Compensation(backlash_mm=_number(m[1], path, row, "$16x"), source="grblHAL")
+            return Compensation(backlash_mm=finite_number(m[1], path, row, "$16x"), source="grblHAL")
     raise InputError("no '$160..$162=<mm>' line", file=path)
 
 

@@ -23,16 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def read_scenarios(path) -> dict:
     """The scenario specification of a TOML file (see ``models.discovery_benchmark``)."""
-    import tomllib
-
     from features.readings.errors import InputError
+    from features.readings.fileio import read_toml
 
-    try:
-        spec = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("cannot read scenarios: no such file", file=path) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"invalid TOML: {err}", file=path) from None
+    spec = read_toml(path, "scenarios")
     unknown = set(spec) - {"baseline", "seeds", "resolution_um", "truth", "hidden", "designs",
                            "special"}
     if unknown:

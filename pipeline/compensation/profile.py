@@ -6,7 +6,7 @@ there are no linear ones), weighted by the number of readings. From a trained pr
 backlash at the requested conditions, split symmetrically (mean_up = -b/2, mean_down = +b/2),
 with no position error (a predictor of backlash knows nothing of the lead error).
 
-Sign conventions (SCHEMA.md): deviation x = measured - target; lost motion makes
+Sign conventions (docs/data-contract.md): deviation x = measured - target; lost motion makes
 B_i = mean_up - mean_down negative; the scalar backlash written to controllers is
 b = max(0, -mean B_i), the mean lost motion. A correction is what the controller must add to
 the commanded position: correction = -deviation.
