@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
 from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.validation import check_is_fitted, validate_data
 
@@ -62,7 +62,7 @@ class BootstrapEnsemble(RegressorMixin, BaseEstimator):
         values = self._members_predict(X)
         n = len(values)
         mean, sd = values.mean(axis=0), values.std(axis=0, ddof=1)
-        half = stats.t.ppf(0.5 + (level or self.level) / 2, n - 1) * sd * np.sqrt(1 + 1 / n)
+        half = stdtrit(n - 1, 0.5 + (level or self.level) / 2) * sd * np.sqrt(1 + 1 / n)
         return mean, mean - half, mean + half
 
     def save(self, directory) -> None:
