@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError
 from features.readings.rtl import looks_like_rtl
 from features.readings.validation import (
@@ -30,7 +31,7 @@ from features.readings.validation import (
     warn,
 )
 
-FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
+FORMATS = schema.FORMATS
 
 # Paper Table 2 columns: canonical wide names and the spellings accepted for them.
 PAPER_COLUMNS = {

@@ -12,6 +12,9 @@ plus ``visit`` and ``repeat`` (defaults filled in) and ``deviation_um`` (compute
 
 from __future__ import annotations
 
+# Input layouts a readings file may have (features.readings.formats reads each one).
+FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
+
 REQUIRED = ("machine_id", "axis", "test_id", "method", "target", "direction", "cycle")
 DEVIATION = "deviation_um"
 MEASURED = "measured"

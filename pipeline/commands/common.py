@@ -6,6 +6,7 @@ import argparse
 import shutil
 from pathlib import Path
 
+from features.readings import schema
 from features.readings.errors import InputError
 
 # Outputs each command writes, by argparse dest: a folder, or a file.
@@ -19,7 +20,7 @@ OUTPUTS = {
 }
 
 
-FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")  # features.readings.formats.FORMATS
+FORMATS = schema.FORMATS
 
 
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:
