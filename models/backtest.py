@@ -5,9 +5,11 @@ Every predictor is scored on the points of the forecast visit against what was m
 and, on twin data, against the true backlash; beside them stands *persistence*, the forecast
 that the next visit measures what the last one did (the same point's value at visit k, else that
 target's mean at visit k). An adjustment restarts the wear clock: training keeps the visits since
-the last adjustment before the origin (``models.wear_map.latest_epoch``), and an origin whose
-next visit is itself an adjustment is skipped (nothing before it says where the new clock
-starts). Predictors with ``predict_interval`` also report how often their 95 % interval covers
+the last adjustment before the origin (``models.wear_map.latest_epoch``: a drop in operating
+hours, an ``event``, or, given the per-visit backlash series, a downward change point that the
+drift statistics find in the visits up to the origin, so nothing is learned from the future),
+and an origin whose next visit is itself a known adjustment (hours or event) is skipped
+(nothing before it says where the new clock starts). Predictors with ``predict_interval`` also report how often their 95 % interval covers
 the measured value and the truth.
 """
 
@@ -19,7 +21,7 @@ import pandas as pd
 from features.readings.errors import InputError
 from features.table import FeatureTable
 from models import evaluation, registry
-from models.wear_map import latest_epoch
+from models.wear_map import found_adjustments, latest_epoch
 
 PERSISTENCE = "persistence"
 SAME_POINT = ("machine_id", "axis", "feed_mm_min", "dwell_s", "repeat", "target")
@@ -53,23 +55,31 @@ def persistence(table: FeatureTable, train: np.ndarray, test: np.ndarray) -> np.
 
 
 def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None = None,
-             random_state: int = 0, min_train_visits: int = 2, progress=None) -> pd.DataFrame:
+             random_state: int = 0, min_train_visits: int = 2, progress=None,
+             visits: pd.DataFrame | None = None) -> pd.DataFrame:
     """One row per predictor and origin: ``model, origin, forecast_visit, n_train, n_test,
     rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and ``coverage_pct`` /
-    ``truth_coverage_pct`` where known. ``progress`` wraps the origin loop (e.g. tqdm)."""
+    ``truth_coverage_pct`` where known. ``progress`` wraps the origin loop (e.g. tqdm).
+    ``visits``: the per-visit backlash (``features.visits.visit_backlash``) whose downward
+    change points up to each origin also restart the wear clock."""
     meta = table.meta
     rank = evaluation.visit_order(meta)
     y = table.y.to_numpy(float)
     true = evaluation.true_backlash(meta, truth) if truth is not None else None
     hours = table.X.get("operating_hours", None)
     events = meta.get("event", None)
+    visit_rank = dict(zip(meta["visit"].astype(str), rank, strict=True))
     rows = []
     steps = origins(table, min_train_visits)
     for k in (progress(steps) if progress else steps):
         upto = rank <= k + 1
+        adjustments = None
+        if visits is not None:  # change points from the visits up to the origin only
+            known = visits["visit"].astype(str).map(visit_rank) <= k
+            adjustments = found_adjustments(visits[known.to_numpy()])
         epoch = np.zeros(len(meta), bool)
         epoch[upto] = latest_epoch(meta[upto], None if hours is None else hours[upto],
-                                   None if events is None else events[upto])
+                                   None if events is None else events[upto], adjustments)
         test = np.flatnonzero(rank == k + 1)
         if not epoch[test].all():  # the forecast visit is an adjustment: a new clock
             continue

@@ -63,3 +63,39 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     if noise_floor_um is not None:
         metrics["noise_floor_um"] = float(noise_floor_um)
     return fit
+
+
+def visit_series(readings: pd.DataFrame) -> tuple[pd.DataFrame | None, str]:
+    """Per-visit backlash of every machine axis (``features.visits.visit_backlash``) for the
+    change-point search of ``since_adjustment``, or None and why it cannot be had."""
+    from features.readings.errors import InputError
+    from features.visits import visit_backlash
+
+    try:
+        return visit_backlash(readings), ""
+    except InputError as err:
+        return None, f"no change-point search ({err.message})"
+
+
+def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None):
+    """The rows since the last mechanical adjustment of each machine axis, and a note.
+
+    An adjustment is a drop in operating hours, an ``event`` 'adjustment', or a downward level
+    change point of the per-visit backlash found by the drift statistics (when ``readings``
+    with dates are given). Returns the reduced table and a note for the model's meta:
+    ``series`` (per machine axis: visits kept, visits dropped, reason), ``change_points``
+    ('searched' or why not), ``rows_used`` and ``rows``.
+    """
+    from models.wear_map import found_adjustments, wear_epochs
+
+    series, why_not = (visit_series(readings) if readings is not None
+                       else (None, "no change-point search (no readings)"))
+    adjustments = found_adjustments(series) if series is not None else None
+    mask, notes = wear_epochs(table.meta, table.X.get("operating_hours"),
+                              table.meta.get("event"), adjustments)
+    note = {"series": notes, "change_points": "searched" if series is not None else why_not,
+            "rows_used": int(mask.sum()), "rows": len(mask)}
+    kept = FeatureTable(table.X[mask].reset_index(drop=True),
+                        table.y[mask].reset_index(drop=True),
+                        table.meta[mask].reset_index(drop=True), table.target_kind, table.reason)
+    return kept, note

@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
 from scipy.interpolate import BSpline
+from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
@@ -47,6 +47,7 @@ HOURS = "operating_hours"
 CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
               "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
 FILE_NAME = "wear_map.json"
+WITHIN_VISIT_SHARE = 0.1
 
 
 def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np.ndarray:
@@ -147,7 +148,8 @@ class WearMap(RegressorMixin, BaseEstimator):
         names = list(frame.columns)
         self.use_position_ = POSITION in names and np.ptp(frame[POSITION]) > 0
         self.use_hours_ = HOURS in names and np.ptp(frame[HOURS]) > 0
-        self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0]
+        self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0
+                            and not self._confounded_with_wear(frame, c)]
         self.condition_means_ = {c: float(frame[c].mean()) for c in self.conditions_}
         self.condition_sd_ = {c: float(frame[c].std(ddof=1)) for c in self.conditions_}
         self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_)
@@ -173,6 +175,21 @@ class WearMap(RegressorMixin, BaseEstimator):
                             + self.visit_sd_um_ ** 2 * inverse @ visit_sums @ inverse)
         self.can_forecast_ = bool(self.use_hours_)
         return self
+
+    def _confounded_with_wear(self, frame: pd.DataFrame, name: str) -> bool:
+        """With fewer than four visits (told apart by their hours), a condition that changes
+        almost only between visits (less than ``WITHIN_VISIT_SHARE`` of its variance within
+        them) cannot be told from the wear term and the visit's own offset: a level, a wear
+        rate and a condition slope fitted to three visit levels leave nothing to tell a
+        condition effect from the day-to-day offset of a visit."""
+        if not self.use_hours_:
+            return False
+        labels, codes = np.unique(frame[HOURS].to_numpy(float), return_inverse=True)
+        if len(labels) >= 4:
+            return False
+        values = frame[name].to_numpy(float)
+        means = np.bincount(codes, values) / np.bincount(codes)
+        return float(np.var(values - means[codes])) < WITHIN_VISIT_SHARE * float(np.var(values))
 
     def _visit_effect(self, frame: pd.DataFrame, A: np.ndarray, residual: np.ndarray):
         """Standard deviation tau [um] of a common offset per visit (visits told apart by their
@@ -371,31 +388,110 @@ def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
 
 
 def latest_epoch(meta: pd.DataFrame, hours: pd.Series | None = None,
-                 events: pd.Series | None = None) -> np.ndarray:
-    """Rows since the last mechanical adjustment of their machine and axis (a boolean mask).
+                 events: pd.Series | None = None,
+                 adjustments: pd.DataFrame | None = None) -> np.ndarray:
+    """Rows since the last mechanical adjustment of their machine and axis (a boolean mask);
+    see ``wear_epochs``, which also says why."""
+    return wear_epochs(meta, hours, events, adjustments)[0]
+
+
+def wear_epochs(meta: pd.DataFrame, hours: pd.Series | None = None,
+                events: pd.Series | None = None, adjustments: pd.DataFrame | None = None):
+    """Rows since the last mechanical adjustment of their machine and axis, and why.
 
     An adjustment restarts the wear clock: it shows as an ``event`` 'adjustment' (or 'reset')
-    on a visit, or as operating hours that drop from one visit to the next (visits in date
-    order, else in natural label order).
+    on a visit, as operating hours that drop from one visit to the next (visits in date order,
+    else in natural label order), or as a visit listed in ``adjustments`` (``machine_id, axis,
+    visit, reason``: the downward level changes that ``found_adjustments`` finds in the
+    per-visit backlash), which finds adjustments that left the hour counter running.
+
+    Returns
+    -------
+    mask : bool array, True for the rows kept
+    notes : list of dicts, one per machine axis: ``machine_id, axis, visits`` (the visits
+        kept, in order), ``dropped`` (number of earlier visits left out) and ``reason`` (what
+        marked the start of the kept visits; empty when nothing did).
     """
     from models.evaluation import visit_order
 
     keep = np.ones(len(meta), bool)
     rank = visit_order(meta)
+    labels = meta["visit"].astype(str).to_numpy() if "visit" in meta else rank.astype(str)
     axes = [c for c in ("machine_id", "axis") if c in meta]
-    groups = meta.groupby(axes, dropna=False).indices if axes else {None: np.arange(len(meta))}
+    groups = meta.groupby(axes, dropna=False).indices if axes else {(): np.arange(len(meta))}
+    found = {}
+    if adjustments is not None:
+        for row in adjustments.itertuples(index=False):
+            found[(str(row.machine_id), str(row.axis), str(row.visit))] = row.reason
+    notes = []
     for rows in groups.values():
+        machine, axis = (str(meta[c].iloc[rows[0]]) if c in meta else "" for c in
+                         ("machine_id", "axis"))
         order = rank[rows]
         visits = np.unique(order)
-        start = visits[0]
+        start, why = visits[0], ""
         for previous, current in itertools.pairwise(visits):
             at = rows[order == current]
             before = rows[order == previous]
-            reset = events is not None and events.iloc[at].astype(str).str.lower().isin(
-                ("adjustment", "reset")).any()
+            reasons = []
+            if events is not None:
+                named = events.iloc[at].astype(str).str.lower()
+                if named.isin(("adjustment", "reset")).any():
+                    reasons.append(f"event '{named[named.isin(('adjustment', 'reset'))].iloc[0]}'")
             if hours is not None:
-                reset = reset or float(hours.iloc[at].mean()) < float(hours.iloc[before].mean())
-            if reset:
-                start = current
+                now, then = float(hours.iloc[at].mean()), float(hours.iloc[before].mean())
+                if now < then:
+                    reasons.append(f"operating hours drop from {then:g} h to {now:g} h")
+            change = found.get((machine, axis, str(labels[at[0]])))
+            if change:
+                reasons.append(change)
+            if reasons:
+                start, why = current, f"adjustment at visit {labels[at[0]]}: " + "; ".join(
+                    reasons)
         keep[rows] = order >= start
-    return keep
+        kept = [str(labels[rows[order == v][0]]) for v in visits if v >= start]
+        notes.append({"machine_id": machine, "axis": axis, "visits": kept,
+                      "dropped": int(np.sum(visits < start)), "reason": why})
+    return keep, notes
+
+
+def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
+    """Mechanical adjustments the drift statistics find in the per-visit backlash: downward
+    level change points (``models.drift.analyse_series``; an upward step is a failure, not an
+    adjustment).
+
+    ``visits``: rows of ``features.visits.visit_backlash`` (``machine_id, axis, visit, date,
+    backlash_um, u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
+    """
+    from models import drift
+
+    rows = []
+    for _, group in visits.groupby(["machine_id", "axis"], sort=True, observed=True):
+        if len(group) < 4:  # two segments of two visits at least
+            continue
+        series = drift.analyse_series(group)
+        for change in series.change_points:
+            if change["jump_um"] < 0:
+                visit = str(series.visits["visit"].iloc[change["index"]])
+                rows.append({"machine_id": series.machine_id, "axis": series.axis,
+                             "visit": visit, "jump_um": change["jump_um"],
+                             "jump_sigma": change["jump_sigma"],
+                             "reason": f"backlash steps down by {-change['jump_um']:.2f} um "
+                                       f"({-change['jump_sigma']:.1f} sigma, drift change point)"})
+    return pd.DataFrame(rows, columns=["machine_id", "axis", "visit", "jump_um", "jump_sigma",
+                                       "reason"])
+
+
+def epoch_lines(notes: list[dict], limit: int = 6) -> list[str]:
+    """One human line per machine axis that says which visits the wear clock uses and why."""
+    lines = []
+    for note in notes[:limit]:
+        name = " ".join(v for v in (note["machine_id"], note["axis"]) if v) or "data"
+        visits = note["visits"]
+        span = visits[0] if len(visits) == 1 else f"{visits[0]}..{visits[-1]}"
+        why = (f"{note['reason']}; {note['dropped']} earlier visit(s) left out"
+               if note["dropped"] else "no mechanical adjustment found")
+        lines.append(f"wear clock {name}: visits {span} ({len(visits)}); {why}")
+    if len(notes) > limit:
+        lines.append(f"wear clock: {len(notes) - limit} more machine axes (model.json meta)")
+    return lines

@@ -98,19 +98,24 @@ def run_backtest(args, names, readings, table, floor, truth) -> int:
 
     from features.readings.fileio import atomic_path, clean_nan, dumps
     from models import backtest
+    from models.training import visit_series
     from pipeline import tracking
 
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="backlash-backtest-"))
+    visits, why_not = visit_series(readings)
+    if visits is None:
+        print(f"note: adjustments from operating hours and events only; {why_not}",
+              file=sys.stderr)
     results = backtest.backtest(table, names, truth, args.seed,
                                 progress=lambda s: tqdm(s, desc="origins", file=sys.stderr,
-                                                        leave=False))
+                                                        leave=False), visits=visits)
     summary = backtest.summary(results)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_path(out / "backtest.csv") as tmp:
         results.to_csv(tmp, index=False)
     with atomic_path(out / "backtest_summary.csv") as tmp:
         summary.to_csv(tmp, index=False)
-    figure = write_wear_map(table, out) if "wear-map" in names else None
+    figure = write_wear_map(table, out, readings) if "wear-map" in names else None
     with tracking.run("compare", f"backtest {Path(args.data).name}") as parent:
         import mlflow
 
@@ -141,15 +146,17 @@ def run_backtest(args, names, readings, table, floor, truth) -> int:
     return 0
 
 
-def write_wear_map(table, out: Path):
+def write_wear_map(table, out: Path, readings=None):
     """The wear map fitted on the visits since the last adjustment: w(x) with its interval
     (CSV and PNG); None when the data cannot give a wear rate (one visit)."""
     from features.readings.fileio import atomic_path
-    from models.wear_map import WearMap, latest_epoch
+    from models.training import since_adjustment
+    from models.wear_map import WearMap, epoch_lines
 
-    hours = table.X.get("operating_hours", None)
-    keep = latest_epoch(table.meta, hours, table.meta.get("event"))
-    model = WearMap().fit(table.X[keep], table.y[keep])
+    kept, note = since_adjustment(table, readings)
+    for line in epoch_lines(note["series"]):
+        print(f"note: {line}", file=sys.stderr)
+    model = WearMap().fit(kept.X, kept.y)
     if not model.can_forecast_:
         return None
     wear = model.wear_rate_map()

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from models import registry
-    from models.training import fit_model
+    from models.training import fit_model, since_adjustment
     from pipeline import model_tracking, tracking
     from pipeline.commands.common import load_table
     from pipeline.model_report import write_figures
@@ -30,10 +30,19 @@ def run(args: argparse.Namespace) -> int:
     readings, table, floor, truth = load_table(args)
     print(f"{len(table.y)} backlash points, target {table.target_kind}: {table.reason}",
           file=sys.stderr)
+    clock = None
+    if name.startswith("wear-map"):  # the wear clock restarts at a mechanical adjustment
+        from models.wear_map import epoch_lines
+
+        table, clock = since_adjustment(table, readings)
+        for line in [*epoch_lines(clock["series"]), clock["change_points"]]:
+            if line and line != "searched":
+                print(f"note: {line}", file=sys.stderr)
     fit = fit_model(table, name, args.split, args.seed, truth, floor, str(args.data))
     digest = tracking.data_hash(readings)
     meta = {"split": args.split, "data_sha256": digest, "data": str(args.data),
-            "noise_floor_um": floor, "target_reason": table.reason, "seed": args.seed}
+            "noise_floor_um": floor, "target_reason": table.reason, "seed": args.seed,
+            **({"wear_clock": clock} if clock else {})}
     model_dir = registry.save_model(fit.trained_model(meta), args.out)
     figures = write_figures(fit, model_dir / "figures")
     with tracking.run("train", f"train {name}") as active:
