@@ -153,8 +153,8 @@ def test_paper_position_effect_about_twice_the_noise_is_found_with_its_size():
 
 
 def test_paper_machine_temperature_is_found_with_its_size_over_ten_seeds():
-    """Preload change with screw temperature, -0.3 um/K: about 0.44 um over the observed range,
-    twice the per-point noise, and moving with feed through warm-up. Only the run-to-run
+    """Preload change with screw temperature, -0.3 um/K: 0.5-0.8 um over the observed range,
+    about twice the per-point noise, and moving with feed through warm-up. Only the run-to-run
     scatter of the pendulum test's start temperature (0.5 K) separates it from feed; the
     conditions are those of the pendulum test, whose reversals the paper target measures."""
     found, covered = 0, 0
@@ -167,7 +167,7 @@ def test_paper_machine_temperature_is_found_with_its_size_over_ten_seeds():
         covered += bool(row["effect_low_um"] <= true_um <= row["effect_high_um"])
         assert row["tested"] == "run"  # between runs, against the run-to-run error
     assert found >= 9, found
-    assert covered >= 8, covered
+    assert covered >= 9, covered
 
 
 def test_a_path_input_without_its_effect_is_not_a_driver():
