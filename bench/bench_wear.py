@@ -24,7 +24,7 @@ def main() -> None:
     start = time.perf_counter()
     sim = simulate(config, seed=0)
     table = feature_table(sim.readings)
-    truth = true_backlash(table.meta, sim.truth)
+    truth = true_backlash(table.meta, sim.truth, table.target_kind)
     prepare_s = time.perf_counter() - start
     groups = table.meta.groupby(["machine_id", "axis"]).indices
     rank = visit_order(table.meta)

@@ -15,6 +15,13 @@ section 4, Table 2 and Fig. 9):
 ``humidity_pct``    relative humidity, mean at that target [%RH]
 ==================  ====================================================================
 
+The conditions are means over the readings of the tests that show the backlash: for the
+``paper`` target (pendulum minus linear in a direct system, where only the pendulum test
+reverses at interior targets) the pendulum test's readings, for the ``iso`` target both tests.
+The two tests of a pair start at different temperatures; averaging them would mix the
+pendulum's screw temperature, which sets the measured lost motion, with the linear test's,
+which does not enter it.
+
 plus ``dwell_s`` and ``operating_hours`` when the readings have them. The deviations come
 from the linear test only, so a model trained on this table predicts what the pendulum test
 would add from a linear test and its conditions.
@@ -87,7 +94,8 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
     points = backlash_targets(readings, kind=target)
     kind = points.attrs["target_kind"]
     names = list(features) if features else default_features(readings, kind)
-    table = points.merge(point_inputs(readings), on=list(POINT_KEYS), how="left",
+    methods = ("pendulum",) if kind == "paper" else None
+    table = points.merge(point_inputs(readings, methods), on=list(POINT_KEYS), how="left",
                          validate="many_to_one")
     unknown = [f for f in names if f not in table.columns]
     if unknown:
@@ -133,9 +141,10 @@ def with_pair_keys(readings: pd.DataFrame) -> pd.DataFrame:
     return readings.assign(**missing) if missing else readings
 
 
-def point_inputs(readings: pd.DataFrame) -> pd.DataFrame:
-    """Per point: linear-test mean deviation per direction, and mean conditions over both
-    tests of the pair at that target."""
+def point_inputs(readings: pd.DataFrame, methods: tuple[str, ...] | None = None) -> pd.DataFrame:
+    """Per point: linear-test mean deviation per direction, and mean conditions at that target
+    over the readings of the tests in ``methods`` (default both tests of the pair; a point
+    without such readings falls back to both)."""
     keys = list(POINT_KEYS)
     linear = readings[readings["method"] == "linear"]
     deviation = (linear.groupby([*keys, "direction"], dropna=False)["deviation_um"].mean()
@@ -144,7 +153,12 @@ def point_inputs(readings: pd.DataFrame) -> pd.DataFrame:
     env = [c for c in ENVIRONMENT if c in readings]
     inputs = deviation
     if env:
-        inputs = inputs.join(readings.groupby(keys, dropna=False)[env].mean(), how="left")
+        conditions = readings.groupby(keys, dropna=False)[env].mean()
+        if methods:
+            chosen = readings[readings["method"].isin(methods)]
+            conditions = (chosen.groupby(keys, dropna=False)[env].mean()
+                          .combine_first(conditions))
+        inputs = inputs.join(conditions, how="left")
     if "started_at" in readings:
         inputs = inputs.join(readings.groupby(keys, dropna=False)["started_at"].min(), how="left")
     return inputs.reset_index()

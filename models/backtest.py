@@ -65,7 +65,7 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
     meta = table.meta
     rank = evaluation.visit_order(meta)
     y = table.y.to_numpy(float)
-    true = evaluation.true_backlash(meta, truth) if truth is not None else None
+    true = evaluation.true_backlash(meta, truth, table.target_kind) if truth is not None else None
     hours = table.X.get("operating_hours", None)
     events = meta.get("event", None)
     visit_rank = dict(zip(meta["visit"].astype(str), rank, strict=True))

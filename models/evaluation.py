@@ -91,11 +91,16 @@ def scores(y_true, y_pred) -> dict[str, float]:
     }
 
 
-def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame) -> np.ndarray:
-    """The twin's true backlash at each feature-table point (mean over the point's tests).
+def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame, kind: str | None = None) -> np.ndarray:
+    """The twin's true backlash at each feature-table point, mean over the tests that show it.
 
-    ``truth`` needs the point keys present in ``meta`` and ``true_backlash_um``.
+    ``truth`` needs the point keys present in ``meta`` and ``true_backlash_um``. For the
+    ``paper`` target (``kind``, the feature table's ``target_kind``) that is the pendulum test
+    of the pair, the only one reversing at interior targets of a direct system, at its own
+    temperature; otherwise every test of the point.
     """
+    if kind == "paper" and "method" in truth and (truth["method"] == "pendulum").any():
+        truth = truth[truth["method"] == "pendulum"]
     keys = [k for k in meta.columns if k in truth.columns and k not in ("started_at",)]
     per_point = truth.groupby(keys, dropna=False)["true_backlash_um"].mean()
     found = meta[keys].merge(per_point.reset_index(), on=keys, how="left")

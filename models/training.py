@@ -52,7 +52,7 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     metrics |= {f"train_{k}": v for k, v in evaluation.scores(y[train], predicted[train]).items()}
     fit = Fit(name, estimator, table, train, test, predicted, metrics)
     if truth is not None:
-        fit.truth_um = evaluation.true_backlash(table.meta, truth)
+        fit.truth_um = evaluation.true_backlash(table.meta, truth, table.target_kind)
         known = test[np.isfinite(fit.truth_um[test])]
         if known.size:
             metrics |= {f"truth_{k}": v for k, v in

@@ -35,7 +35,7 @@ def test_next_visit_forecast_beats_the_noise_floor_and_intervals_cover_the_truth
     for sim, table in fleets:
         train, test = last_visit_split(table)
         model = WearMap().fit(table.X[train], table.y[train])
-        truth = true_backlash(table.meta, sim.truth)[test]
+        truth = true_backlash(table.meta, sim.truth, table.target_kind)[test]
         floor = target_noise_floor(sim.readings, table.target_kind)
         mean, low, high = model.predict_interval(table.X[test])
         # from a plan alone: no deviations and no machine temperature, only targets, hours, feed

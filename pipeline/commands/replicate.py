@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         from models.evaluation import true_backlash
         from pipeline.commands.common import read_truth
 
-        truth = true_backlash(table.meta, read_truth(args.truth))
+        truth = true_backlash(table.meta, read_truth(args.truth), table.target_kind)
     results = replicate(table.X, table.y, table.meta, args.seed, args.boot, truth)
     paths = write_replication(results, args.out, source=str(args.data))
     print(markdown(comparison_rows(results)), file=sys.stderr)
