@@ -149,7 +149,8 @@ def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
                 "--storage", storage]
         if where == "child":
             proc = backlash(*args, cwd=tmp_path)
-            assert proc.wait(timeout=300) == 0, proc.communicate()[1][-2000:]
+            _, err = proc.communicate(timeout=300)  # drains the pipes while it waits
+            assert proc.returncode == 0, err[-2000:]
         else:
             assert main(args) == 0
         study = optuna.load_study(study_name="backlash-network", storage=storage)
@@ -170,6 +171,7 @@ def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path)
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
         time.sleep(0.1)
     proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=60) == 130
+    _, err = proc.communicate(timeout=120)  # drain the pipes: a full one would block the writer
+    assert proc.returncode == 130, err[-2000:]
     after = states(storage)
     assert after[-1] == "FAIL" and "RUNNING" not in after
