@@ -239,20 +239,23 @@ def heidenhain(com_path, mp_path=None) -> Compensation:
 
 def m425(path) -> Compensation:
     """Marlin / RepRapFirmware ``M425 X... `` backlash distance [mm] (first axis given)."""
-    for row, line in enumerate(_text(path).splitlines(), start=1):
-        line = line.split(";")[0].strip()
-        if m := re.match(r"M425\s+[XYZ](\S+)", line):
-            return Compensation(backlash_mm=finite_number(m[1], path, row, "M425"), source="M425")
-    raise InputError("no 'M425 X|Y|Z<mm>' line", file=path)
+    return _scalar_setting(path, r"M425\s+[XYZ](\S+).*", "M425", "no 'M425 X|Y|Z<mm>' line")
 
 
 def grblhal(path) -> Compensation:
     """grblHAL ``$160-$162`` backlash [mm] (first setting given)."""
+    return _scalar_setting(path, r"\$16[0-2]\s*=\s*(\S+)", "grblHAL",
+                           "no '$160..$162=<mm>' line")
+
+
+def _scalar_setting(path, pattern: str, source: str, missing: str) -> Compensation:
+    """The first line ``pattern`` matches whole (after ``;`` comments are cut): its value is
+    the backlash [mm] of a scalar-only controller."""
     for row, line in enumerate(_text(path).splitlines(), start=1):
-        line = line.split(";")[0].strip()
-        if m := re.fullmatch(r"\$16[0-2]\s*=\s*(\S+)", line):
-            return Compensation(backlash_mm=finite_number(m[1], path, row, "$16x"), source="grblHAL")
-    raise InputError("no '$160..$162=<mm>' line", file=path)
+        if m := re.fullmatch(pattern, line.split(";")[0].strip()):
+            return Compensation(backlash_mm=finite_number(m[1], path, row, source),
+                                source=source)
+    raise InputError(missing, file=path)
 
 
 def csv_table(path) -> Compensation:

@@ -76,8 +76,6 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.rank_report import write_rank_report
 
     tracking.check_uri()
-    if args.k < 1:
-        raise InputError(f"--k must be at least 1, got {args.k}")
     bins = parse_bins(args.bins)
     features = parse_features(args.features)
     model, notes = load_predictor(args.model)
