@@ -18,9 +18,7 @@ OUTPUTS = {
     "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER}, "compensate": {"out": FOLDER},
     "replicate": {"out": FOLDER},
 }
-
-
-FORMATS = schema.FORMATS
+FORMATS = schema.FORMATS  # the input layouts every --format option offers
 
 
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:
