@@ -11,6 +11,7 @@ removed again. Any other exception is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import sys
@@ -80,5 +81,17 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def program() -> None:
+    """The ``backlash`` executable: ``main`` plus what only a whole process may do."""
+    from pipeline.background_run import allow_fork
+
+    allow_fork()
+    code = main()
+    # Every object dies with the process: freezing them spares the interpreter's final garbage
+    # collection, which walks all of them (about a second after mlflow and scikit-learn).
+    gc.freeze()
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    program()

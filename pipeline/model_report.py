@@ -22,7 +22,7 @@ def training_history(estimator) -> dict | None:
 
 def plot_training(info: dict, path: Path) -> Path:
     """Fig. 10: mean squared error per epoch on the training, validation and test splits."""
-    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1)
+    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1, fixed_margins=True)
     for key, label in (("train_mse", "training"), ("val_mse", "validation"), ("test_mse", "test")):
         values = info["history"].get(key)
         if values is not None and len(values):
@@ -40,7 +40,7 @@ def plot_training(info: dict, path: Path) -> Path:
 def plot_error_histogram(fit, path: Path) -> Path:
     """Fig. 11: histogram of prediction errors (predicted - target) on training and test."""
     error = fit.predicted_um - fit.table.y.to_numpy(float)
-    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1)
+    fig, ax = new_figure(6.5, 4, nrows=1, ncols=1, fixed_margins=True)
     bins = np.histogram_bin_edges(error, bins=20)
     ax.hist(error[fit.train_index], bins=bins, alpha=0.6, label="training")
     ax.hist(error[fit.test_index], bins=bins, alpha=0.6, label="test")
@@ -56,7 +56,7 @@ def plot_predictions(fit, path: Path) -> Path:
     """Fig. 12: backlash per test point: target, prediction and (twin) true backlash."""
     idx = fit.test_index
     order = np.arange(len(idx))
-    fig, ax = new_figure(8, 4, nrows=1, ncols=1)
+    fig, ax = new_figure(8, 4, nrows=1, ncols=1, fixed_margins=True)
     ax.plot(order, fit.table.y.to_numpy(float)[idx], "o", ms=4, label="measured target")
     ax.plot(order, fit.predicted_um[idx], "x", ms=5, label=f"predicted ({fit.name})")
     if fit.truth_um is not None:
@@ -72,7 +72,8 @@ def plot_regression(fit, path: Path) -> Path:
     """Fig. 13: predicted against target for training, test and all points, with R."""
     y = fit.table.y.to_numpy(float)
     parts = {"training": fit.train_index, "test": fit.test_index, "all": np.arange(len(y))}
-    fig, axes = new_figure(12, 4, nrows=1, ncols=3, sharex=True, sharey=True)
+    fig, axes = new_figure(12, 4, nrows=1, ncols=3, sharex=True, sharey=True,
+                           fixed_margins=True)
     lo, hi = float(min(y.min(), fit.predicted_um.min())), float(max(y.max(), fit.predicted_um.max()))
     for ax, (label, idx) in zip(axes, parts.items()):
         t, p = y[idx], fit.predicted_um[idx]

@@ -52,7 +52,7 @@ def check_uri(uri: str | None = None) -> str:
     from features.readings.errors import InputError
 
     uri = uri or tracking_uri()
-    scheme = uri.split(":", 1)[0].split("+", 1)[0].lower() if "://" in uri else ""
+    scheme = _scheme(uri)
     if scheme == "sqlite":
         path = _sqlite_path(uri)
         if path is None:
@@ -69,6 +69,11 @@ def check_uri(uri: str | None = None) -> str:
                      "postgresql://USER@HOST/DB")
 
 
+def _scheme(uri: str) -> str:
+    """``sqlite`` of ``sqlite:///x``, ``postgresql`` of ``postgresql+psycopg2://...``."""
+    return uri.split(":", 1)[0].split("+", 1)[0].lower() if "://" in uri else ""
+
+
 def _sqlite_path(uri: str) -> Path | None:
     path = uri.split("sqlite:///", 1)[1] if uri.startswith("sqlite:///") else ""
     path = path.split("?", 1)[0]
@@ -79,15 +84,8 @@ def _sqlite_path(uri: str) -> Path | None:
 
 def mlflow_module():
     """mlflow, with the tracking and registry URI set from the environment and the store
-    created (under a lock when it is a fresh local file).
-
-    The product sends no usage data: MLflow's telemetry is switched off here unless the user
-    set ``MLFLOW_DISABLE_TELEMETRY`` explicitly.
-    """
-    if "MLFLOW_DISABLE_TELEMETRY" not in os.environ:
-        os.environ["MLFLOW_DISABLE_TELEMETRY"] = "true"
-    import mlflow
-
+    created (under a lock when it is a fresh local file)."""
+    mlflow = import_store()
     uri = check_uri()
     if mlflow.get_tracking_uri() != uri:
         mlflow.set_tracking_uri(uri)
@@ -100,6 +98,24 @@ def mlflow_module():
 
 
 configure = mlflow_module
+
+
+def import_store():
+    """Import mlflow and the modules its store needs for the configured URI, touching nothing
+    on disk; returns mlflow. Lets a process pay the imports before it knows it will log.
+
+    The product sends no usage data: MLflow's telemetry is switched off here unless the user
+    set ``MLFLOW_DISABLE_TELEMETRY`` explicitly. MLflow's per-file progress bars, which flash
+    by for the few small files of a model, are off unless the user turned them on.
+    """
+    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+    import mlflow
+
+    if _scheme(tracking_uri()) in DATABASE_SCHEMES:
+        import mlflow.store.model_registry.sqlalchemy_store
+        import mlflow.store.tracking.sqlalchemy_store
+    return mlflow
 
 
 def client():

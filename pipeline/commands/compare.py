@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                                             out / "models" / name)
             with tracking.run("compare", name, nested=True):
                 version = model_tracking.log_fit(
-                    fit, model_dir, write_figures(fit, model_dir / "figures"),
+                    fit, model_dir, write_figures(fit, model_dir / model_tracking.FIGURES),
                     {"model": name, "split": args.split, "data_sha256": digest,
                      "target_kind": table.target_kind, "seed": args.seed})
             rows.append({"model": name, **fit.metrics, "version": version})

@@ -18,16 +18,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
+
+    from pipeline import tracking
+    from pipeline.background_run import BackgroundRun
+
+    tracking.check_uri()
+    with BackgroundRun("train", _log_and_promote) as mlflow_run:
+        return _train(args, mlflow_run)
+
+
+def _train(args: argparse.Namespace, mlflow_run) -> int:
     from models import registry
     from models.training import fit_model, since_adjustment
     from pipeline import model_tracking, tracking
     from pipeline.commands.common import load_table
     from pipeline.model_report import write_figures
 
-    tracking.check_uri()
     name = args.model or registry.RECOMMENDED
     registry.check_name(name)
     readings, table, floor, truth = load_table(args)
+    mlflow_run.start(f"train {name}")
     print(f"{len(table.y)} backlash points, target {table.target_kind}: {table.reason}",
           file=sys.stderr)
     clock = None
@@ -44,19 +55,30 @@ def run(args: argparse.Namespace) -> int:
             "noise_floor_um": floor, "target_reason": table.reason, "seed": args.seed,
             **({"wear_clock": clock} if clock else {})}
     model_dir = registry.save_model(fit.trained_model(meta), args.out)
-    figures = write_figures(fit, model_dir / "figures")
-    with tracking.run("train", f"train {name}") as active:
-        version = model_tracking.log_fit(fit, model_dir, figures, {
-            "model": name, "split": args.split, "target_kind": table.target_kind,
-            "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
-            "n_test": len(fit.test_index), "data": str(args.data), "data_sha256": digest,
-            "seed": args.seed})
-        champion = model_tracking.promote_if_best(version, digest, fit.metrics["test_rmse_um"])
+    mlflow_run.log(model_tracking.fit_record(fit, model_dir, {
+        "model": name, "split": args.split, "target_kind": table.target_kind,
+        "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
+        "n_test": len(fit.test_index), "data": str(args.data), "data_sha256": digest,
+        "seed": args.seed}))
+    figures = write_figures(fit, model_dir / model_tracking.FIGURES)  # drawn while the model is logged
+    mlflow_run.log({"figures": [str(path) for path in figures]})
+    logged = mlflow_run.finish()
     print_metrics(name, fit.metrics, file=sys.stderr)
-    print(f"model -> {model_dir}/; MLflow run {active.info.run_id}, "
-          f"{model_tracking.REGISTERED_NAME} v{version}{' (champion)' if champion else ''}",
-          file=sys.stderr)
+    print(f"model -> {model_dir}/; MLflow run {logged['run_id']}, "
+          f"{model_tracking.REGISTERED_NAME} v{logged['version']}"
+          f"{' (champion)' if logged['champion'] else ''}", file=sys.stderr)
     return 0
+
+
+def _log_and_promote(record: dict) -> dict:
+    """Inside the MLflow run: log a part of the fit; a model becomes champion if it is best."""
+    from pipeline import model_tracking
+
+    logged = model_tracking.log_record(record)
+    if "version" in logged:
+        logged["champion"] = model_tracking.promote_if_best(
+            logged["version"], record["params"]["data_sha256"], record["metrics"]["test_rmse_um"])
+    return logged
 
 
 def print_metrics(name: str, metrics: dict, file) -> None:

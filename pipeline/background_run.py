@@ -1,0 +1,194 @@
+"""An MLflow run whose slow start overlaps the command's own work.
+
+Importing mlflow and opening its store take about three seconds, longer than reading and
+fitting a typical campaign. ``BackgroundRun`` hands that to a forked child process as the
+command begins; the command computes meanwhile and sends the child what to log as soon as
+each part is ready. Where the process cannot fork safely (no ``os.fork``, mlflow already
+imported, more than one thread, or a caller other than the ``backlash`` program itself), the
+same calls run in-process, in the same order, so both ways log the same run.
+
+Protocol, one JSON line per message on a private pipe (never pickle):
+
+1. the child imports mlflow and the store's modules, touching nothing on disk;
+2. ``start(run_name)``: the input is valid, so the child opens the store and starts the run;
+3. ``log(record)``, any number of times: the child logs ``record`` with the given function;
+4. ``finish()``: the child ends the run and answers with the merged results of the log
+   calls plus ``run_id``, or with the first error it met.
+
+A command that fails before ``start`` leaves no trace in the store; one that fails after it
+leaves a run marked FAILED, as an in-process run would. A child whose parent died sees the
+pipe close and stops the same way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import sys
+import threading
+import traceback
+from collections.abc import Callable
+from typing import Self
+
+from features.readings.errors import InputError
+
+_allowed = False  # set by the ``backlash`` program; library callers and tests stay in-process
+
+
+def allow_fork() -> None:
+    """Let runs started from now on use a child process (called by ``pipeline.cli.program``)."""
+    global _allowed
+    _allowed = True
+
+
+def _can_fork() -> bool:
+    return (_allowed and hasattr(os, "fork") and "mlflow" not in sys.modules
+            and threading.active_count() == 1)
+
+
+class _Aborted(Exception):
+    """The command stopped before it finished the run."""
+
+
+class BackgroundRun:
+    """``with BackgroundRun(experiment, log) as run``: ``run.start(name)``, ``run.log(record)``
+    (``log(record) -> dict`` is called inside the MLflow run), ``result = run.finish()``.
+
+    Create it after importing what both processes use (pandas, which mlflow imports too) and
+    before what only the command uses: the child is forked at once and shares the former.
+    """
+
+    def __init__(self, experiment: str, log: Callable[[dict], dict]):
+        self._experiment, self._log = experiment, log
+        self._pid = self._pipes = None
+        self._started = False
+        self._inline = None  # the in-process run: its context stack and merged results
+        if _can_fork():
+            self._fork()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close(*exc)
+
+    def start(self, run_name: str) -> None:
+        """The input is valid: the store may be opened and the run started."""
+        self._started = True
+        if self._pid is not None:
+            return self._send({"run_name": run_name})
+        from pipeline import tracking
+
+        stack = contextlib.ExitStack()
+        active = stack.enter_context(tracking.run(self._experiment, run_name))
+        self._inline = (stack, {"run_id": active.info.run_id})
+
+    def log(self, record: dict) -> None:
+        """Log ``record`` in the run (in the background: without waiting for it)."""
+        if self._pid is not None:
+            return self._send({"record": record})
+        self._inline[1].update(self._log(record))
+
+    def finish(self) -> dict:
+        """End the run; returns the merged results of the ``log`` calls and ``run_id``."""
+        if self._pid is None:
+            stack, result = self._inline
+            self._inline = None
+            stack.close()
+            return result
+        self._send({"finish": True})
+        reply = self._receive()
+        self.close(None, None, None)
+        if reply is None:
+            raise RuntimeError("the MLflow logging process ended without an answer")
+        if "error" in reply:
+            if reply.get("input"):
+                raise InputError(reply["error"])
+            raise RuntimeError(f"MLflow logging failed:\n{reply['error']}")
+        return reply
+
+    def close(self, *exc) -> None:
+        """Abandon an unfinished run: FAILED if started, else no trace at all."""
+        if self._inline is not None:
+            stack, self._inline = self._inline[0], None
+            stack.__exit__(*(exc or (_Aborted, _Aborted(), None)))
+        if self._pipes is not None:
+            for pipe in self._pipes:
+                pipe.close()  # a started child sees the pipe close and ends the run FAILED
+            self._pipes = None
+        if self._pid is not None and not self._started:
+            os.kill(self._pid, signal.SIGKILL)  # it has only imported: nothing to clean up
+        if self._pid is not None and (exc == (None, None, None) or not self._started):
+            os.waitpid(self._pid, 0)  # do not leave a zombie behind
+        self._pid = None
+
+    def _fork(self) -> None:
+        down_r, down_w = os.pipe()
+        up_r, up_w = os.pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()  # or the child would print the parent's buffered text again
+        pid = os.fork()
+        if pid == 0:
+            os.close(down_w)
+            os.close(up_r)
+            _child(os.fdopen(down_r, "r"), os.fdopen(up_w, "w"), self._experiment, self._log)
+        os.close(down_r)
+        os.close(up_w)
+        self._pid = pid
+        self._pipes = (os.fdopen(down_w, "w"), os.fdopen(up_r, "r"))
+
+    def _send(self, message: dict) -> None:
+        try:
+            self._pipes[0].write(json.dumps(message) + "\n")
+            self._pipes[0].flush()
+        except BrokenPipeError:
+            pass  # the child stopped on an error; ``finish`` reads it
+
+    def _receive(self) -> dict | None:
+        line = self._pipes[1].readline()
+        return json.loads(line) if line else None
+
+
+def _child(inbox, outbox, experiment: str, log) -> None:
+    """Body of the forked child; never returns (``os._exit``), so the parent's ``finally``
+    blocks, atexit handlers and buffered files are never run twice."""
+    code = 0
+    try:
+        reply = _serve(inbox, experiment, log)
+    except _Aborted:
+        reply = None
+    except InputError as err:
+        reply = {"error": err.line(), "input": True}
+    except BaseException:  # noqa: BLE001 - a bug: the parent raises it with this traceback
+        reply, code = {"error": traceback.format_exc()}, 1
+    try:
+        if reply is not None:
+            outbox.write(json.dumps(reply) + "\n")
+            outbox.flush()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(code)
+
+
+def _serve(inbox, experiment: str, log) -> dict:
+    from pipeline import tracking
+
+    tracking.import_store()
+    start = _next(inbox)
+    with tracking.run(experiment, start["run_name"]) as active:
+        result = {"run_id": active.info.run_id}
+        while "finish" not in (message := _next(inbox)):
+            result.update(log(message["record"]))
+    return result
+
+
+def _next(inbox) -> dict:
+    """The next message; ``_Aborted`` when the parent closed the pipe (it failed or died),
+    which ends a started run as FAILED."""
+    line = inbox.readline()
+    if not line:
+        raise _Aborted
+    return json.loads(line)
