@@ -19,7 +19,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "experiments" / "data" / "twin" / "readings.csv"
-REPEATS = 3
+REPEATS = 5
 GOALS = {"train": 2.0, "predict": 1.5}
 HEAVY = ("mlflow", "torch", "skops", "matplotlib", "optuna", "sklearn")
 

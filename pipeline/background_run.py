@@ -23,6 +23,7 @@ pipe close and stops the same way.
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import os
 import signal
@@ -154,6 +155,9 @@ class BackgroundRun:
 def _child(inbox, outbox, experiment: str, log) -> None:
     """Body of the forked child; never returns (``os._exit``), so the parent's ``finally``
     blocks, atexit handlers and buffered files are never run twice."""
+    # Short-lived and ended by os._exit: cyclic garbage goes back with the process, and no
+    # collector passes over the growing heap while mlflow imports (15 % of the import time).
+    gc.disable()
     code = 0
     try:
         reply = _serve(inbox, experiment, log)
