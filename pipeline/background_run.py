@@ -72,8 +72,8 @@ class BackgroundRun:
     def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close(*exc)
+    def __exit__(self, *exc_info) -> None:
+        self.close(*exc_info)
 
     def start(self, run_name: str) -> None:
         """The input is valid: the store may be opened and the run started."""
@@ -101,7 +101,7 @@ class BackgroundRun:
             return result
         self._send({"finish": True})
         reply = self._receive()
-        self.close(None, None, None)
+        self.close()
         if reply is None:
             raise RuntimeError("the MLflow logging process ended without an answer")
         if "error" in reply:
@@ -110,18 +110,19 @@ class BackgroundRun:
             raise RuntimeError(f"MLflow logging failed:\n{reply['error']}")
         return reply
 
-    def close(self, *exc) -> None:
-        """Abandon an unfinished run: FAILED if started, else no trace at all."""
+    def close(self, exc_type=None, exc=None, tb=None) -> None:
+        """End what is open: a run left by an exception ends FAILED (a child sees its pipe
+        close), a child that has not started is stopped, and no child is left behind."""
         if self._inline is not None:
             stack, self._inline = self._inline[0], None
-            stack.__exit__(*(exc or (_Aborted, _Aborted(), None)))
+            stack.__exit__(exc_type, exc, tb)
         if self._pipes is not None:
             for pipe in self._pipes:
-                pipe.close()  # a started child sees the pipe close and ends the run FAILED
+                pipe.close()
             self._pipes = None
         if self._pid is not None and not self._started:
             os.kill(self._pid, signal.SIGKILL)  # it has only imported: nothing to clean up
-        if self._pid is not None and (exc == (None, None, None) or not self._started):
+        if self._pid is not None and (exc_type is None or not self._started):
             os.waitpid(self._pid, 0)  # do not leave a zombie behind
         self._pid = None
 

@@ -56,7 +56,7 @@ def log_record(record: dict) -> dict:
         return {}
     mlflow.log_params(tracking.params(record["params"]))
     mlflow.log_params(tracking.params(record["estimator_params"]))
-    mlflow.log_metrics(tracking.metrics(record["metrics"]))
+    mlflow.log_metrics(record["metrics"])  # finite, with valid names: see fit_record
     for name, values in record["history"].items():
         for epoch, value in enumerate(values):
             if value is not None:

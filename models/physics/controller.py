@@ -171,12 +171,8 @@ def siemens(eec_path, md_path=None) -> Compensation:
                          f"got {len(values)}", file=eec_path)
     nominal = meta["_MIN"] + meta["_STEP"] * np.arange(n)
     error = np.array([values[i] for i in range(n)])
-    backlash = 0.0
-    if md_path is not None:
-        for row, line in enumerate(_text(md_path).splitlines(), start=1):
-            line = line.split(";")[0].strip()
-            if m := re.fullmatch(r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", line):
-                backlash = finite_number(m[1], md_path, row, "MD32450 BACKLASH")
+    backlash = 0.0 if md_path is None else _last_setting(
+        md_path, r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", "MD32450 BACKLASH")
     # the EEC value is the error: the control takes it off the position
     return Compensation(nominal, -error, -error, backlash, "siemens EEC")
 
@@ -228,12 +224,8 @@ def heidenhain(com_path, mp_path=None) -> Compensation:
         raise InputError("no 'NR position error' lines", file=com_path)
     table = np.asarray(rows)
     _ascending(table[:, 0], com_path)
-    backlash = 0.0
-    if mp_path is not None:
-        for row, line in enumerate(_text(mp_path).splitlines(), start=1):
-            line = line.split(";")[0].strip()
-            if m := re.fullmatch(r"MP710\.\d+\s*=\s*(\S+)", line):
-                backlash = finite_number(m[1], mp_path, row, "MP710")
+    backlash = 0.0 if mp_path is None else _last_setting(
+        mp_path, r"MP710\.\d+\s*=\s*(\S+)", "MP710")
     return Compensation(table[:, 0], -table[:, 1], -table[:, 1], backlash, "heidenhain .COM")
 
 
@@ -249,13 +241,27 @@ def grblhal(path) -> Compensation:
 
 
 def _scalar_setting(path, pattern: str, source: str, missing: str) -> Compensation:
-    """The first line ``pattern`` matches whole (after ``;`` comments are cut): its value is
-    the backlash [mm] of a scalar-only controller."""
+    """The first setting ``pattern`` matches is the backlash [mm] of a scalar-only controller."""
+    value = next(_settings(path, pattern, source), None)
+    if value is None:
+        raise InputError(missing, file=path)
+    return Compensation(backlash_mm=value, source=source)
+
+
+def _last_setting(path, pattern: str, what: str) -> float:
+    """The last setting ``pattern`` matches (the control reads its file top to bottom), else 0."""
+    value = 0.0
+    for value in _settings(path, pattern, what):
+        pass
+    return value
+
+
+def _settings(path, pattern: str, what: str):
+    """In file order, the value of each line ``pattern`` matches whole once ``;`` comments are
+    cut (group 1, a finite number)."""
     for row, line in enumerate(_text(path).splitlines(), start=1):
         if m := re.fullmatch(pattern, line.split(";")[0].strip()):
-            return Compensation(backlash_mm=finite_number(m[1], path, row, source),
-                                source=source)
-    raise InputError(missing, file=path)
+            yield finite_number(m[1], path, row, what)
 
 
 def csv_table(path) -> Compensation:
