@@ -5,7 +5,10 @@ modules at top level; heavy libraries (torch, mlflow, sklearn) are imported insi
 Error contract: a user error (``InputError``, or a ``ValueError`` naming a parameter, raised
 anywhere below a subcommand, and every bad option) is printed as one line
 ``backlash COMMAND: error: ...`` with exit code 2, and any output folder the run created is
-removed again. Any other exception is a bug and keeps its traceback.
+removed again. A Python parameter named in an error is shown as the option it maps to (the
+command's ``FLAGS``, else ``--name-with-dashes``). Any other exception is a bug and keeps its
+traceback. Notes the library issues (``BacklashWarning``) are printed as ``note: ...`` after a
+successful command, never before an error line.
 """
 
 from __future__ import annotations
@@ -15,13 +18,11 @@ import gc
 import importlib
 import os
 import sys
+import warnings
 
-from features.readings.errors import InputError
+from features.readings.errors import BacklashWarning, InputError
+from pipeline.commands import NAMES as COMMANDS  # the one command registry
 from pipeline.commands.common import check_outputs, remove_created
-
-# Order is the order shown in --help.
-COMMANDS = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
-            "replicate", "drift", "discover", "hidden-effects", "compensate", "run")
 
 
 class Parser(argparse.ArgumentParser):
@@ -61,11 +62,13 @@ def main(argv: list[str] | None = None) -> int:
         return int(stop.code or 0)
     created = []
     try:
-        created = check_outputs(args.command, args)
-        code = args._run(args)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", BacklashWarning)
+            created = check_outputs(args.command, args)
+            code = args._run(args)
     except (InputError, ValueError) as err:
         remove_created(created)
-        line = err.line() if isinstance(err, InputError) else str(err)
+        line = err.line(_flag_namer(args.command)) if isinstance(err, InputError) else str(err)
         print(f"backlash {args.command}: error: {_one_line(line)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -74,7 +77,26 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `backlash iso --json | head`: the reader left, nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    _show(caught)
     return int(code or 0)
+
+
+def _show(caught: list[warnings.WarningMessage]) -> None:
+    """Notes as ``note: ...`` lines (each once, in order); other warnings as Python shows them."""
+    seen = set()
+    for w in caught:
+        if not issubclass(w.category, BacklashWarning):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        elif str(w.message) not in seen:
+            seen.add(str(w.message))
+            print(f"note: {_one_line(w.message)}", file=sys.stderr)
+
+
+def _flag_namer(command: str):
+    """Python parameter -> the option that sets it: the command's ``FLAGS``, else ``--name``."""
+    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
+    flags = getattr(module, "FLAGS", {})
+    return lambda name: flags.get(name, f"--{name.replace('_', '-')}")
 
 
 def _one_line(text: str) -> str:

@@ -9,15 +9,6 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError
 
-# Outputs each command writes, by argparse dest: a folder, or a file.
-FOLDER, FILE = "folder", "file"
-OUTPUTS = {
-    "convert": {"out": FILE}, "iso": {"plot": FILE}, "predict": {"out": FILE},
-    "simulate": {"out": FOLDER}, "train": {"out": FOLDER}, "compare": {"out": FOLDER},
-    "rank": {"out": FOLDER}, "drift": {"out": FOLDER}, "discover": {"out": FOLDER},
-    "hidden-effects": {"out": FOLDER}, "run": {"out": FOLDER}, "compensate": {"out": FOLDER},
-    "replicate": {"out": FOLDER},
-}
 FORMATS = schema.FORMATS  # the input layouts every --format option offers
 
 
@@ -153,8 +144,11 @@ def check_outputs(command: str, args) -> list[Path]:
     this run will create (removed again if the run ends in a user error)."""
     from features.readings.fileio import check_output
 
+    import importlib
+
+    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
     created = []
-    for dest, kind in OUTPUTS.get(command, {}).items():
+    for dest, kind in getattr(module, "OUTPUTS", {}).items():
         value = getattr(args, dest, None)
         if value is None:
             continue

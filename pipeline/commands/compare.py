@@ -10,6 +10,7 @@ from pathlib import Path
 from pipeline.commands.common import add_data_arguments
 
 HELP = "Train every predictor (network, physics baselines, comparators) on one split; compare."
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
 
 

@@ -10,6 +10,7 @@ from pipeline.commands.common import FORMATS
 
 HELP = ("Write controller compensation files (LinuxCNC, SINUMERIK, Fanuc, Heidenhain, M425, "
         "grblHAL, CSV) from ISO tests or a predictor; --verify re-measures the twin with them.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 CONTROLLER_NAMES = ("linuxcnc", "siemens", "fanuc", "heidenhain", "marlin", "reprap", "grblhal",
                     "csv")
 

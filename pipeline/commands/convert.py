@@ -7,6 +7,7 @@ import argparse
 from pipeline.commands.common import FORMATS
 
 HELP = "Read a readings file (canonical, paper Table 2 or ecmc), validate it, write CSV/Parquet."
+OUTPUTS = {"out": "file"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

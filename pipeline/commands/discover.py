@@ -9,6 +9,7 @@ from pipeline.commands.common import FORMATS
 
 HELP = ("Find where simulation and measurement disagree, name the missing physical effect, "
         "add it and show the gap shrink.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

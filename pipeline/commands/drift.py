@@ -12,6 +12,7 @@ from pipeline.commands.common import FORMATS
 HELP = ("Follow backlash across maintenance visits: robust trend, change points, the date it "
         "crosses a threshold, and (with --model) residual and input drift of a trained model. "
         "Exit 3 when an alert fires.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 ALERT_EXIT = 3
 
 

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 HELP = "Benchmark the missing-effect workflow on twin data in which effects were hidden."
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "hidden_effect_scenarios.toml"
 
 

@@ -8,6 +8,7 @@ import sys
 from pipeline.commands.common import FORMATS
 
 HELP = "ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test."
+OUTPUTS = {"plot": "file"}  # output paths by argparse dest: checked before any work
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
              "E_up", "E_down", "M", "R", "R_up", "R_down", "B", "B_mean")
 PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R_i")

@@ -10,6 +10,7 @@ from pipeline.commands.common import FORMATS
 
 HELP = ("Predict backlash with a trained model directory from new tests or from a plan table "
         "(targets and conditions); write a CSV.")
+OUTPUTS = {"out": "file"}  # output paths by argparse dest: checked before any work
 COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target",
            "backlash_um")
 INTERVAL = ("backlash_low_um", "backlash_high_um")

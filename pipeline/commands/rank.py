@@ -12,6 +12,7 @@ from pipeline.commands.common import FORMATS, parse_features, zero_or_more
 HELP = ("Which inputs drive backlash given the others (driver with its effect in um, proxy, "
         "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
         "permutation importance, mutual information); writes an HTML report.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

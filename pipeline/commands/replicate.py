@@ -9,6 +9,7 @@ from pipeline.commands.common import FORMATS, zero_or_more
 
 HELP = ("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, k-NN "
         "accuracy) on paired tests, with and without the deviation inputs.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -6,6 +6,7 @@ import argparse
 
 HELP = ("Run an experiment file (TOML steps: a command and its options each) and log it to "
         "MLflow.")
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

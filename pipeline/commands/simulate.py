@@ -6,6 +6,7 @@ import argparse
 import sys
 
 HELP = "Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and truth."
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

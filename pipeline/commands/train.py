@@ -8,6 +8,7 @@ import sys
 from pipeline.commands.common import add_data_arguments
 
 HELP = "Train a backlash predictor on paired tests and save it (default: the recommended model)."
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -12,6 +12,7 @@ from pipeline.commands.common import add_data_arguments
 
 HELP = ("Tune the network (hidden sizes, activation, trainer, regularisation) by "
         "cross-validation with Optuna.")
+OUTPUTS = {}
 STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
 _STOP = threading.Event()  # set by a SIGTERM that must wait for the current trial's storage
 

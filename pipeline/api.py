@@ -1,0 +1,41 @@
+"""The public Python API: every job of the product as a function, imported by a short name.
+
+>>> import backlash as bl
+>>> readings = bl.read("test.dat")            # doctest: +SKIP
+>>> figures = bl.iso(readings).figures        # doctest: +SKIP
+
+Each function is the workflow the CLI and experiment files call (``pipeline.workflows``):
+keyword parameters checked on entry, a result object out (frames, figures, notes), nothing
+printed. See ``docs/api.md``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+# Public name -> the workflow module that defines it (imported on first use, so that
+# ``import backlash`` stays light).
+_WHERE = {
+    "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
+    "iso": "iso", "simulate": "simulate",
+    "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
+    "backtest": "compare", "tune": "tune",
+    "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
+    "hidden_effects": "hidden_effects", "compensate": "compensate",
+}
+__all__ = sorted(_WHERE) + ["InputError", "BacklashWarning"]
+
+
+def __getattr__(name: str):
+    if name in ("InputError", "BacklashWarning"):
+        from features.readings import errors
+
+        return getattr(errors, name)
+    if name in _WHERE:
+        module = importlib.import_module(f"pipeline.workflows.{_WHERE[name]}")
+        return getattr(module, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

@@ -1,0 +1,92 @@
+"""Workflows: one function per job, typed keyword parameters in, a result object out.
+
+The CLI (``pipeline.commands``), experiment files (``pipeline.experiment``) and Python users
+(``pipeline.api``) all call these functions. A workflow checks what it is given with
+``check_params`` (scikit-learn's constraint language, the same as the estimators'
+``_parameter_constraints``), never prints (notes are ``BacklashWarning`` or result fields,
+progress goes to the ``progress`` callback) and names Python parameters in its errors.
+"""
+
+from __future__ import annotations
+
+from features.readings.errors import InputError
+
+
+def check_params(constraints: dict, values: dict, caller: str) -> None:
+    """Check keyword values against scikit-learn parameter constraints.
+
+    Parameters
+    ----------
+    constraints : dict
+        Parameter name -> list of constraints (``Interval``, ``StrOptions``, types,
+        ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``.
+    values : dict
+        Parameter name -> value given.
+    caller : str
+        The workflow's name, shown in the message.
+
+    Raises
+    ------
+    InputError
+        Naming the first parameter that breaks its constraint (``.parameter`` is its name).
+    """
+    from sklearn.utils._param_validation import (InvalidParameterError,
+                                                 validate_parameter_constraints)
+
+    for name, value in values.items():
+        if name not in constraints:
+            continue
+        try:
+            validate_parameter_constraints({name: constraints[name]}, {name: value}, caller)
+        except InvalidParameterError as err:
+            raise InputError(_constraint_text(str(err), name), parameter=name) from None
+
+
+def _constraint_text(message: str, name: str) -> str:
+    """scikit-learn says "The 'x' parameter of f must be A. Got B instead."; the error already
+    names the parameter, so keep "must be A; got B"."""
+    head, _, rest = message.partition(" must be ")
+    if not rest:
+        return message
+    expected, _, got = rest.rpartition(". Got ")
+    return f"must be {expected}; got {got.removesuffix(' instead.')}" if got else f"must be {rest}"
+
+
+# --------------------------------------------------------------------------- the registry
+from dataclasses import dataclass  # noqa: E402
+import importlib  # noqa: E402
+
+# Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
+NAMES = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
+         "replicate", "drift", "discover", "hidden-effects", "compensate")
+
+
+@dataclass(frozen=True)
+class Workflow:
+    """One job's record: the CLI command, the experiment runner and the docs read it.
+
+    Attributes
+    ----------
+    name : str
+        The job's name, also its CLI command and an experiment step's ``job``.
+    function : callable
+        ``function(**parameters, progress=None) -> Result``.
+    summary : str
+        One sentence: the command's help and the docs' table of jobs.
+    inputs : tuple of str
+        Parameters that name files or folders to read (an experiment resolves them against
+        its own folder and checks they exist).
+    """
+
+    name: str
+    function: object
+    summary: str
+    inputs: tuple[str, ...] = ()
+
+
+def workflow(name: str) -> Workflow:
+    """The record of job ``name`` (imports its module on first use)."""
+    if name not in NAMES:
+        raise InputError(f"unknown job {name!r}; expected one of {', '.join(NAMES)}",
+                         parameter="name")
+    return importlib.import_module(f"pipeline.workflows.{name.replace('-', '_')}").WORKFLOW
