@@ -14,6 +14,9 @@ from __future__ import annotations
 
 # Input layouts a readings file may have (features.readings.formats reads each one).
 FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
+# Help text of every DATA argument (generated from the format records once they exist).
+DATA_HELP = ("readings file: canonical CSV or Parquet, paper Table-2 CSV, ecmc .dat or "
+             "Renishaw .rtl")
 
 REQUIRED = ("machine_id", "axis", "test_id", "method", "target", "direction", "cycle")
 DEVIATION = "deviation_um"

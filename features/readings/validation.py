@@ -386,3 +386,41 @@ def finite_number(text: str, path, row: int, what: str) -> float:
     if not np.isfinite(value):
         raise InputError(f"{what}: {text!r} is not a finite number", file=path, row=row)
     return value
+
+
+def check_readings(frame, parameter: str = "readings") -> pd.DataFrame:
+    """Check that ``frame`` is a readings frame as ``validate`` returns it; return it.
+
+    A library caller may pass a frame it built or changed by hand; a frame that breaks the
+    contract (a missing column, labels that are not text, a NaN deviation) would give figures
+    named after column headers or NaN, so it is refused here, naming ``parameter``.
+
+    Raises
+    ------
+    TypeError
+        ``frame`` is not a pandas DataFrame.
+    InputError
+        ``frame`` breaks the readings contract (``.parameter`` is ``parameter``).
+    """
+    if not isinstance(frame, pd.DataFrame):
+        raise TypeError(f"{parameter} must be a readings DataFrame (from read) or a file path; "
+                        f"got {type(frame).__name__}")
+    need = (*schema.REQUIRED, schema.DEVIATION, "visit", "repeat")
+    missing = [c for c in need if c not in frame]
+    if missing:
+        raise InputError(f"not a validated readings frame: no column {missing[0]!r}; read or "
+                         f"validate it first", parameter=parameter)
+    if len(frame) == 0:
+        raise InputError("holds no readings", parameter=parameter)
+    for col in ("machine_id", "axis", "test_id", "visit"):
+        if not frame[col].map(type).eq(str).all():
+            raise InputError(f"not a validated readings frame: column {col!r} holds non-text "
+                             f"labels; read or validate it first", parameter=parameter)
+    bad = ~frame["method"].isin(schema.METHODS) | ~frame["direction"].isin(schema.DIRECTIONS)
+    numbers = frame[["target", schema.DEVIATION]].apply(pd.to_numeric, errors="coerce")
+    bad |= ~np.isfinite(numbers.to_numpy(dtype=float)).all(axis=1)
+    if bad.any():
+        raise InputError(f"not a validated readings frame: row {int(np.flatnonzero(bad)[0])} "
+                         f"has a method, direction, target or deviation outside the contract; "
+                         f"read or validate it first", parameter=parameter)
+    return frame

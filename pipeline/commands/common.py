@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shutil
+import sys
 from pathlib import Path
 
 from features.readings import schema
@@ -156,6 +158,27 @@ def check_outputs(command: str, args) -> list[Path]:
         if root is not None:
             created.append(root)
     return created
+
+
+@contextlib.contextmanager
+def progress_bar(what: str = ""):
+    """A ``progress(done, total, what)`` callback drawing a tqdm bar on stderr (only when
+    stderr is a terminal: logs and pipes stay clean)."""
+    from tqdm import tqdm
+
+    bar = tqdm(desc=what, disable=not sys.stderr.isatty(), leave=False, file=sys.stderr)
+
+    def progress(done: int, total: int, step: str = "") -> None:
+        if total and bar.total != total:
+            bar.total = total
+        if step:
+            bar.set_postfix_str(step, refresh=False)
+        bar.update(done - bar.n)
+
+    try:
+        yield progress
+    finally:
+        bar.close()
 
 
 def remove_created(folders: list[Path]) -> None:

@@ -52,6 +52,20 @@ def _constraint_text(message: str, name: str) -> str:
     return f"must be {expected}; got {got.removesuffix(' instead.')}" if got else f"must be {rest}"
 
 
+def readings_of(data, format: str = "auto", parameter: str = "data"):
+    """The validated readings frame a workflow works on: ``data`` is a readings file path
+    (read in ``format``) or a frame as ``read`` returns it (checked, not re-read)."""
+    import os
+
+    if isinstance(data, (str, os.PathLike)):
+        from features.readings.io import read_readings
+
+        return read_readings(data, format)
+    from features.readings.validation import check_readings
+
+    return check_readings(data, parameter)
+
+
 # --------------------------------------------------------------------------- the registry
 from dataclasses import dataclass  # noqa: E402
 import importlib  # noqa: E402
