@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 export MLFLOW_DISABLE_TELEMETRY := true
 export MPLBACKEND := Agg
 
-.PHONY: demo test bench lint install clean
+.PHONY: demo test bench lint docs install clean
 
 install: $(STAMP)
 
@@ -28,8 +28,12 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench
 
+# The manual in docs/, built strictly (a broken link or a stale API name fails the build).
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict -d site
+
 lint: $(STAMP)
 	$(BIN)/ruff check pipeline features models experiments tests bench
 
 clean:
-	rm -rf $(VENV) mlruns mlflow.db mlflow.db.lock mlartifacts .pytest_cache
+	rm -rf $(VENV) site mlruns mlflow.db mlflow.db.lock mlartifacts .pytest_cache

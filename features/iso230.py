@@ -1,6 +1,6 @@
 """ISO 230-2 statistics of positioning tests, vectorised over many tests at once.
 
-Definitions (ISO 230-2:2014, clause 2; seed 000, eqs. 1-9). For a test, target P_i, cycle j
+Definitions (ISO 230-2:2014, clause 2; [Mechta2022], eqs. 1-9). For a test, target P_i, cycle j
 and approach direction (up = ``+``, down = ``-``), the deviation is x_ij = measured - target.
 
 Per target, per direction (n readings):
@@ -35,6 +35,8 @@ import pandas as pd
 from scipy.special import gammaincinv  # scipy.special, not scipy.stats: seconds less to import
 
 from features.readings import schema
+from features.readings.errors import InputError
+from features.readings.validation import check_readings
 
 PER_TARGET_FIGURES = ("n_up", "n_down", "mean_up", "mean_down", "mean_bi", "s_up", "s_down",
                       "B_i", "R_up_i", "R_down_i", "R_i")
@@ -46,6 +48,8 @@ TEST_COLUMNS = ("method", "repeat", "feed_mm_min", "dwell_s", "started_at", "ope
 ENVIRONMENT = ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct")
 # A reading is an outlier when it lies this many scale units from the median of its siblings.
 OUTLIER_THRESHOLD = 8.0
+# The readings columns the figures use (checked on entry: a hand-made frame must have them).
+USED = (*schema.TEST_KEYS, "target", "direction", "deviation_um")
 
 
 def _test_index(readings: pd.DataFrame) -> np.ndarray:
@@ -65,13 +69,25 @@ def per_target(readings: pd.DataFrame) -> pd.DataFrame:
 
     Parameters
     ----------
-    readings : validated readings table (``features.readings.read_readings``)
+    readings : DataFrame
+        Validated readings (``features.readings.read_readings``); deviations in um (arcsec
+        for rotary axes).
 
     Returns
     -------
-    DataFrame with ``TEST_KEYS``, ``unit``, carried test columns, ``target`` and
-    ``PER_TARGET_FIGURES`` [um or arcsec], plus environment means when present.
+    DataFrame
+        ``TEST_KEYS``, ``unit``, carried test columns, ``target`` and ``PER_TARGET_FIGURES``
+        [um or arcsec], plus environment means when present.
+
+    Raises
+    ------
+    InputError
+        ``readings`` is not a validated readings frame (``.parameter`` is ``"readings"``).
     """
+    return _per_target(check_readings(readings, columns=USED))
+
+
+def _per_target(readings: pd.DataFrame) -> pd.DataFrame:
     test = _test_index(readings)
     up = (readings["direction"] == "+").to_numpy()
     x = readings["deviation_um"].to_numpy(float)
@@ -105,9 +121,32 @@ def per_target(readings: pd.DataFrame) -> pd.DataFrame:
 def axis_figures(readings: pd.DataFrame, targets: pd.DataFrame | None = None) -> pd.DataFrame:
     """Axis figures A, A_up, A_down, E, E_up, E_down, M, R, R_up, R_down, B, B_mean per test.
 
-    ``targets`` may pass an already computed ``per_target(readings)`` to avoid recomputing it.
+    Parameters
+    ----------
+    readings : DataFrame
+        Validated readings (``features.readings.read_readings``).
+    targets : DataFrame, optional
+        ``per_target(readings)`` when already computed (saves computing it again).
+
+    Returns
+    -------
+    DataFrame
+        One row per test: ``TEST_KEYS``, ``unit``, carried test columns, environment means
+        and ``AXIS_FIGURES`` [um or arcsec].
+
+    Raises
+    ------
+    InputError
+        ``readings`` is not a validated readings frame, or ``targets`` lacks per-target
+        figures (``.parameter`` names which).
     """
-    targets = per_target(readings) if targets is None else targets
+    readings = check_readings(readings, columns=USED)
+    if targets is None:
+        targets = _per_target(readings)
+    elif not isinstance(targets, pd.DataFrame) or not {
+            *schema.TEST_KEYS, *PER_TARGET_FIGURES} <= set(targets.columns):
+        raise InputError("expected the per-target figures of the readings (per_target)",
+                         parameter="targets")
     group = targets.groupby(list(schema.TEST_KEYS), sort=False)
     t = targets.assign(
         hi_up=targets["mean_up"] + 2 * targets["s_up"], lo_up=targets["mean_up"] - 2 * targets["s_up"],
@@ -145,8 +184,10 @@ def outliers(readings: pd.DataFrame, threshold: float = OUTLIER_THRESHOLD) -> pd
     that it is unbiased for a normal reading noise.
     The test-wide floor keeps a sibling group that agrees to the last digit from flagging
     ordinary noise; leaving the reading out keeps it from hiding itself (n is only ~5).
-    Returns a boolean Series aligned with ``readings``; nothing is dropped.
+    Returns a boolean Series aligned with ``readings``; nothing is dropped. Raises
+    ``InputError`` (``.parameter`` ``"readings"``) for a frame that is not validated readings.
     """
+    readings = check_readings(readings, columns=USED)
     test = _test_index(readings)
     group = pd.Series(0, index=readings.index).groupby(
         [test, readings["target"].to_numpy(), readings["direction"].to_numpy()], sort=False)

@@ -6,7 +6,7 @@ at a predictor's use of it), so an input that merely moves with a driver over th
 behind a larger one. Which inputs *drive* backlash, given the others, is decided in
 ``models.influence`` from the effect records; this module gives the paper's views beside it.
 
-The backlash paper (seed 004, section 5) ranks its eight inputs with a distance-weighted
+The backlash paper [BacklashNN], section 5 ranks its eight inputs with a distance-weighted
 k-nearest-neighbour classifier on backlash classes (validation accuracy 98.8 %) and a one-way
 ANOVA F-test per input, scored as -ln(p) (Fig. 14, Table 5). This module reproduces both and
 adds two checks that see what a comparison of class means cannot:
@@ -46,9 +46,9 @@ non-driver (pressure) can rank first, while permutation and MI put position on t
 mean of ranks is not enough either (position last by ANOVA, first by MI averages to the
 middle, behind noise inputs that sit mid-table everywhere); hence influence first.
 
-An input that was constant within each visit but differed between visits (within-visit
-share of its variance below 1 %) cannot be told apart from the visit itself: it is reported
-as a proxy for the visit, whatever its score.
+An input that varied (almost) only between visits (within-visit share of its variance below
+``features.statistics.MIN_LEVEL_SHARE``, 10 %) cannot be told apart from the visit itself: it
+is reported as a proxy for the visit, whatever its score.
 """
 
 from __future__ import annotations
@@ -61,13 +61,15 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.statistics import MIN_LEVEL_SHARE, within_share
 
 N_NEIGHBORS = 5
 N_BINS = 4
 N_SPLITS = 5
 ANOVA_ALPHA = 1e-3            # p below this: the ANOVA sees the input
 PERMUTATION_FLOOR = 0.02      # share of the strongest input's permutation importance
-PROXY_WITHIN_SHARE = 0.01     # within-visit share of variance below this: proxy for the visit
+# within-visit share of variance below this: proxy for the visit (the reason is given there)
+PROXY_WITHIN_SHARE = MIN_LEVEL_SHARE
 RANK_BY = ("consensus", "anova")
 
 # Names of the paper's Table 5 for the feature-table columns.
@@ -162,7 +164,8 @@ def check_inputs(X: pd.DataFrame, y, n_neighbors: int = N_NEIGHBORS,
                          "backlash value", file=source, column="backlash_um")
     if len(X) <= n_neighbors:
         raise InputError(f"only {len(X)} points but k = {n_neighbors} neighbours: k-NN needs "
-                         "more points than k (use a smaller --k or more data)", file=source)
+                         "more points than k; give a smaller k or more data", file=source,
+                         parameter="k")
 
 
 def backlash_classes(y_um, bins=N_BINS, source: str = "features"):
@@ -186,7 +189,8 @@ def backlash_classes(y_um, bins=N_BINS, source: str = "features"):
     y = np.asarray(y_um, dtype=float)
     if np.ndim(bins) == 0:
         if int(bins) < 2:
-            raise InputError(f"--bins must be at least 2, got {bins}", file=source)
+            raise InputError(f"must be at least 2 classes; got {bins}", file=source,
+                             parameter="bins")
         cuts = np.unique(np.quantile(y, np.linspace(0, 1, int(bins) + 1))[1:-1])
     else:
         cuts = np.unique(np.asarray(bins, dtype=float))
@@ -195,24 +199,21 @@ def backlash_classes(y_um, bins=N_BINS, source: str = "features"):
     if used.size < 2:
         raise InputError(f"all {len(y)} points fall into one backlash class "
                          f"({y.min():.3g}-{y.max():.3g} um): a ranking needs backlash that "
-                         "varies (check the data or the --bins boundaries)", file=source,
-                         column="backlash_um")
+                         "varies (check the data or the class boundaries)", file=source,
+                         column="backlash_um", parameter="bins")
     inner = cuts[used[1:] - 1]
     return classes, np.concatenate([[y.min()], inner, [y.max()]])
 
 
 def within_visit_share(X: pd.DataFrame, groups) -> pd.Series:
-    """Share of each input's variance found within visits: SS_within / SS_total.
+    """Share of each input's variance found within visits: SS_within / SS_total
+    (``features.statistics.within_share``).
 
     Near 0: the input was constant within each visit and only differs between them.
     NaN when there is a single visit or the input does not vary.
     """
-    groups = pd.Series(np.asarray(groups), index=X.index)
-    if groups.nunique() < 2:
-        return pd.Series(np.nan, index=X.columns)
-    centred = X - X.groupby(groups).transform("mean")
-    total = ((X - X.mean()) ** 2).sum()
-    return ((centred ** 2).sum() / total.where(total > 0)).rename("within_visit_share")
+    share = within_share(X.to_numpy(float), np.asarray(groups))
+    return pd.Series(share, index=X.columns, name="within_visit_share")
 
 
 # --- the four views -------------------------------------------------------------------------
@@ -311,13 +312,13 @@ def knn_scores(X: pd.DataFrame, classes, edges_um, n_neighbors: int = N_NEIGHBOR
     if folds < 2:
         raise InputError(f"backlash class {edges_um[counts.argmin()]:.3g}-"
                          f"{edges_um[counts.argmin() + 1]:.3g} um holds a single point; "
-                         "cross-validation needs two per class (use fewer --bins)",
-                         file=source, column="backlash_um")
+                         "cross-validation needs two per class; give fewer classes",
+                         file=source, column="backlash_um", parameter="bins")
     smallest_train = len(classes) - int(np.ceil(len(classes) / folds))
     if smallest_train < n_neighbors:
         raise InputError(f"a training fold holds {smallest_train} points, fewer than "
-                         f"k = {n_neighbors} neighbours (use a smaller --k or more data)",
-                         file=source)
+                         f"k = {n_neighbors} neighbours; give a smaller k or more data",
+                         file=source, parameter="k")
     splits = list(StratifiedKFold(folds, shuffle=True, random_state=random_state)
                   .split(X, classes))
     values = X.to_numpy(dtype=float)

@@ -1,7 +1,7 @@
 """Feature table: the backlash paper's Table 2 inputs per paired interior point, plus target.
 
 One row per backlash point (``features.targets.backlash_targets``): the pair of tests
-(``features.readings.schema.PAIR_KEYS``) and the target position. Inputs, as in the paper (seed 004,
+(``features.readings.schema.PAIR_KEYS``) and the target position. Inputs, as in the paper ([BacklashNN],
 section 4, Table 2 and Fig. 9):
 
 ==================  ====================================================================
@@ -29,14 +29,13 @@ would add from a linear test and its conditions.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from features.readings import schema
-from features.readings.errors import InputError
+from features.readings.errors import InputError, note
 
 PAPER_FEATURES = ("target", "deviation_down_um", "deviation_up_um", "feed_mm_min",
                   "machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct")
@@ -70,7 +69,7 @@ def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:
     missing = [f for f in PAPER_FEATURES if f not in names]
     if missing:
         why = " (ISO target: the reversal value is their difference)" if kind == "iso" else ""
-        print(f"note: inputs without {', '.join(missing)}{why}", file=sys.stderr)
+        note(f"inputs without {', '.join(missing)}{why}")
     return names
 
 
@@ -101,13 +100,12 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
     if unknown:
         raise InputError(f"unknown feature {unknown[0]!r}; available: "
                          f"{', '.join(c for c in table.columns if c in _candidates(table))}",
-                         file=source)
+                         file=source, parameter="features")
     table = table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
     if not features:
         constant = [n for n in names if table[n].nunique(dropna=False) < 2]
         if constant:
-            print(f"note: {', '.join(constant)} constant over all points; left out",
-                  file=sys.stderr)
+            note(f"{', '.join(constant)} constant over all points; left out")
             names = [n for n in names if n not in constant]
     meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction") if c in table]
     return FeatureTable(table[names].astype(float), table["backlash_um"].astype(float),
@@ -131,7 +129,7 @@ def prediction_inputs(readings: pd.DataFrame, features: list[str]) -> pd.DataFra
         raise InputError(f"the model needs input {missing[0]!r}, which the readings lack",
                          file=source, column=missing[0])
     table = inputs[list(dict.fromkeys([*POINT_KEYS, *features]))]
-    check_features(table[features], source, allow_constant=True)
+    check_features(table[features], source, allow_constant=True, parameter=None)
     return table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
 
 
@@ -164,24 +162,25 @@ def point_inputs(readings: pd.DataFrame, methods: tuple[str, ...] | None = None)
     return inputs.reset_index()
 
 
-def check_features(X: pd.DataFrame, source: str = "features",
-                   allow_constant: bool = False) -> None:
+def check_features(X: pd.DataFrame, source: str = "features", allow_constant: bool = False,
+                   parameter: str | None = "features") -> None:
     """Refuse inputs a network cannot learn from: NaN values and (for training) constant
-    columns."""
+    columns. ``parameter`` names the caller's parameter that chose the inputs (None when the
+    inputs are a fitted model's, not the caller's choice)."""
     if X.empty:
         raise InputError("no backlash points: nothing to train on", file=source)
+    remedy = " (leave it out of the features)" if parameter else ""
     nan = X.isna()
     if nan.any().any():
         col = nan.any().idxmax()
         row = int(np.flatnonzero(nan[col].to_numpy())[0])
         raise InputError(f"NaN in feature at point {row + 1} of the feature table; every input "
-                         "needs a value (drop the feature with --features)", file=source,
-                         column=col)
+                         f"needs a value{remedy}", file=source, column=col, parameter=parameter)
     constant = [] if allow_constant else [c for c in X.columns if X[c].nunique() < 2]
     if constant:
         raise InputError(f"feature is constant ({X[constant[0]].iloc[0]:g}) over all points; "
-                         "it carries no information (drop it with --features)", file=source,
-                         column=constant[0])
+                         f"it carries no information{remedy}", file=source,
+                         column=constant[0], parameter=parameter)
 
 
 def _candidates(table: pd.DataFrame) -> list[str]:

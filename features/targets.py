@@ -2,7 +2,7 @@
 
 Two definitions, one row per backlash point (``PAIR_KEYS`` + ``target``):
 
-- ``paper`` (seed 004, section 2.2.2): for a linear and a pendulum test that are paired
+- ``paper`` ([BacklashNN], section 2.2.2): for a linear and a pendulum test that are paired
   (same machine, axis, visit, feed, dwell and repeat), per direction d
   ``z_d = mean_pendulum_d - mean_linear_d`` and ``backlash_um = |z_down - z_up|``, interior
   targets only. With a direct measuring system (linear scale) the linear cycle hides lost motion
@@ -39,7 +39,8 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto") -> pd.DataFrame
     """Backlash per point: ``POINT_KEYS``, ``backlash_um``, ``backlash_u_um``, ``started_at``,
     and ``z_up_um``/``z_down_um`` for the paper definition."""
     if kind not in KINDS:
-        raise InputError(f"unknown target {kind!r}; expected one of {', '.join(KINDS)}")
+        raise InputError(f"unknown target {kind!r}; expected one of {', '.join(KINDS)}",
+                         parameter="kind")
     source = readings.attrs.get("source", "readings")
     stats = _with_pair_keys(iso230.per_target(readings))
     stats["interior"] = _interior(stats)
@@ -133,7 +134,7 @@ def _check_pairs(linear: pd.DataFrame, pendulum: pd.DataFrame, source: str) -> N
             raise InputError(f"unpaired {name} test {alone.iloc[0]!r}: no "
                              f"{'pendulum' if name == 'linear' else 'linear'} test with the same "
                              "machine_id, axis, visit, feed_mm_min, dwell_s and repeat (the paper "
-                             "target needs both; --target iso uses the reversal value instead)",
+                             "target needs both; the iso target uses the reversal value instead)",
                              file=source, column="test_id")
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from features.readings.errors import InputError
+from features.readings.errors import InputError, Progress, report
 from features.table import FeatureTable
 from models import evaluation, registry
 from models.wear_map import found_adjustments, latest_epoch
@@ -55,11 +55,12 @@ def persistence(table: FeatureTable, train: np.ndarray, test: np.ndarray) -> np.
 
 
 def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None = None,
-             random_state: int = 0, min_train_visits: int = 2, progress=None,
+             random_state: int = 0, min_train_visits: int = 2,
+             progress: Progress | None = None,
              visits: pd.DataFrame | None = None) -> pd.DataFrame:
     """One row per predictor and origin: ``model, origin, forecast_visit, n_train, n_test,
     rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and ``coverage_pct`` /
-    ``truth_coverage_pct`` where known. ``progress`` wraps the origin loop (e.g. tqdm).
+    ``truth_coverage_pct`` where known. ``progress(done, total, what)`` hears of each origin.
     ``visits``: the per-visit backlash (``features.visits.visit_backlash``) whose downward
     change points up to each origin also restart the wear clock."""
     meta = table.meta
@@ -71,7 +72,8 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
     visit_rank = dict(zip(meta["visit"].astype(str), rank, strict=True))
     rows = []
     steps = origins(table, min_train_visits)
-    for k in (progress(steps) if progress else steps):
+    for i, k in enumerate(steps):
+        report(progress, i, len(steps), f"origin {k}")
         upto = rank <= k + 1
         adjustments = None
         if visits is not None:  # change points from the visits up to the origin only
@@ -101,6 +103,7 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
                     row["truth_coverage_pct"] = float(100 * np.mean(
                         (low <= true[test]) & (true[test] <= high)))
             rows.append(row)
+    report(progress, len(steps), len(steps), "origins")
     if not rows:
         raise InputError("no origin to backtest: every forecast visit follows an adjustment or "
                          "has too few visits before it", file=meta.attrs.get("source", "data"))

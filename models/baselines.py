@@ -9,31 +9,38 @@ scikit-learn's estimator checks on random unnamed arrays see — declared with t
 training step refuses a feature set without them.
 
 - ``ConstantBacklash``: one lost-motion value, the mean of the training targets — what a CNC
-  control's scalar backlash compensation assumes (seed 004, section 2.2.2).
+  control's scalar backlash compensation assumes ([BacklashNN], section 2.2.2).
 - ``LinearInTemperature``: b = b_20 + k (T_machine - 20 degC): preload change with the screw's
   temperature (``backlash_temperature``).
 - ``BezierPosition`` (degree 4) and ``BSplinePosition`` (degree 2, uniform clamped knots), five
   control points each, least squares over the position normalised to [0, 1] on the training
-  range — the intra-axis error models of seed 000 (eqs. 18 and 20), here for the backlash profile.
+  range — the intra-axis error models of [Mechta2022] (eqs. 18 and 20), here for the backlash profile.
 - (the effect-model baseline, built from the effect records, is in ``models.effect_model``)
 - ``PhysicsHybrid``: a physics baseline plus any regressor fitted on its residual.
 """
 
 from __future__ import annotations
 
-import json
+from numbers import Integral
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
-from scipy.interpolate import BSpline
 from scipy.special import comb
-from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context, clone
+from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.errors import InputError
-from features.readings.fileio import write_json
-from models.persistence import load_estimator, save_estimator
+from features.statistics import bspline_basis
+from models.persistence import (
+    load_estimator,
+    read_state,
+    restore_inputs,
+    save_estimator,
+    write_state,
+)
 from models.physics.effects import REFERENCE_TEMP_C
 
 HYBRID_FILE = "hybrid.json"
@@ -76,9 +83,12 @@ class _BaselineTags:
 class ConstantBacklash(_BaselineTags, RegressorMixin, BaseEstimator):
     """Constant lost motion b [um]: the training mean."""
 
+    _parameter_constraints: ClassVar[dict] = {}
+
     def required_inputs(self) -> tuple[str, ...]:
         return ()
 
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         X, y = validate_data(self, X, y, y_numeric=True)
         self.backlash_um_ = float(np.mean(y))
@@ -106,6 +116,8 @@ class LinearInTemperature(_BaselineTags, RegressorMixin, BaseEstimator):
         Column of the temperature input; None when the inputs do not name it (slope 0).
     """
 
+    _parameter_constraints: ClassVar[dict] = {"temperature": [str], "features": [None, "array-like"]}
+
     def __init__(self, temperature: str = "machine_temp_c", features=None):
         self.temperature = temperature
         self.features = features
@@ -119,6 +131,7 @@ class LinearInTemperature(_BaselineTags, RegressorMixin, BaseEstimator):
         return np.column_stack([np.ones(len(X)),
                                 X[:, self.temperature_column_] - REFERENCE_TEMP_C])
 
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         self.temperature_column_ = column_of(self, self.temperature, X.shape[1])
@@ -152,6 +165,7 @@ class _PositionCurve(_BaselineTags, RegressorMixin, BaseEstimator):
         x = self._x(X)
         return np.clip((x - self.range_[0]) / (self.range_[1] - self.range_[0]), 0.0, 1.0)
 
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         self.position_column_ = column_of(self, self.position, X.shape[1])
@@ -168,9 +182,12 @@ class _PositionCurve(_BaselineTags, RegressorMixin, BaseEstimator):
 
 
 class BezierPosition(_PositionCurve):
-    """Bezier curve of degree n over position (seed 000, eq. 3): B(t) = sum_i C(n,i) t^i
+    """Bezier curve of degree n over position ([Mechta2022], eq. 3): B(t) = sum_i C(n,i) t^i
     (1-t)^(n-i) P_i with n + 1 control points P_i [um]; default degree 4 (five points).
     ``features`` names a numpy input's columns."""
+
+    _parameter_constraints: ClassVar[dict] = {"degree": [Interval(Integral, 1, None, closed="left")],
+                                    "features": [None, "array-like"]}
 
     def __init__(self, degree: int = 4, features=None):
         self.degree = degree
@@ -182,9 +199,14 @@ class BezierPosition(_PositionCurve):
 
 
 class BSplinePosition(_PositionCurve):
-    """B-spline of degree k over position (seed 000, eq. 4) on a uniform clamped knot vector
-    with ``n_control`` control points [um]; default degree 2, five points. ``features`` names
+    """B-spline of degree k over position ([Mechta2022], eq. 4) on a uniform clamped knot vector
+    with ``n_control`` control points [um]; default degree 2, five points (the degree is at
+    most ``n_control - 1``). ``features`` names
     a numpy input's columns."""
+
+    _parameter_constraints: ClassVar[dict] = {"degree": [Interval(Integral, 0, None, closed="left")],
+                                    "n_control": [Interval(Integral, 1, None, closed="left")],
+                                    "features": [None, "array-like"]}
 
     def __init__(self, degree: int = 2, n_control: int = 5, features=None):
         self.degree = degree
@@ -192,9 +214,7 @@ class BSplinePosition(_PositionCurve):
         self.features = features
 
     def basis(self, t: np.ndarray) -> np.ndarray:
-        inner = np.linspace(0, 1, self.n_control - self.degree + 1)
-        knots = np.r_[[0.0] * self.degree, inner, [1.0] * self.degree]
-        return BSpline.design_matrix(t, knots, self.degree).toarray()
+        return bspline_basis(t, self.n_control, self.degree)
 
 
 class PhysicsHybrid(RegressorMixin, BaseEstimator):
@@ -204,6 +224,10 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
     numpy input), so a physics part finds its named inputs either way. Saved as
     ``hybrid.json`` plus one file or folder per part (``models.persistence``).
     """
+
+    _parameter_constraints: ClassVar[dict] = {"physics": [HasMethods(["fit", "predict"])],
+                                    "residual": [HasMethods(["fit", "predict"])],
+                                    "features": [None, "array-like"]}
 
     def __init__(self, physics=None, residual=None, features=None):
         self.physics = physics
@@ -220,9 +244,8 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
         names = input_names(self, X.shape[1])
         return X if None in names else pd.DataFrame(X, columns=names)
 
+    @_fit_context(prefer_skip_nested_validation=False)
     def fit(self, X, y):
-        if self.physics is None or self.residual is None:
-            raise ValueError("physics and residual must both be estimators")
         X, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         X = self._named(X)
         self.physics_ = clone(self.physics).fit(X, y)
@@ -240,31 +263,22 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
         directory = Path(directory)
         parts = {"physics": save_estimator(self.physics_, directory, "physics"),
                  "residual": save_estimator(self.residual_, directory, "residual")}
-        return write_json(directory / HYBRID_FILE, {
-            **parts, "features": None if self.features is None else list(self.features),
-            "n_features_in": int(self.n_features_in_),
-            "feature_names_in": [str(c) for c in getattr(self, "feature_names_in_", [])]})
+        return write_state(directory / HYBRID_FILE, self, {
+            **parts, "features": None if self.features is None else list(self.features)})
 
     @classmethod
     def load(cls, directory, template: PhysicsHybrid) -> PhysicsHybrid:
         """Read ``save``'s folder; each part must be of the class ``template`` has there."""
         path = Path(directory) / HYBRID_FILE
-        try:
-            saved = json.loads(path.read_text(encoding="utf-8"))
-            n_features = int(saved["n_features_in"])
-            names = [str(c) for c in saved["feature_names_in"]]
-            features = saved["features"]
-            parts = {k: saved[k] for k in ("physics", "residual")}
-        except FileNotFoundError:
-            raise InputError("hybrid model folder has no hybrid.json", file=path) from None
-        except (ValueError, KeyError, TypeError) as err:
-            raise InputError(f"broken hybrid.json: {err}", file=path) from None
-        fitted = {k: load_estimator(directory, parts[k], getattr(template, k), where=path)
-                  for k in parts}
+        saved = read_state(path, ("physics", "residual", "features"))
+        features = saved["features"]
+        if features is not None and (not isinstance(features, list)
+                                     or not all(isinstance(f, str) for f in features)):
+            raise InputError(f"broken {HYBRID_FILE}: features must list the input names",
+                             file=path)
+        fitted = {k: load_estimator(directory, saved[k], getattr(template, k), where=path)
+                  for k in ("physics", "residual")}
         model = cls(physics=clone(fitted["physics"]), residual=clone(fitted["residual"]),
                     features=None if features is None else tuple(features))
         model.physics_, model.residual_ = fitted["physics"], fitted["residual"]
-        model.n_features_in_ = n_features
-        if names:
-            model.feature_names_in_ = np.asarray(names, dtype=object)
-        return model
+        return restore_inputs(model, saved)

@@ -1,8 +1,8 @@
 """Benchmark of the discovery workflow: scenarios in which effects are hidden from the
 baseline, nulls in which nothing is, and designs that cannot tell effects apart.
 
-Scenarios are data (``experiments/hidden_effect_scenarios.toml``, read by the pipeline): a
-specification names the baseline, the truth every scenario carries, the hidden effects and
+Scenarios are data (``experiments/hidden_effect_scenarios.toml``, read by ``read_scenarios``
+into a ``Scenarios``): a specification names the baseline, the truth every scenario carries, the hidden effects and
 their parameters, the designs (plan, measuring system, noise, environment, which effects each
 hides, nulls) and special scenarios (confounded, aliased, several effects at once).
 ``expand`` turns it into scenario dicts; ``run`` generates readings for each (the twin by
@@ -17,62 +17,142 @@ that was not hidden); on nulls ``false name`` for any name.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import pandas as pd
 
+from features.readings.config import from_table, read_config
 from features.readings.errors import InputError
 from models.discovery import DEFAULT_BASELINE, discover
 from models.physics import effects
 
 KINDS = ("hidden", "null", "confounded", "aliased")
+Effects = dict[str, dict[str, float]]  # effect name -> its parameters
 
 
-def expand(spec: dict, seeds=None) -> list[dict]:
-    """Scenario dicts from a specification (see the module docstring); ``seeds`` overrides the
-    specification's seeds."""
-    seeds = list(seeds if seeds is not None else spec.get("seeds", [1]))
-    designs = spec.get("designs", {})
-    hidden_params = spec.get("hidden", {})
-    for name in hidden_params:
-        _check_effect(name, "hidden")
+@dataclass
+class Design:
+    """How a test was run: measuring system, noise [um], plan and environment (overrides of the
+    twin's campaign tables), which effects it hides (``"all"``: every ``[hidden]`` one), null
+    scenarios per seed and effect parameters of this design."""
+
+    system: Literal["indirect", "direct"] = "indirect"
+    noise_um: float = 0.3
+    hidden: list[str] | Literal["all"] = "all"
+    nulls: int = 1
+    plan: dict = field(default_factory=dict)
+    environment: dict = field(default_factory=dict)
+    params: Effects = field(default_factory=dict)
+
+
+@dataclass
+class Special:
+    """A scenario of its own on a design: several hidden effects, a confounded or aliased
+    design (its ``plan``, ``environment``, ``system`` and ``noise_um`` override the design's)."""
+
+    name: str
+    design: str
+    kind: Literal["hidden", "null", "confounded", "aliased"] = "hidden"
+    hidden: list[str] = field(default_factory=list)
+    seeds: list[int] | None = None
+    plan: dict = field(default_factory=dict)
+    environment: dict = field(default_factory=dict)
+    system: Literal["indirect", "direct"] | None = None
+    noise_um: float | None = None
+    params: Effects = field(default_factory=dict)
+
+
+@dataclass
+class Scenarios:
+    """A benchmark specification (``experiments/hidden_effect_scenarios.toml``)."""
+
+    designs: dict[str, Design] = field(default_factory=dict)
+    baseline: list[str] = field(default_factory=lambda: list(DEFAULT_BASELINE))
+    seeds: list[int] = field(default_factory=lambda: [1])
+    resolution_um: float = 0.1
+    truth: Effects = field(default_factory=dict)
+    hidden: Effects = field(default_factory=dict)
+    special: list[Special] = field(default_factory=list)
+
+    def check(self, file) -> None:
+        """Known effects and designs, plans and environments the twin can run."""
+        _check(self, file)
+
+
+def read_scenarios(source) -> Scenarios:
+    """A benchmark specification from a TOML file or a dict of the same shape; unknown keys,
+    effects and designs are one ``InputError`` naming the file and the key."""
+    if isinstance(source, Scenarios):
+        return source
+    return read_config(source, Scenarios, what="scenarios")
+
+
+def _check(spec: Scenarios, file) -> None:
+    from models.physics.campaign import Environment, Plan
+
+    def known(names, column):
+        for name in names:
+            if name not in effects.RECORDS:
+                raise InputError(f"unknown effect {name!r}; expected one of "
+                                 f"{', '.join(effects.RECORDS)}", file=file, column=column)
+
+    if not spec.designs:
+        raise InputError("no [designs.*]: a benchmark needs at least one design", file=file)
+    known(spec.baseline, "baseline")
+    known(spec.truth, "truth")
+    known(spec.hidden, "hidden")
+    if any(s < 0 for s in spec.seeds):
+        raise InputError(f"a seed is a whole number >= 0, got {min(spec.seeds)}", file=file,
+                         column="seeds")
+    parts = [(f"designs.{k}", d) for k, d in spec.designs.items()]
+    parts += [(f"special[{i}]", s) for i, s in enumerate(spec.special, start=1)]
+    for key, part in parts:
+        known([] if part.hidden == "all" else part.hidden, f"{key}.hidden")
+        known(part.params, f"{key}.params")
+        # the twin's own tables: unknown keys and wrong kinds are named here, not mid-run
+        from_table(part.plan, Plan, file=file, prefix=f"{key}.plan.")
+        from_table(part.environment, Environment, file=file, prefix=f"{key}.environment.")
+        if (part.noise_um or 0) < 0:
+            raise InputError("noise must be >= 0 um", file=file, column=f"{key}.noise_um")
+        if isinstance(part, Design) and part.nulls < 0:
+            raise InputError(f"nulls must be >= 0, got {part.nulls}", file=file,
+                             column=f"{key}.nulls")
+        if isinstance(part, Special) and part.design not in spec.designs:
+            raise InputError(f"unknown design {part.design!r}; expected one of "
+                             f"{', '.join(spec.designs)}", file=file, column=f"{key}.design")
+
+
+def expand(spec, seeds=None) -> list[dict]:
+    """Scenario dicts from a specification (a ``Scenarios``, or a TOML file or dict read by
+    ``read_scenarios``); ``seeds`` overrides the specification's seeds."""
+    spec = read_scenarios(spec)
+    seeds = list(seeds if seeds is not None else spec.seeds)
     out = []
-    for design_name, design in designs.items():
-        names = design.get("hidden", "all")
-        names = list(hidden_params) if names == "all" else list(names)
+    for design_name, design in spec.designs.items():
+        names = list(spec.hidden) if design.hidden == "all" else list(design.hidden)
         for seed in seeds:
             for name in names:
                 out.append(_scenario(spec, design_name, design, f"{name}/{design_name}/{seed}",
                                      "hidden", [name], seed))
-            for k in range(int(design.get("nulls", 1))):
+            for k in range(design.nulls):
                 out.append(_scenario(spec, design_name, design,
                                      f"null/{design_name}/{seed}" + (f"/{k + 1}" if k else ""),
                                      "null", [], seed * 100 + k))
-    for special in spec.get("special", []):
-        kind = special.get("kind", "hidden")
-        if kind not in KINDS:
-            raise InputError(f"unknown scenario kind {kind!r}; expected one of "
-                             f"{', '.join(KINDS)}", column="special.kind")
-        design_name = special.get("design")
-        if "name" not in special:
-            raise InputError("every [[special]] needs a name", column="special.name")
-        if design_name not in designs:
-            raise InputError(f"unknown design {design_name!r}", column="special.design")
-        design = _merge(designs[design_name], {k: special[k] for k in
-                                               ("plan", "environment", "system", "noise_um")
-                                               if k in special})
-        for seed in special.get("seeds", seeds):
-            out.append(_scenario(spec, design_name, design, f"{special['name']}/{seed}", kind,
-                                 list(special.get("hidden", [])), seed,
-                                 special.get("params", {})))
+    for special in spec.special:
+        base = spec.designs[special.design]
+        design = dataclasses.replace(
+            base, plan=_merge(base.plan, special.plan),
+            environment=_merge(base.environment, special.environment),
+            system=special.system or base.system,
+            noise_um=base.noise_um if special.noise_um is None else special.noise_um)
+        for seed in (special.seeds if special.seeds is not None else seeds):
+            out.append(_scenario(spec, special.design, design, f"{special.name}/{seed}",
+                                 special.kind, list(special.hidden), seed, special.params))
     return out
-
-
-def _check_effect(name: str, where: str) -> None:
-    if name not in effects.RECORDS:
-        raise InputError(f"unknown effect {name!r}; expected one of "
-                         f"{', '.join(effects.RECORDS)}", column=where)
 
 
 def _merge(base: dict, override: dict) -> dict:
@@ -82,20 +162,16 @@ def _merge(base: dict, override: dict) -> dict:
     return out
 
 
-def _scenario(spec, design_name, design, name, kind, hidden, seed, params=None) -> dict:
-    truth = copy.deepcopy(spec.get("truth", {}))
+def _scenario(spec: Scenarios, design_name, design: Design, name, kind, hidden, seed,
+              params=None) -> dict:
+    truth = copy.deepcopy(spec.truth)
     for effect in hidden:
-        _check_effect(effect, "hidden")
-        truth[effect] = {**spec.get("hidden", {}).get(effect, {}),
-                         **design.get("params", {}).get(effect, {}),
+        truth[effect] = {**spec.hidden.get(effect, {}), **design.params.get(effect, {}),
                          **(params or {}).get(effect, {})}
     return {"name": name, "kind": kind, "design": design_name, "hidden": hidden, "seed": seed,
-            "baseline": list(spec.get("baseline", DEFAULT_BASELINE)),
-            "system": design.get("system", "indirect"),
-            "noise_um": float(design.get("noise_um", 0.3)),
-            "resolution_um": float(spec.get("resolution_um", 0.1)),
-            "plan": copy.deepcopy(design.get("plan", {})),
-            "environment": copy.deepcopy(design.get("environment", {})),
+            "baseline": list(spec.baseline), "system": design.system,
+            "noise_um": float(design.noise_um), "resolution_um": float(spec.resolution_um),
+            "plan": copy.deepcopy(design.plan), "environment": copy.deepcopy(design.environment),
             "effects": truth}
 
 

@@ -16,8 +16,12 @@ constant term is fitted.
 
 from __future__ import annotations
 
+from numbers import Integral
+from typing import ClassVar
+
 import numpy as np
-from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context
+from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from models.physics import effects
@@ -35,6 +39,9 @@ class EffectModelBaseline(RegressorMixin, BaseEstimator):
     features : tuple of str or None
         Names of the columns of a numpy input (ignored for a DataFrame, which names its own).
     """
+
+    _parameter_constraints: ClassVar[dict] = {"n_centers": [Interval(Integral, 1, None, closed="left")],
+                                    "features": [None, "array-like"]}
 
     def __init__(self, n_centers: int = 9, features: tuple[str, ...] | None = None):
         self.n_centers = n_centers
@@ -83,6 +90,7 @@ class EffectModelBaseline(RegressorMixin, BaseEstimator):
         return {name: X[:, i] for i, name in enumerate(self._names(X.shape[1])) if name}
 
     # -------------------------------------------------------------- estimator API
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         X, y = validate_data(self, X, y, y_numeric=True)
         columns = self._columns(X)

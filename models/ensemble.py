@@ -10,22 +10,51 @@ Members are saved through ``models.persistence`` side by side with an ``ensemble
 
 from __future__ import annotations
 
-import json
+from numbers import Integral, Real
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
-from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context, clone
+from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.errors import InputError
-from models.persistence import load_estimator, save_estimator
+from models.persistence import (
+    check_spec,
+    checked_params,
+    load_estimator,
+    read_state,
+    restore_inputs,
+    save_estimator,
+    write_state,
+)
 
 FILE_NAME = "ensemble.json"
 
 
 class BootstrapEnsemble(RegressorMixin, BaseEstimator):
-    """Mean of ``n_members`` bootstrap fits of ``estimator``, with ``predict_interval``."""
+    """Mean of ``n_members`` bootstrap fits of ``estimator``, with ``predict_interval``.
+
+    Parameters
+    ----------
+    estimator : regressor
+        The model each member clones.
+    n_members : int
+        Bootstrap fits, at least 2 (their spread is the interval).
+    random_state : int
+        Seed of the resamples; member i gets ``random_state + i`` when it takes one.
+    level : float
+        Coverage of ``predict_interval`` (default 0.95).
+    """
+
+    _parameter_constraints: ClassVar[dict] = {
+        "estimator": [HasMethods(["fit", "predict"])],
+        "n_members": [Interval(Integral, 2, None, closed="left")],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
+        "level": [Interval(Real, 0, 1, closed="neither")],
+    }
 
     def __init__(self, estimator=None, n_members: int = 5, random_state: int = 0,
                  level: float = 0.95):
@@ -34,6 +63,7 @@ class BootstrapEnsemble(RegressorMixin, BaseEstimator):
         self.random_state = random_state
         self.level = level
 
+    @_fit_context(prefer_skip_nested_validation=False)
     def fit(self, X, y):
         checked, y = validate_data(self, X, y, y_numeric=True, dtype=np.float64)
         X = X if hasattr(X, "iloc") else checked  # members keep the column names
@@ -65,30 +95,36 @@ class BootstrapEnsemble(RegressorMixin, BaseEstimator):
         half = stdtrit(n - 1, 0.5 + (level or self.level) / 2) * sd * np.sqrt(1 + 1 / n)
         return mean, mean - half, mean + half
 
-    def save(self, directory) -> None:
+    def save(self, directory) -> Path:
+        """Each member by ``save_estimator``, their specs and the parameters in ensemble.json."""
+        check_is_fitted(self, "members_")
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         parts = [save_estimator(m, directory, f"member_{i}") for i, m in enumerate(self.members_)]
         params = {k: v for k, v in self.get_params(deep=False).items() if k != "estimator"}
-        (directory / FILE_NAME).write_text(json.dumps({
-            "params": params, "members": parts, "n_features_in": int(self.n_features_in_),
-            "feature_names_in": [str(c) for c in getattr(self, "feature_names_in_", [])]},
-            indent=2))
+        return write_state(directory / FILE_NAME, self, {"params": params, "members": parts})
 
     @classmethod
     def load(cls, directory, template: BootstrapEnsemble):
         """Read ``save``'s folder; every member must be of the class of ``template.estimator``."""
         directory = Path(directory)
-        state = json.loads((directory / FILE_NAME).read_text())
+        path = directory / FILE_NAME
+        state = read_state(path, ("params", "members"))
+        if not isinstance(state["params"], dict) or not isinstance(state["members"], list) \
+                or not state["members"]:
+            raise InputError(f"broken {FILE_NAME}: expected parameters and a list of members",
+                             file=path)
         for spec in state["members"]:  # members live in this directory, nowhere else
+            spec = check_spec(spec, path)
             if Path(spec["path"]).name != spec["path"] or spec["path"] in ("", ".", ".."):
-                raise InputError("ensemble member outside the model directory",
-                                 file=directory / FILE_NAME, column=str(spec["path"]))
-        members = [load_estimator(directory, spec, template.estimator, where=directory / FILE_NAME)
+                raise InputError("ensemble member outside the model directory", file=path,
+                                 column=str(spec["path"]))
+        members = [load_estimator(directory, spec, template.estimator, where=path)
                    for spec in state["members"]]
-        model = cls(estimator=clone(members[0]), **state["params"])
+        unknown = set(state["params"]) - set(cls._parameter_constraints)
+        if unknown or "estimator" in state["params"]:
+            raise InputError(f"broken {FILE_NAME}: unknown parameter "
+                             f"{min(unknown or {'estimator'})!r}", file=path)
+        model = checked_params(cls(estimator=clone(members[0]), **state["params"]), path)
         model.members_ = members
-        model.n_features_in_ = int(state["n_features_in"])
-        if state["feature_names_in"]:
-            model.feature_names_in_ = np.asarray(state["feature_names_in"], dtype=object)
-        return model
+        return restore_inputs(model, state)

@@ -39,11 +39,12 @@ def holdout(meta: pd.DataFrame, kind: str = "random", random_state: int = 0,
         visits = np.unique(rank)
         if len(visits) < 2:
             raise InputError("the forward split needs readings from at least 2 visits; "
-                             "use --split random", file=source)
+                             "use the random split", file=source, parameter="split")
         n_test_visits = max(1, round(0.25 * len(visits)))
         test = rank >= visits[-n_test_visits]
         return np.flatnonzero(~test), np.flatnonzero(test)
-    raise InputError(f"unknown split {kind!r}; expected one of {', '.join(SPLITS)}")
+    raise InputError(f"unknown split {kind!r}; expected one of {', '.join(SPLITS)}",
+                     parameter="split")
 
 
 def visit_order(meta: pd.DataFrame) -> np.ndarray:
@@ -105,3 +106,20 @@ def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame, kind: str | None = No
     per_point = truth.groupby(keys, dropna=False)["true_backlash_um"].mean()
     found = meta[keys].merge(per_point.reset_index(), on=keys, how="left")
     return found["true_backlash_um"].to_numpy(float)
+
+
+def read_truth(path) -> pd.DataFrame:
+    """The twin's truth table (``simulate`` writes it): one line per problem, naming the file."""
+    try:
+        truth = pd.read_csv(path, dtype={"visit": str, "machine_id": str, "axis": str})
+    except FileNotFoundError:
+        raise InputError("cannot read truth table: no such file", file=path) from None
+    except IsADirectoryError:
+        raise InputError("cannot read truth table: a folder, expected a CSV file",
+                         file=path) from None
+    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as err:
+        raise InputError(f"cannot read truth table: {err}", file=path) from None
+    if "true_backlash_um" not in truth:
+        raise InputError("missing column true_backlash_um: expected the truth table written "
+                         "by backlash simulate", file=path, column="true_backlash_um")
+    return truth

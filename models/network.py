@@ -1,7 +1,7 @@
 """The paper's shallow feed-forward network (8-8-8-1, tanh) with a Levenberg-Marquardt trainer
 that follows MATLAB ``trainlm``, and an Adam alternative.
 
-What mirrors MATLAB (``feedforwardnet`` + ``train`` defaults, seed 004 Sec. 3-4):
+What mirrors MATLAB (``feedforwardnet`` + ``train`` defaults, [BacklashNN], Sec. 3-4):
 
 - ``mapminmax``: inputs and target mapped to [-1, 1] with the training split's range only.
 - ``dividerand``: seeded random train/validation/test split (70/15/15) inside ``fit``; the test
@@ -27,11 +27,14 @@ IJCNN 1990; MATLAB Deep Learning Toolbox ``trainlm``, ``initnw``, ``dividerand``
 from __future__ import annotations
 
 import math
+from numbers import Integral, Real
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import torch
-from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context
+from sklearn.utils._param_validation import Interval, InvalidParameterError, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.fileio import atomic_path
@@ -226,6 +229,26 @@ class ShallowNetwork(RegressorMixin, BaseEstimator):
     train_index_, val_index_, test_index_ : arrays of row positions of the ``fit`` input.
     """
 
+    _parameter_constraints: ClassVar[dict] = {
+        "hidden_sizes": ["array-like"],
+        "activation": [StrOptions(set(_ACTIVATIONS))],
+        "trainer": [StrOptions({"lm", "adam"})],
+        "epochs": [Interval(Integral, 0, None, closed="left")],
+        "mu": [Interval(Real, 0, None, closed="neither")],
+        "mu_dec": [Interval(Real, 0, 1, closed="neither")],
+        "mu_inc": [Interval(Real, 1, None, closed="neither")],
+        "mu_max": [Interval(Real, 0, None, closed="neither")],
+        "max_fail": [Interval(Integral, 1, None, closed="left")],
+        "min_grad": [Interval(Real, 0, None, closed="left")],
+        "goal": [Interval(Real, 0, None, closed="left")],
+        "weight_decay": [Interval(Real, 0, None, closed="left")],
+        "learning_rate": [Interval(Real, 0, None, closed="neither")],
+        "batch_size": [None, Interval(Integral, 1, None, closed="left")],
+        "val_fraction": [Interval(Real, 0, 1, closed="left")],
+        "test_fraction": [Interval(Real, 0, 1, closed="left")],
+        "random_state": [None, Interval(Integral, 0, None, closed="left")],
+    }
+
     def __init__(self, hidden_sizes=(8, 8), activation="tanh", trainer="lm", epochs=1000,
                  mu=1e-3, mu_dec=0.1, mu_inc=10, mu_max=1e10, max_fail=6, min_grad=1e-7,
                  goal=0.0, weight_decay=0.0, learning_rate=1e-2, batch_size=None,
@@ -250,13 +273,15 @@ class ShallowNetwork(RegressorMixin, BaseEstimator):
 
     # -- fitting ------------------------------------------------------------------------------
 
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         """Split, scale on the training part, initialise and train."""
+        if isinstance(self.hidden_sizes, str) or not all(
+                isinstance(h, Integral) and h >= 1 for h in self.hidden_sizes):
+            raise InvalidParameterError("The 'hidden_sizes' parameter of ShallowNetwork must "
+                                        "list positive integers (neurons per hidden layer). "
+                                        f"Got {self.hidden_sizes!r} instead.")
         X, y = validate_data(self, X, y, dtype=np.float64, y_numeric=True)
-        if self.activation not in _ACTIVATIONS:
-            raise ValueError(f"activation must be one of {sorted(_ACTIVATIONS)}")
-        if self.trainer not in ("lm", "adam"):
-            raise ValueError("trainer must be 'lm' or 'adam'")
         self.train_index_, self.val_index_, self.test_index_ = divide_rand(
             len(y), self.val_fraction, self.test_fraction, self.random_state)
         self.x_centre_, self.x_gain_ = minmax_fit(X[self.train_index_])

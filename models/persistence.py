@@ -24,6 +24,11 @@ Loading never unpickles and never trusts a type because of the module it lives i
 A spec (returned by ``save_estimator``, kept by the caller in its own JSON) is
 ``{"format", "class", "path", "sha256"}``; ``check_spec`` validates one read from disk.
 Every problem is an ``InputError`` naming the file.
+
+An estimator that saves itself (``self`` format) keeps its parameters and fitted state in one
+JSON file, written by ``write_state`` (atomically, with the inputs it was fitted on) and read
+back by ``read_state`` (every key it needs checked, no key error escapes) and
+``restore_inputs``: the wear map, the physics hybrid and the bootstrap ensemble.
 """
 
 from __future__ import annotations
@@ -160,6 +165,66 @@ def _decode(value):
             and value["dtype"] in _ARRAY_DTYPES):
         return np.asarray(value["array"], dtype=value["dtype"])
     raise ValueError(f"unexpected value {str(value)[:60]!r}")
+
+
+# ----------------------------------------------------------------------------- JSON state
+
+INPUT_KEYS = ("n_features_in", "feature_names_in")
+
+
+def fitted_inputs(estimator) -> dict:
+    """The inputs ``estimator`` was fitted on, as JSON: their number and names (if any)."""
+    return {"n_features_in": int(estimator.n_features_in_),
+            "feature_names_in": [str(c) for c in getattr(estimator, "feature_names_in_", [])]}
+
+
+def write_state(path, estimator, state: dict) -> Path:
+    """Write ``state`` and the inputs ``estimator`` was fitted on to the JSON file ``path``,
+    atomically (a reader never sees half a file)."""
+    return write_json(path, {**state, **fitted_inputs(estimator)})
+
+
+def read_state(path, keys=()) -> dict:
+    """The JSON object written by ``write_state`` at ``path``, with ``keys`` (and the fitted
+    inputs) present; anything else is an ``InputError`` naming the file."""
+    path = Path(path)
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"model folder has no {path.name}", file=path) from None
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(f"broken {path.name}: {err}", file=path) from None
+    if not isinstance(state, dict):
+        raise InputError(f"broken {path.name}: expected a JSON object, found "
+                         f"{type(state).__name__}", file=path)
+    for key in (*keys, *INPUT_KEYS):
+        if key not in state:
+            raise InputError(f"broken {path.name}: lacks the key {key!r}", file=path)
+    names = state["feature_names_in"]
+    if (isinstance(state["n_features_in"], bool) or not isinstance(state["n_features_in"], int)
+            or not isinstance(names, list) or not all(isinstance(c, str) for c in names)):
+        raise InputError(f"broken {path.name}: n_features_in must be a number and "
+                         "feature_names_in a list of names", file=path)
+    return state
+
+
+def restore_inputs(model, state: dict):
+    """Set ``n_features_in_`` and ``feature_names_in_`` of ``model`` from ``read_state``'s
+    result; returns ``model``."""
+    model.n_features_in_ = int(state["n_features_in"])
+    if state["feature_names_in"]:
+        model.feature_names_in_ = np.asarray(state["feature_names_in"], dtype=object)
+    return model
+
+
+def checked_params(model, where):
+    """``model`` once its parameters (read from disk) pass its declared constraints
+    (``_parameter_constraints``); an ``InputError`` naming ``where`` otherwise."""
+    try:
+        model._validate_params()
+    except ValueError as err:
+        raise InputError(f"saved parameters are invalid: {err}", file=where) from None
+    return model
 
 
 # ----------------------------------------------------------------------------- loading

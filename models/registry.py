@@ -1,6 +1,9 @@
 """Named predictors, and saving/loading a trained one without unpickling untrusted files.
 
-Every entry is a scikit-learn style estimator working on the feature table
+One record per predictor (``PREDICTORS``, a ``Predictor`` each: name, description, how to build
+it, its save format, whether it is a wear map that restarts its clock at an adjustment and
+whether it forecasts a plan); the CLI's choices and help and the docs' table (``table()``) are
+read from it. Every entry is a scikit-learn style estimator working on the feature table
 (``features.table``), so cross-validation, permutation importance and Optuna objectives
 treat the network, the physics baselines and the comparators alike.
 
@@ -14,6 +17,7 @@ there). ``load_model`` is the only reader of model directories.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,43 +27,43 @@ from models.persistence import load_estimator, save_estimator
 MODEL_FILE = "model.json"
 TRAINING_INPUTS = "training_inputs.csv"
 
-# name: (one-line description, factory(random_state) -> unfitted estimator)
 RECOMMENDED = "wear-map"
-DESCRIPTIONS = {
-    "wear-map": "level and wear rate along the screw (B-splines, CV) plus feed and temperature "
-                "terms; forecasts the next visit with a 95 % interval (recommended)",
-    "wear-map-hybrid": "wear map plus the paper's 8-8-8-1 network on its residual",
-    "shallow-lm-ensemble": "five paper networks on bootstrap resamples: mean and a 95 % "
-                           "interval from their spread",
-    "hybrid": "effect-model physics fit plus a small network on its residual",
-    "shallow-lm": "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB trainlm",
-    "shallow-adam": "paper network 8-8-8-1 tanh, Adam with early stopping",
-    "effect-model": "least-squares fit of the twin's lost-motion effects",
-    "constant": "constant backlash (mean of the training targets)",
-    "linear-temperature": "backlash linear in machine temperature",
-    "bezier": "Bezier curve of degree 4 over position, 5 control points (least squares)",
-    "bspline": "B-spline of degree 2 over position, 5 coefficients (least squares)",
-    "knn": "k-nearest-neighbour regressor on standardised inputs (distance weighted)",
-    "gbr": "gradient boosting regressor",
-    "ridge": "ridge regression on standardised inputs (alpha by cross-validation)",
-}
 
 
-def names() -> list[str]:
-    return list(DESCRIPTIONS)
+@dataclass(frozen=True)
+class Predictor:
+    """One predictor the product can train: the record the CLI choices, the help and the docs
+    table come from.
 
+    Attributes
+    ----------
+    name : str
+        Registry name (``--model``, ``model=``, ``model.json``'s ``name``).
+    description : str
+        One line for the help and the docs.
+    build : callable
+        ``build(random_state) -> estimator``: an unfitted scikit-learn style estimator (imports
+        only what it needs).
+    save_format : str
+        How ``models.persistence.save_estimator`` writes it (read back by
+        ``models.persistence.load_estimator`` with this record's estimator as the template):
+        ``json`` (plain numbers), ``torch`` (a state dict read with ``weights_only``),
+        ``parts`` (a composite writing each part in its own format) or ``skops`` (allow-listed
+        types only).
+    wear_clock : bool
+        A wear map: trained on the visits since the last mechanical adjustment of each machine
+        axis (the wear clock restarts there), where a per-point model uses every row.
+    forecasts : bool
+        Predicts a plan of a visit not measured yet (operating hours and conditions only, no
+        linear-test deviations), with a 95 % interval.
+    """
 
-def check_name(name: str) -> None:
-    if name not in DESCRIPTIONS:
-        raise InputError(f"unknown model {name!r}; expected one of {', '.join(names())}",
-                         column="--model")
-
-
-def make(name: str, random_state: int = 0, **params):
-    """An unfitted estimator by registry name; ``params`` override its defaults."""
-    check_name(name)
-    estimator = _factories()[name](random_state)
-    return estimator.set_params(**params) if params else estimator
+    name: str
+    description: str
+    build: Callable[[int], object] = field(repr=False)
+    save_format: str = "json"
+    wear_clock: bool = False
+    forecasts: bool = False
 
 
 def _network(**params):
@@ -82,10 +86,11 @@ def _effect_model():
 
 def _hybrid(seed: int):
     return _baselines().PhysicsHybrid(physics=_effect_model(),
-                           residual=_network(hidden_sizes=(8, 8), trainer="lm", random_state=seed))
+                                      residual=_network(hidden_sizes=(8, 8), trainer="lm",
+                                                        random_state=seed))
 
 
-def _wear_map():
+def _wear_map(seed: int = 0):
     from models.wear_map import WearMap
 
     return WearMap()
@@ -129,24 +134,72 @@ def _ridge(seed: int):
     return _scaled(RidgeCV(alphas=(0.01, 0.1, 1, 10)))
 
 
-def _factories() -> dict:
-    """name -> factory(random_state); each imports only what its estimator needs."""
-    return {
-        "wear-map": lambda seed: _wear_map(),
-        "wear-map-hybrid": _wear_map_hybrid,
-        "shallow-lm-ensemble": _ensemble,
-        "hybrid": _hybrid,
-        "shallow-lm": lambda seed: _network(trainer="lm", random_state=seed),
-        "shallow-adam": lambda seed: _network(trainer="adam", random_state=seed),
-        "effect-model": lambda seed: _effect_model(),
-        "constant": lambda seed: _baselines().ConstantBacklash(),
-        "linear-temperature": lambda seed: _baselines().LinearInTemperature(),
-        "bezier": lambda seed: _baselines().BezierPosition(),
-        "bspline": lambda seed: _baselines().BSplinePosition(),
-        "knn": _knn,
-        "gbr": _gbr,
-        "ridge": _ridge,
-    }
+# Every predictor, in the order of the help and of ``compare``'s default list.
+PREDICTORS = {p.name: p for p in (
+    Predictor("wear-map", "level and wear rate along the screw (B-splines, CV) plus feed and "
+              "temperature terms; forecasts the next visit with a 95 % interval (recommended)",
+              _wear_map, "json", wear_clock=True, forecasts=True),
+    Predictor("wear-map-hybrid", "wear map plus the paper's 8-8-8-1 network on its residual",
+              _wear_map_hybrid, "parts", wear_clock=True),
+    Predictor("shallow-lm-ensemble", "five paper networks on bootstrap resamples: mean and a "
+              "95 % interval from their spread", _ensemble, "parts"),
+    Predictor("hybrid", "effect-model physics fit plus a small network on its residual",
+              _hybrid, "parts"),
+    Predictor("shallow-lm", "paper network 8-8-8-1 tanh, Levenberg-Marquardt like MATLAB "
+              "trainlm", lambda seed: _network(trainer="lm", random_state=seed), "torch"),
+    Predictor("shallow-adam", "paper network 8-8-8-1 tanh, Adam with early stopping",
+              lambda seed: _network(trainer="adam", random_state=seed), "torch"),
+    Predictor("effect-model", "least-squares fit of the twin's lost-motion effects",
+              lambda seed: _effect_model(), "json"),
+    Predictor("constant", "constant backlash (mean of the training targets)",
+              lambda seed: _baselines().ConstantBacklash(), "json"),
+    Predictor("linear-temperature", "backlash linear in machine temperature",
+              lambda seed: _baselines().LinearInTemperature(), "json"),
+    Predictor("bezier", "Bezier curve of degree 4 over position, 5 control points (least "
+              "squares)", lambda seed: _baselines().BezierPosition(), "json"),
+    Predictor("bspline", "B-spline of degree 2 over position, 5 coefficients (least squares)",
+              lambda seed: _baselines().BSplinePosition(), "json"),
+    Predictor("knn", "k-nearest-neighbour regressor on standardised inputs (distance weighted)",
+              _knn, "skops"),
+    Predictor("gbr", "gradient boosting regressor", _gbr, "skops"),
+    Predictor("ridge", "ridge regression on standardised inputs (alpha by cross-validation)",
+              _ridge, "skops"),
+)}
+
+
+def names() -> list[str]:
+    return list(PREDICTORS)
+
+
+def predictor(name: str, parameter: str = "model") -> Predictor:
+    """The record of predictor ``name``; ``InputError`` naming ``parameter`` if unknown."""
+    check_name(name, parameter)
+    return PREDICTORS[name]
+
+
+def check_name(name: str, parameter: str = "model") -> None:
+    if name not in PREDICTORS:
+        raise InputError(f"unknown model {name!r}; expected one of {', '.join(names())}",
+                         parameter=parameter)
+
+
+def make(name: str, random_state: int = 0, **params):
+    """An unfitted estimator by registry name; ``params`` override its defaults."""
+    estimator = predictor(name).build(random_state)
+    return estimator.set_params(**params) if params else estimator
+
+
+def help_text() -> str:
+    """The predictors as help text: ``name: description`` for each."""
+    return "; ".join(f"{p.name}: {p.description}" for p in PREDICTORS.values())
+
+
+def table() -> list[dict]:
+    """One row per predictor for the docs: name, description, save format, wear clock,
+    forecasts a plan."""
+    return [{"name": p.name, "description": p.description, "save format": p.save_format,
+             "wear clock": p.wear_clock, "forecasts a plan": p.forecasts}
+            for p in PREDICTORS.values()]
 
 
 def required_inputs(estimator) -> tuple[str, ...]:
@@ -161,7 +214,7 @@ def check_inputs(name: str, estimator, columns, source: str = "data") -> None:
     if missing:
         raise InputError(f"predictor {name!r} needs the input {missing[0]!r}; the feature "
                          f"set {', '.join(map(str, columns))} lacks it", file=source,
-                         column="--features")
+                         parameter="features")
 
 
 # scikit-learn estimators used as they are, with the estimator checks scikit-learn itself
@@ -275,7 +328,7 @@ def _read_meta(path: Path) -> dict:
         if not isinstance(meta[key], kind) or isinstance(meta[key], bool):
             raise InputError(f"model.json key {key!r} has the wrong type "
                              f"({type(meta[key]).__name__})", file=path)
-    if meta["name"] not in DESCRIPTIONS:
+    if meta["name"] not in PREDICTORS:
         raise InputError(f"model.json names an unknown predictor {meta['name']!r}", file=path)
     if not meta["features"] or not all(isinstance(f, str) for f in meta["features"]):
         raise InputError("model.json key 'features' must list the input column names",

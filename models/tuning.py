@@ -6,11 +6,17 @@ Several worker processes, or machines, share one study through its storage URL: 
 SQLite file by default, PostgreSQL for many workers. Running trials send heartbeats, so a
 trial whose worker was killed is marked FAIL instead of staying RUNNING, and the sampler's
 seed depends only on the given seed, the worker index and the study's size at the start.
+
+A search stops cleanly: SIGTERM stops it the way Ctrl-C does (the running trial is marked
+FAIL), worker processes die with their parent, and a signal that arrives while Optuna stores a
+finished trial takes effect once that is done (``run_workers``, ``terminate_as_interrupt``).
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import threading
 import warnings
 
 import numpy as np
@@ -19,6 +25,8 @@ DEFAULT_STORAGE = "sqlite:///optuna.db"
 HEARTBEAT_S = 10
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
 TRAINERS = ("lm", "adam")
+STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
+STOP = threading.Event()  # set by a SIGTERM that must wait for the current trial's storage
 
 
 def suggest(trial) -> dict:
@@ -49,7 +57,7 @@ def objective(X, y, folds: int, random_state: int, tag: str, stop=None):
     """Optuna objective: CV RMSE [um] of the drawn network. ``stop`` (a ``threading.Event``):
     once set, a trial that starts fails at once, as if interrupted."""
 
-    def run_trial(trial) -> float:  # name known to `backlash tune`'s SIGTERM handler
+    def run_trial(trial) -> float:  # name known to the SIGTERM handler (_on_terminate)
         if stop is not None and stop.is_set():
             raise KeyboardInterrupt
         trial.set_user_attr("tag", tag)  # first, so a trial killed while running is traceable
@@ -124,7 +132,7 @@ def counts(study) -> dict[str, int]:
 
 
 def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag: str,
-         worker: int = 0, start: int = 0, threads: int | None = None, progress: bool = False,
+         worker: int = 0, start: int = 0, threads: int | None = None,
          callbacks: tuple = (), heartbeat_s: int = HEARTBEAT_S, stop=None) -> None:
     """One worker: run ``trials`` trials of the shared study.
 
@@ -141,4 +149,96 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s)
     study.optimize(objective(X, y, folds, seed, tag, stop), n_trials=trials,
-                   callbacks=list(callbacks), show_progress_bar=progress)
+                   callbacks=list(callbacks))
+
+
+def search(work_args: dict, trials: int, workers: int = 1) -> None:
+    """Run ``trials`` trials of ``work`` (its other arguments in ``work_args``) in this process
+    or shared among ``workers`` processes, SIGTERM handled as an interrupt."""
+    with terminate_as_interrupt():
+        if workers == 1:
+            work(trials=trials, worker=0, stop=STOP, **work_args)
+        else:
+            shares = [trials // workers + (i < trials % workers) for i in range(workers)]
+            run_workers(work_args, shares)
+
+
+class terminate_as_interrupt:
+    """SIGTERM stops the search the way Ctrl-C does, so the running trial is marked FAIL on the
+    way out instead of being left RUNNING. A signal that arrives while Optuna stores a finished
+    trial or draws the next one takes effect once that is done (interrupting a storage write
+    would leave the trial RUNNING): the drawn trial fails at its start, the stored one is
+    logged first (callbacks check ``STOP``)."""
+
+    def __enter__(self):
+        import signal
+
+        self._old = None
+        STOP.clear()
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGTERM, _on_terminate)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self._old is not None:
+            signal.signal(signal.SIGTERM, self._old)
+        return False
+
+
+def _on_terminate(signum, frame):
+    names = set()
+    while frame is not None:
+        names.add(frame.f_code.co_name)
+        frame = frame.f_back
+    if "run_trial" in names or "_optimize_sequential" not in names:
+        raise KeyboardInterrupt  # inside the objective, or not optimising: stop now
+    STOP.set()  # inside Optuna's bookkeeping: the objective or a callback stops next
+
+
+def _worker(work_args: dict, trials: int, worker: int) -> None:
+    """Entry point of one worker process: dies with its parent (so a killed search leaves no
+    orphans running trials) and turns SIGTERM into a clean FAIL of its running trial."""
+    _die_with_parent(os.getppid())
+    with terminate_as_interrupt():
+        try:
+            work(trials=trials, worker=worker, threads=1, stop=STOP, **work_args)
+        except KeyboardInterrupt:
+            sys.exit(130)
+
+
+def _die_with_parent(parent: int) -> None:
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG: SIGTERM when the parent dies
+    except (OSError, AttributeError):
+        return  # not Linux: workers finish their share after a killed parent
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+def run_workers(work_args: dict, shares: list[int]) -> None:
+    """One spawned process per non-empty share; all stopped if this one is interrupted."""
+    import multiprocessing as mp
+
+    context = mp.get_context("spawn")
+    procs = [context.Process(target=_worker, args=(work_args, n, i))
+             for i, n in enumerate(shares) if n]
+    try:
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join()
+    finally:  # interrupted: stop the workers so their running trials are marked failed
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join()
+    failed = [p.exitcode for p in procs if p.exitcode]
+    if failed:
+        raise RuntimeError(f"{len(failed)} tuning worker(s) failed (exit codes {failed})")

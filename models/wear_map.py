@@ -10,7 +10,7 @@ that varies along the axis (DESIGN.md, wear). The model, linear in its coefficie
   terms of the ``backlash_feed`` and ``backlash_temperature`` effects, each evaluated with unit
   amplitude (``models.physics.effects``);
 - b0(x) [um] and the wear-rate map w(x) [um per 1000 h] are B-splines over the position with
-  the same basis (seed 000, eq. 4: uniform clamped knots, cubic), or one value per target
+  the same basis ([Mechta2022], eq. 4: uniform clamped knots, cubic), or one value per target
   (piecewise linear between the targets) when the targets repeat across visits. The number of
   control points is chosen by leave-one-visit-out cross-validation (visits told apart by their
   hours), so the data choose how much shape the screw shows;
@@ -30,16 +30,23 @@ uses ``features`` when given; unnamed inputs give a constant model.
 
 from __future__ import annotations
 
-import itertools
-import json
+from numbers import Integral, Real
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
-from scipy.interpolate import BSpline
 from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
-from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
+
+from features.statistics import bspline_basis, grouped_cv_sse, varies_only_between
+from models.wear_clock import epoch_lines, found_adjustments, latest_epoch, wear_epochs
+
+# the wear clock (``models.wear_clock``) is importable from here too
+__all__ = ["CONDITIONS", "FILE_NAME", "HOURS", "POSITION", "WearMap", "epoch_lines",
+           "found_adjustments", "latest_epoch", "spline_basis", "target_basis", "wear_epochs"]
 
 POSITION = "target"
 HOURS = "operating_hours"
@@ -47,20 +54,13 @@ HOURS = "operating_hours"
 CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
               "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
 FILE_NAME = "wear_map.json"
-WITHIN_VISIT_SHARE = 0.1
 
 
 def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np.ndarray:
-    """Uniform clamped B-spline basis over [lo, hi] (seed 000, eq. 4), shape (len(x),
+    """Uniform clamped B-spline basis over [lo, hi] ([Mechta2022], eq. 4), shape (len(x),
     n_control); degree min(degree, n_control - 1); outside the range the end values hold."""
-    x = np.asarray(x, float)
-    if n_control == 1 or len(x) == 0:
-        return np.ones((len(x), 1 if n_control == 1 else n_control))
-    k = min(degree, n_control - 1)
-    t = np.clip((x - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
-    inner = np.linspace(0, 1, n_control - k + 1)
-    knots = np.r_[[0.0] * k, inner, [1.0] * k]
-    return BSpline.design_matrix(t, knots, k).toarray()
+    t = np.clip((np.asarray(x, float) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    return bspline_basis(t, n_control, degree)
 
 
 def target_basis(x, knots_mm) -> np.ndarray:
@@ -88,6 +88,14 @@ class WearMap(RegressorMixin, BaseEstimator):
     level : float
         Coverage of the intervals (default 0.95).
     """
+
+    _parameter_constraints: ClassVar[dict] = {
+        "features": [None, "array-like"],
+        "n_control": [None, Interval(Integral, 1, None, closed="left"), StrOptions({"targets"})],
+        "max_control": [Interval(Integral, 1, None, closed="left")],
+        "alpha": [Interval(Real, 0, None, closed="left")],
+        "level": [Interval(Real, 0, 1, closed="neither")],
+    }
 
     def __init__(self, features=None, n_control=None, max_control: int = 8,
                  alpha: float = 1e-8, level: float = 0.95):
@@ -139,6 +147,7 @@ class WearMap(RegressorMixin, BaseEstimator):
         return inverse @ (A.T @ y), inverse
 
     # ---- fit ----------------------------------------------------------------------------
+    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         names = (self._names(X, X.shape[1])
                  if hasattr(X, "shape") and len(X.shape) == 2 else None)
@@ -177,19 +186,17 @@ class WearMap(RegressorMixin, BaseEstimator):
         return self
 
     def _confounded_with_wear(self, frame: pd.DataFrame, name: str) -> bool:
-        """With fewer than four visits (told apart by their hours), a condition that changes
-        almost only between visits (less than ``WITHIN_VISIT_SHARE`` of its variance within
-        them) cannot be told from the wear term and the visit's own offset: a level, a wear
-        rate and a condition slope fitted to three visit levels leave nothing to tell a
-        condition effect from the day-to-day offset of a visit."""
+        """With fewer than four visits (told apart by their hours), a condition that varies
+        only between visits (``features.statistics.varies_only_between``) cannot be told from
+        the wear term and the visit's own offset: a level, a wear rate and a condition slope
+        fitted to three visit levels leave nothing to tell a condition effect from the
+        day-to-day offset of a visit."""
         if not self.use_hours_:
             return False
-        labels, codes = np.unique(frame[HOURS].to_numpy(float), return_inverse=True)
-        if len(labels) >= 4:
+        hours = frame[HOURS].to_numpy(float)
+        if len(np.unique(hours)) >= 4:
             return False
-        values = frame[name].to_numpy(float)
-        means = np.bincount(codes, values) / np.bincount(codes)
-        return float(np.var(values - means[codes])) < WITHIN_VISIT_SHARE * float(np.var(values))
+        return varies_only_between(frame[name].to_numpy(float), hours)
 
     def _visit_effect(self, frame: pd.DataFrame, A: np.ndarray, residual: np.ndarray):
         """Standard deviation tau [um] of a common offset per visit (visits told apart by their
@@ -224,16 +231,11 @@ class WearMap(RegressorMixin, BaseEstimator):
             return candidates[0]
         groups = (frame[HOURS].to_numpy(float) if self.use_hours_
                   else np.arange(len(frame)) % 5)
-        labels = np.unique(groups)
-        if len(labels) < 3:
-            labels, groups = np.arange(5), np.arange(len(frame)) % 5
+        if len(np.unique(groups)) < 3:
+            groups = np.arange(len(frame)) % 5
         for choice in candidates:
-            A = self._design(frame, choice)
-            sse = 0.0
-            for g in labels:
-                test = groups == g
-                coef, _ = self._solve(A[~test], y[~test])
-                sse += float(np.sum((A[test] @ coef - y[test]) ** 2))
+            sse = grouped_cv_sse(self._design(frame, choice), y, groups,
+                                 solve=lambda A, b: self._solve(A, b)[0])
             self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
         best = min(self.cv_scores_, key=self.cv_scores_.get)
         return best if best == "targets" else int(best)
@@ -309,42 +311,37 @@ class WearMap(RegressorMixin, BaseEstimator):
 
     # ---- persistence (JSON, no pickle) ----------------------------------------------------
     def save(self, directory) -> Path:
-        check_is_fitted(self, "coef_")
-        from features.readings.fileio import write_json
+        """Write ``wear_map.json`` (parameters and fitted state) into ``directory``."""
+        from models.persistence import write_state
 
+        check_is_fitted(self, "coef_")
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         params = self.get_params()
         params["features"] = list(params["features"]) if params["features"] else None
-        state = {
-            "params": params, "n_features_in": int(self.n_features_in_),
-            "feature_names_in": [str(c) for c in getattr(self, "feature_names_in_", [])],
-            **{name: _jsonable(getattr(self, name)) for name in _STATE},
-        }
-        write_json(directory / FILE_NAME, state)
-        return directory / FILE_NAME
+        state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE}}
+        return write_state(directory / FILE_NAME, self, state)
 
     @classmethod
     def load(cls, directory) -> WearMap:
+        """Read ``save``'s file; every problem is an ``InputError`` naming it."""
         from features.readings.errors import InputError
+        from models.persistence import checked_params, read_state, restore_inputs
 
         path = Path(directory) / FILE_NAME
+        state = read_state(path, ("params", *_STATE))
         try:
-            state = json.loads(path.read_text(encoding="utf-8"))
             params = dict(state["params"])
             if params.get("features") is not None:
                 params["features"] = tuple(params["features"])
-            model = cls(**params)
-            model.n_features_in_ = int(state["n_features_in"])
-            if state["feature_names_in"]:
-                model.feature_names_in_ = np.asarray(state["feature_names_in"], dtype=object)
+            model = checked_params(cls(**params), path)
             for name in _STATE:
                 setattr(model, name, _restore(name, state[name]))
-        except FileNotFoundError:
-            raise InputError("model directory has no wear-map file", file=path) from None
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
-            raise InputError(f"broken wear-map file: {err}", file=path) from None
-        return model
+        except (TypeError, ValueError) as err:
+            if isinstance(err, InputError):
+                raise
+            raise InputError(f"broken {FILE_NAME}: {err}", file=path) from None
+        return restore_inputs(model, state)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
@@ -385,113 +382,3 @@ def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
     values = np.asarray(values, float)
     return effects.contribution(effect, np.zeros(len(values)), 0, {name: values},
                                 **{amplitude: 1.0})
-
-
-def latest_epoch(meta: pd.DataFrame, hours: pd.Series | None = None,
-                 events: pd.Series | None = None,
-                 adjustments: pd.DataFrame | None = None) -> np.ndarray:
-    """Rows since the last mechanical adjustment of their machine and axis (a boolean mask);
-    see ``wear_epochs``, which also says why."""
-    return wear_epochs(meta, hours, events, adjustments)[0]
-
-
-def wear_epochs(meta: pd.DataFrame, hours: pd.Series | None = None,
-                events: pd.Series | None = None, adjustments: pd.DataFrame | None = None):
-    """Rows since the last mechanical adjustment of their machine and axis, and why.
-
-    An adjustment restarts the wear clock: it shows as an ``event`` 'adjustment' (or 'reset')
-    on a visit, as operating hours that drop from one visit to the next (visits in date order,
-    else in natural label order), or as a visit listed in ``adjustments`` (``machine_id, axis,
-    visit, reason``: the downward level changes that ``found_adjustments`` finds in the
-    per-visit backlash), which finds adjustments that left the hour counter running.
-
-    Returns
-    -------
-    mask : bool array, True for the rows kept
-    notes : list of dicts, one per machine axis: ``machine_id, axis, visits`` (the visits
-        kept, in order), ``dropped`` (number of earlier visits left out) and ``reason`` (what
-        marked the start of the kept visits; empty when nothing did).
-    """
-    from models.evaluation import visit_order
-
-    keep = np.ones(len(meta), bool)
-    rank = visit_order(meta)
-    labels = meta["visit"].astype(str).to_numpy() if "visit" in meta else rank.astype(str)
-    axes = [c for c in ("machine_id", "axis") if c in meta]
-    groups = meta.groupby(axes, dropna=False).indices if axes else {(): np.arange(len(meta))}
-    found = {}
-    if adjustments is not None:
-        for row in adjustments.itertuples(index=False):
-            found[(str(row.machine_id), str(row.axis), str(row.visit))] = row.reason
-    notes = []
-    for rows in groups.values():
-        machine, axis = (str(meta[c].iloc[rows[0]]) if c in meta else "" for c in
-                         ("machine_id", "axis"))
-        order = rank[rows]
-        visits = np.unique(order)
-        start, why = visits[0], ""
-        for previous, current in itertools.pairwise(visits):
-            at = rows[order == current]
-            before = rows[order == previous]
-            reasons = []
-            if events is not None:
-                named = events.iloc[at].astype(str).str.lower()
-                if named.isin(("adjustment", "reset")).any():
-                    reasons.append(f"event '{named[named.isin(('adjustment', 'reset'))].iloc[0]}'")
-            if hours is not None:
-                now, then = float(hours.iloc[at].mean()), float(hours.iloc[before].mean())
-                if now < then:
-                    reasons.append(f"operating hours drop from {then:g} h to {now:g} h")
-            change = found.get((machine, axis, str(labels[at[0]])))
-            if change:
-                reasons.append(change)
-            if reasons:
-                start, why = current, f"adjustment at visit {labels[at[0]]}: " + "; ".join(
-                    reasons)
-        keep[rows] = order >= start
-        kept = [str(labels[rows[order == v][0]]) for v in visits if v >= start]
-        notes.append({"machine_id": machine, "axis": axis, "visits": kept,
-                      "dropped": int(np.sum(visits < start)), "reason": why})
-    return keep, notes
-
-
-def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
-    """Mechanical adjustments the drift statistics find in the per-visit backlash: downward
-    level change points (``models.drift.analyse_series``; an upward step is a failure, not an
-    adjustment).
-
-    ``visits``: rows of ``features.visits.visit_backlash`` (``machine_id, axis, visit, date,
-    backlash_um, u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
-    """
-    from models import drift
-
-    rows = []
-    for _, group in visits.groupby(["machine_id", "axis"], sort=True, observed=True):
-        if len(group) < 4:  # two segments of two visits at least
-            continue
-        series = drift.analyse_series(group)
-        for change in series.change_points:
-            if change["jump_um"] < 0:
-                visit = str(series.visits["visit"].iloc[change["index"]])
-                rows.append({"machine_id": series.machine_id, "axis": series.axis,
-                             "visit": visit, "jump_um": change["jump_um"],
-                             "jump_sigma": change["jump_sigma"],
-                             "reason": f"backlash steps down by {-change['jump_um']:.2f} um "
-                                       f"({-change['jump_sigma']:.1f} sigma, drift change point)"})
-    return pd.DataFrame(rows, columns=["machine_id", "axis", "visit", "jump_um", "jump_sigma",
-                                       "reason"])
-
-
-def epoch_lines(notes: list[dict], limit: int = 6) -> list[str]:
-    """One human line per machine axis that says which visits the wear clock uses and why."""
-    lines = []
-    for note in notes[:limit]:
-        name = " ".join(v for v in (note["machine_id"], note["axis"]) if v) or "data"
-        visits = note["visits"]
-        span = visits[0] if len(visits) == 1 else f"{visits[0]}..{visits[-1]}"
-        why = (f"{note['reason']}; {note['dropped']} earlier visit(s) left out"
-               if note["dropped"] else "no mechanical adjustment found")
-        lines.append(f"wear clock {name}: visits {span} ({len(visits)}); {why}")
-    if len(notes) > limit:
-        lines.append(f"wear clock: {len(notes) - limit} more machine axes (model.json meta)")
-    return lines

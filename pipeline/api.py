@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import importlib
 
+from features.readings.errors import BacklashWarning, InputError
+
 # Public name -> the workflow module that defines it (imported on first use, so that
 # ``import backlash`` stays light).
 _WHERE = {
@@ -21,16 +23,16 @@ _WHERE = {
     "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
     "backtest": "compare", "tune": "tune",
     "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
-    "hidden_effects": "hidden_effects", "compensate": "compensate",
+    "hidden_effects": "hidden_effects", "compensate": "compensate", "uncertainty": "uncertainty",
 }
-__all__ = sorted(_WHERE) + ["InputError", "BacklashWarning"]
+__all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
+    "BacklashWarning", "InputError", "backtest", "compare", "compensate", "convert", "discover",
+    "drift", "hidden_effects", "iso", "load_model", "predict", "rank", "read", "replicate",
+    "simulate", "train", "tune", "uncertainty", "validate", "write",
+]
 
 
 def __getattr__(name: str):
-    if name in ("InputError", "BacklashWarning"):
-        from features.readings import errors
-
-        return getattr(errors, name)
     if name in _WHERE:
         module = importlib.import_module(f"pipeline.workflows.{_WHERE[name]}")
         return getattr(module, name)

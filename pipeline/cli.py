@@ -33,7 +33,7 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from pipeline.commands.common import checked_types
+    from pipeline.commands.options import checked_types
 
     parser = Parser(
         prog="backlash",

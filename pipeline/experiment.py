@@ -1,4 +1,5 @@
-"""Experiment files: a TOML file names its steps and their options; ``backlash run`` runs them.
+"""Experiment files: a TOML file names its steps, each a job and its parameters; ``backlash run``
+runs them through the same workflows the CLI and the Python API call.
 
 ```toml
 name = "demo"                       # MLflow run name (default: the file name)
@@ -7,63 +8,79 @@ out = "demo-out"                    # output folder, relative to the working dir
 
 [[steps]]
 title = "ISO 230-2 analysis of a real test"
-command = "iso"                     # a backlash subcommand
-[steps.with]                        # its options by their argparse dest, positional ones too
-file = "{data}/ecmc/ess_mcu1025_ISO230.dat"
-plot = "{out}/ess_iso.png"
+job = "iso"                         # a workflow (pipeline.workflows.NAMES); ``command`` also
+[steps.with]                        # its keyword parameters, by their Python names
+data = "{data}/ecmc/ess_mcu1025_ISO230.dat"
+out = "{out}/ess_iso"               # where the result writes its files
 ```
 
 Placeholders: ``{here}`` the file's folder, ``{data}`` its ``data`` subfolder, ``{out}`` the
 output folder; any other ``{name}`` is an error (write ``{{`` for a literal brace).
 
-The file is checked completely before anything runs: only the keys above, every step a
-table, a known command, its options known and of the option's type, required ones present.
-Input paths (``file``, ``data``, ``truth``, ``config``, model directories) are resolved
-relative to the experiment file and must exist, unless an earlier step writes them inside the
-output folder (then they are checked when their step starts). Output paths (``out``, ``plot``,
-a SQLite storage) are resolved relative to the output folder and must lie inside it.
+The file is checked completely before anything runs: only the keys above, a known job, its
+parameters known, required ones present, values within the workflow's constraints
+(``PARAMETERS``). Parameters that name files to read (the workflow record's ``inputs``) are
+resolved relative to the experiment file and must exist, unless an earlier step writes them
+inside the output folder (then they are checked when their step starts). ``out`` is resolved
+relative to the output folder and must lie inside it, as must a SQLite ``storage``.
 
-Each step calls its command's ``run(args)`` with an ``argparse.Namespace`` made of the
-command's own parser defaults and the step's ``with`` table. The whole experiment is one
-MLflow run (steps that track their own runs nest under it); its artifacts are the experiment
-file and the files the steps wrote (files already in the output folder are left out).
+Each step calls ``workflow(job).function(**parameters)``, then ``result.write(out)`` (a workflow
+that takes ``out`` itself writes it) and logs the result to MLflow (``tracking.log_result``,
+nested). The whole experiment is one MLflow run; its artifacts are the experiment file and the
+files the steps wrote (files already in the output folder are left out). A failing step stops
+the experiment: what it half wrote is removed, and so are folders left empty; the steps before
+it keep their files.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
+import inspect
 import os
-import pkgutil
-import shlex
 import string
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from features.readings.errors import InputError
-from features.readings.fileio import read_toml
-from pipeline.commands import common
-from pipeline.commands.common import check_outputs, remove_created
+from features.readings.config import read_config
+from features.readings.errors import InputError, Progress, report
+from pipeline.results import Result
 
-TOP_KEYS = ("name", "description", "out", "steps")
-STEP_KEYS = ("title", "command", "with")
-# Options that name files or folders: by argparse dest, or by a metavar that says so
-# (``DIR``, ``FILE.toml``, ``DATA|MODEL_DIR``; ``OUT.png`` for an output).
-INPUT_DESTS = ("file", "data", "source", "truth", "config")
-INPUT_WORDS = ("DIR", "FILE", "DATA")
-OUTPUT_DESTS = ("out", "plot")
 SQLITE = "sqlite:///"
 ALERT_EXIT = 3  # an alert (drift monitoring) is a result, not a failure
 
 
+# --------------------------------------------------------------------------- the file
+@dataclass
+class StepFile:
+    """One ``[[steps]]`` table as written."""
+
+    title: str | None = None
+    job: str | None = None
+    command: str | None = None  # the job's CLI name: the same thing as ``job``
+    parameters: dict = field(default_factory=dict, metadata={"key": "with"})
+
+
+@dataclass
+class ExperimentFile:
+    """An experiment file as written."""
+
+    name: str | None = None
+    description: str = ""
+    out: str | None = None
+    steps: list[StepFile] = field(default_factory=list)
+
+
+# --------------------------------------------------------------------------- checked form
 @dataclass
 class Step:
+    """A step ready to run: the job, its keyword parameters (paths resolved) and where its
+    result is written (``out``; None when the workflow writes ``out`` itself or nothing)."""
+
     index: int
     title: str
-    command: str
-    args: argparse.Namespace
-    argv: list[str]  # the equivalent command line, shown to the user
+    job: str
+    params: dict
+    out: Path | None = None
     inputs: list[Path] = field(default_factory=list)
     outputs: list[Path] = field(default_factory=list)
 
@@ -77,131 +94,139 @@ class Experiment:
     description: str = ""
 
 
-# --------------------------------------------------------------------------- commands
-def commands() -> dict[str, object]:
-    """Every ``backlash`` subcommand module by name (``hidden_effects`` -> ``hidden-effects``),
-    except ``run`` itself: an experiment does not start experiments."""
-    import pipeline.commands as package
+@dataclass
+class StepResult:
+    """What one step gave: its workflow result and the files written, by role."""
 
-    found = {}
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f"{package.__name__}.{info.name}")
-        if hasattr(module, "add_arguments") and hasattr(module, "run") and info.name != "run":
-            found[info.name.replace("_", "-")] = module
-    return dict(sorted(found.items()))
+    step: Step
+    result: Result
+    files: dict[str, Path]
+    code: int = 0  # 0, or ALERT_EXIT when the result carries alerts
 
-
-def options(module) -> dict[str, argparse.Action]:
-    """The command's argparse actions by dest, from its own ``add_arguments``."""
-    from pipeline.commands.common import checked_types
-
-    parser = argparse.ArgumentParser(add_help=False)
-    module.add_arguments(parser)
-    checked_types(parser)  # the same finite/count/seed checks as on the command line
-    return {a.dest: a for a in parser._actions}
+    def paths(self) -> list[Path]:
+        """Every file written, in order (a role may hold several files)."""
+        found = []
+        for value in self.files.values():
+            found += [Path(v) for v in value] if isinstance(value, (list, tuple)) else [
+                Path(value)]
+        return found
 
 
-def path_role(action: argparse.Action) -> str | None:
-    """``"input"``, ``"output"``, ``"storage"`` or None for an option that names no path."""
-    metavar = action.metavar if isinstance(action.metavar, str) else ""
-    if action.dest in OUTPUT_DESTS or action.dest.endswith("_out") or metavar.startswith("OUT"):
-        return "output"
-    if action.dest in INPUT_DESTS or any(w in metavar.upper() for w in INPUT_WORDS):
-        return "input"
-    if action.dest == "storage":
-        return "storage"
-    return None
+@dataclass
+class ExperimentResult(Result):
+    """A finished experiment: every step's result, the MLflow run and the exit code."""
+
+    experiment: Experiment
+    steps: list[StepResult] = field(default_factory=list)
+    run_id: str | None = None
+    tracking_uri: str | None = None
+
+    @property
+    def code(self) -> int:
+        """0, or 3 when a step raised an alert."""
+        return max((s.code for s in self.steps), default=0)
+
+    def to_json(self) -> dict:
+        return {"name": self.experiment.name, "out": str(self.experiment.out),
+                "run_id": self.run_id, "code": self.code,
+                "steps": [{"index": s.step.index, "title": s.step.title, "job": s.step.job,
+                           "code": s.code, "files": [str(p) for p in s.paths()]}
+                          for s in self.steps]}
 
 
 # --------------------------------------------------------------------------- loading
 def load(path, out: str | None = None) -> Experiment:
-    """Read and check an experiment file completely; nothing runs and nothing is written."""
+    """Read and check an experiment file completely; nothing runs and nothing is written.
+
+    Parameters
+    ----------
+    path : str or Path
+        The experiment file.
+    out : str, optional
+        Output folder (default: the file's ``out``, else ``<name>-out``), relative to the
+        working directory.
+    """
+    from features.readings.fileio import check_output
+
     path = Path(path)
-    spec = read_toml(path, "experiment")
-    _check_keys(spec, TOP_KEYS, "top-level key", path)
-    for key in ("name", "description", "out"):
-        if key in spec and not isinstance(spec[key], str):
-            raise InputError(f"{key!r} must be a string, got {_kind(spec[key])}", file=path)
+    spec = read_config(path, ExperimentFile, what="experiment")
     here = path.parent.resolve()
+    name = spec.name if spec.name is not None else path.stem
     if out is None:
-        out = expand(spec.get("out", f"{spec.get('name', path.stem)}-out"),
+        out = expand(spec.out if spec.out is not None else f"{name}-out",
                      {"here": str(here)}, path, "'out'")
     if not out.strip():
         raise InputError("the output folder is empty; give 'out' a folder name", file=path)
     out_dir = Path(os.path.realpath(out))
-    values = {"data": str(here / "data"), "out": str(out_dir), "here": str(here)}
-
-    raw_steps = spec.get("steps", [])
-    if not isinstance(raw_steps, list):
-        raise InputError(f"'steps' must be an array of tables ([[steps]]), got "
-                         f"{_kind(raw_steps)}", file=path)
-    if not raw_steps:
+    check_output(out_dir, "folder", "out")
+    if not spec.steps:
         raise InputError("no [[steps]]: an experiment needs at least one step", file=path)
-    known = commands()
-    steps = [load_step(i, raw, known, values, path)
-             for i, raw in enumerate(raw_steps, start=1)]
-    return Experiment(spec.get("name", path.stem), path, out_dir, steps,
-                      spec.get("description", ""))
+    values = {"data": str(here / "data"), "out": str(out_dir), "here": str(here)}
+    steps = [load_step(i, raw, values, path) for i, raw in enumerate(spec.steps, start=1)]
+    return Experiment(name, path, out_dir, steps, spec.description)
 
 
-def load_step(index: int, raw, known: dict, values: dict, path: Path) -> Step:
-    where = f"step {index}"
-    if not isinstance(raw, dict):
-        raise InputError(f"{where}: expected a table ([[steps]] with title, command and "
-                         f"[steps.with]), got {_kind(raw)}", file=path)
-    _check_keys(raw, STEP_KEYS, "key", path, where=f"{where}: ",
-                hint=" (a command's options go in [steps.with])")
-    command = raw.get("command")
-    if not isinstance(command, str) or command not in known:
-        raise InputError(f"{where}: unknown command {command!r}; expected one of "
-                         f"{', '.join(known)}", file=path)
-    where = f"step {index} ({command})"
-    title = raw.get("title", command)
-    given = raw.get("with", {})
-    if not isinstance(title, str):
-        raise InputError(f"{where}: 'title' must be a string, got {_kind(title)}", file=path)
-    if not isinstance(given, dict):
-        raise InputError(f"{where}: 'with' must be a table of options, got {_kind(given)}",
-                         file=path)
-    settable = options(known[command])
-    unknown = [k for k in given if k not in settable]
+def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
+    """A checked step: known job and parameters, placeholders filled, paths resolved."""
+    record = _record(index, raw, path)
+    where = f"step {index} ({record.name})"
+    signature = inspect.signature(record.function)
+    accepted = [n for n, p in signature.parameters.items()
+                if n != "progress" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    allowed = accepted + ([] if "out" in accepted else ["out"])
+    given = raw.parameters
+    unknown = [k for k in given if k not in allowed]
     if unknown:
         hint = unknown[0].replace("-", "_").lstrip("_")
-        hint = f" (write it as {hint!r})" if hint in settable else ""
-        raise InputError(f"{where}: unknown option {unknown[0]!r}{hint}; expected one of "
-                         f"{', '.join(settable)}", file=path)
-    missing = [d for d, a in settable.items() if a.required and d not in given]
+        hint = f" (write it as {hint!r})" if hint in allowed else ""
+        raise InputError(f"{where}: unknown parameter {unknown[0]!r}{hint}; expected one of "
+                         f"{', '.join(allowed)}", file=path)
+    missing = [n for n in accepted if n not in given
+               and signature.parameters[n].default is inspect.Parameter.empty]
     if missing:
-        raise InputError(f"{where}: missing required option {missing[0]!r}", file=path)
+        raise InputError(f"{where}: missing parameter {missing[0]!r}", file=path)
 
-    args = argparse.Namespace(command=command, **defaults(settable))
-    step = Step(index, title, command, args, [command])
-    for dest, value in given.items():
-        action = settable[dest]
-        label = f"{where}: option {dest!r}"
+    step = Step(index, raw.title or record.name, record.name, {})
+    for name, value in given.items():
+        label = f"{where}: parameter {name!r}"
         value = _expand_all(value, values, path, label)
-        value = convert(value, action, path, label)
-        value = _place(value, path_role(action), step, values, path, label)
-        setattr(args, dest, value)
-    for dest, action in settable.items():  # in the parser's order, so positionals line up
-        if dest in given:
-            step.argv += _argv(action, getattr(args, dest))
-    _check_storage(step, settable, Path(values["out"]), path, where)
+        if name in record.inputs:
+            value = _place(value, "input", step, values, path, label)
+        elif name == "out":
+            value = _place(value, "output", step, values, path, label)
+        step.params[name] = value
+    if "storage" in accepted:
+        _check_storage(step, Path(values["out"]), path, where)
+    if "out" in step.params and "out" not in accepted:
+        step.out = Path(step.params.pop("out"))
+    _check_values(record, step.params, path, where)
     return step
 
 
-def defaults(actions: dict[str, argparse.Action]) -> dict:
-    """The values argparse gives options that are not on the command line (a string default
-    goes through the option's type, as argparse does)."""
-    values = {}
-    for dest, action in actions.items():
-        if action.default is argparse.SUPPRESS:
-            continue
-        value = action.default
-        if isinstance(value, str) and action.type is not None:
-            value = action.type(value)
-        values[dest] = value
-    return values
+def _record(index: int, raw: StepFile, path: Path):
+    """The workflow record of a step's job (``job`` or ``command``)."""
+    from pipeline.workflows import NAMES, workflow
+
+    if raw.job is not None and raw.command is not None:
+        raise InputError(f"step {index}: give 'job' or 'command', not both", file=path)
+    job = raw.job if raw.job is not None else raw.command
+    if job not in NAMES:
+        given = "no job given" if job is None else f"unknown job {job!r}"
+        raise InputError(f"step {index}: {given}; expected one of {', '.join(NAMES)}",
+                         file=path)
+    return workflow(job)
+
+
+def _check_values(record, params: dict, path: Path, where: str) -> None:
+    """The workflow's own constraints (``PARAMETERS``), before anything runs."""
+    from pipeline.workflows import check_params
+
+    module = sys.modules[record.function.__module__]
+    try:
+        check_params(getattr(module, "PARAMETERS", {}), params, record.name)
+    except InputError as err:
+        raise InputError(f"{where}: parameter {err.parameter!r}: {err.message}",
+                         file=path) from None
 
 
 def expand(text: str, values: dict, path: Path, label: str) -> str:
@@ -225,50 +250,19 @@ def _expand_all(value, values, path, label):
         return expand(value, values, path, label)
     if isinstance(value, list):
         return [_expand_all(v, values, path, label) for v in value]
+    if isinstance(value, dict):
+        return {k: _expand_all(v, values, path, label) for k, v in value.items()}
     return value
 
 
-def convert(value, action: argparse.Action, path: Path, label: str):
-    """A TOML value as the command line would give it: through the option's type and
-    choices. Flags take true/false; an option taking several values takes an array."""
-    if action.nargs == 0:  # store_true, store_false, store_const
-        if not isinstance(value, bool):
-            raise InputError(f"{label}: expected true or false, got {_kind(value)}", file=path)
-        return action.const if value else action.default
-    if action.nargs in ("*", "+") or isinstance(action.nargs, int):
-        items = value if isinstance(value, list) else [value]
-        return [_one(v, action, path, label) for v in items]
-    if isinstance(value, list):
-        raise InputError(f"{label}: expected a single value, got an array", file=path)
-    return _one(value, action, path, label)
-
-
-def _one(value, action, path, label):
-    if isinstance(value, (bool, dict, list)):
-        numeric = (int, float, common.finite_float, common.count, common.seed)
-        wanted = "number" if action.type in numeric else "string"
-        raise InputError(f"{label}: expected a {wanted}, got {_kind(value)}", file=path)
-    text = value if isinstance(value, str) else str(value)
-    try:
-        converted = action.type(text) if action.type is not None else text
-    except (TypeError, ValueError, argparse.ArgumentTypeError) as err:
-        kind = getattr(action.type, "__name__", "value")
-        raise InputError(f"{label}: expected {'an' if kind[0] in 'aeiou' else 'a'} {kind}, "
-                         f"got {value!r} ({err})", file=path) from None
-    if action.choices is not None and converted not in action.choices:
-        raise InputError(f"{label}: expected one of {', '.join(map(str, action.choices))}, got "
-                         f"{value!r}", file=path)
-    return converted
-
-
 # --------------------------------------------------------------------------- paths
-def _place(value, role, step: Step, values: dict, path: Path, label: str):
-    """Resolve a path option: inputs against the file's folder (they must exist unless an
+def _place(value, role: str, step: Step, values: dict, path: Path, label: str):
+    """Resolve a path parameter: inputs against the file's folder (they must exist unless an
     earlier step writes them), outputs against the output folder (they must stay inside)."""
-    if value is None or role not in ("input", "output"):
-        return value
     if isinstance(value, list):
         return [_place(v, role, step, values, path, label) for v in value]
+    if not isinstance(value, str):
+        return value  # a table or a number: the workflow's constraints judge it
     out = Path(values["out"])
     base = Path(values["here"]) if role == "input" else out
     resolved = Path(os.path.realpath(base / Path(value).expanduser()))
@@ -284,24 +278,21 @@ def _place(value, role, step: Step, values: dict, path: Path, label: str):
     return str(resolved)
 
 
-def _check_storage(step: Step, settable: dict, out: Path, path: Path, where: str) -> None:
+def _check_storage(step: Step, out: Path, path: Path, where: str) -> None:
     """A storage URL (``tune``) is an output: SQLite files inside the output folder, given
-    explicitly (the command's default file lies in the working directory)."""
-    dest = next((d for d, a in settable.items() if path_role(a) == "storage"), None)
-    if dest is None:
-        return
-    url = getattr(step.args, dest)
+    explicitly (the workflow's default file lies in the working directory)."""
+    url = step.params.get("storage")
     if url is None:
-        raise InputError(f"{where}: give option {dest!r}, e.g. \"{SQLITE}{{out}}/optuna.db\": "
-                         "the default storage lies outside the experiment's output folder",
+        raise InputError(f"{where}: give parameter 'storage', e.g. \"{SQLITE}{{out}}/optuna.db\""
+                         ": the default storage lies outside the experiment's output folder",
                          file=path)
-    if url.startswith(SQLITE):
+    if isinstance(url, str) and url.startswith(SQLITE):
         db = Path(os.path.realpath(out / url[len(SQLITE):]))
         if not inside(db, out):
-            raise InputError(f"{where}: option {dest!r}: {url!r} lies outside the experiment's "
-                             f"output folder {out}", file=path)
+            raise InputError(f"{where}: parameter 'storage': {url!r} lies outside the "
+                             f"experiment's output folder {out}", file=path)
         step.outputs.append(db)
-        setattr(step.args, dest, f"{SQLITE}{db}")
+        step.params["storage"] = f"{SQLITE}{db}"
 
 
 def inside(path: Path, folder: Path) -> bool:
@@ -309,82 +300,103 @@ def inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-def _argv(action: argparse.Action, value) -> list[str]:
-    if action.nargs == 0:
-        return [action.option_strings[0]] if value == action.const else []
-    words = [str(v) for v in value] if isinstance(value, list) else [str(value)]
-    return [action.option_strings[0], *words] if action.option_strings else words
-
-
-def _check_keys(table: dict, allowed: tuple, what: str, path: Path, *, where: str = "",
-                hint: str = "") -> None:
-    unknown = [k for k in table if k not in allowed]
-    if unknown:
-        raise InputError(f"{where}unknown {what} {unknown[0]!r}; expected "
-                         f"{', '.join(allowed)}{hint}", file=path)
-
-
-def _kind(value) -> str:
-    names = {bool: "a boolean", int: "an integer", float: "a float", str: "a string",
-             list: "an array", dict: "a table"}
-    return names.get(type(value), type(value).__name__)
-
-
 # --------------------------------------------------------------------------- running
-def execute(experiment: Experiment) -> int:
-    """Run every step in order; stop at the first failing step and return its exit code
-    (3, an alert, does not stop the experiment)."""
-    import mlflow
+def execute(experiment: Experiment, progress: Progress | None = None) -> ExperimentResult:
+    """Run every step in order as one MLflow run.
 
+    Parameters
+    ----------
+    experiment : Experiment
+        What ``load`` returned.
+    progress : callable, optional
+        ``progress(done, total, title)``: called before each step (``done`` steps finished)
+        and once at the end (``done == total``).
+
+    Returns
+    -------
+    ExperimentResult
+        Every step's result; ``code`` is 3 when a step raised an alert (drift), else 0.
+
+    Raises
+    ------
+    InputError
+        The first failing step's error, as one line naming the step. What that step wrote is
+        removed, and so is every folder the experiment created that is left empty.
+    """
     from pipeline import tracking
 
-    experiment.out.mkdir(parents=True, exist_ok=True)
+    outcome = ExperimentResult(experiment=experiment, tracking_uri=tracking.tracking_uri())
     before = snapshot(experiment)
-    known = commands()
-    worst = 0
+    folders = _folders(experiment.out)
+    total = len(experiment.steps)
     with tracking.run("experiments", experiment.name) as active:
-        mlflow.log_artifact(str(experiment.path))
+        outcome.run_id = active.info.run_id
+        tracking.mlflow_module().log_artifact(str(experiment.path))
         try:
             for step in experiment.steps:
-                code = run_step(step, known[step.command], len(experiment.steps))
-                mlflow.log_metric(f"step_{step.index}_exit_code", code)
-                if code not in (0, ALERT_EXIT):
-                    print(f"step {step.index} failed with exit code {code}", file=sys.stderr)
-                    return code
-                worst = max(worst, code)
+                report(progress, step.index - 1, total, step.title)
+                outcome.steps.append(_run_step(step, experiment))
+            report(progress, total, total, "")
         finally:
             log_outputs(experiment, before)
-        print(f"\nexperiment {experiment.name!r}: MLflow run {active.info.run_id} in "
-              f"{tracking.tracking_uri()}; outputs in {experiment.out}/", file=sys.stderr)
-    return worst
+            if len(outcome.steps) < total:
+                _remove_empty(experiment.out, folders)
+    for done in outcome.steps:
+        outcome.notes += done.result.notes
+    return outcome
 
 
-def run_step(step: Step, module, total: int) -> int:
-    shown = shlex.join(_short(word) for word in step.argv)
-    print(f"\n[{step.index}/{total}] {step.title}\n$ backlash {shown}", file=sys.stderr,
-          flush=True)
+def _run_step(step: Step, experiment: Experiment) -> StepResult:
+    """Call the step's workflow, write its result and log it; a failure removes what the
+    step wrote and is re-raised as one line naming the step."""
+    from pipeline import tracking
+    from pipeline.workflows import workflow
+
+    mlflow = tracking.mlflow_module()
+    where = f"step {step.index} ({step.job})"
+    before = _files_below(experiment.out)
     try:
         missing = [p for p in step.inputs if not p.exists()]
         if missing:
-            raise InputError(f"step {step.index} ({step.command}): no such file or folder "
-                             f"{str(missing[0])!r} (no earlier step wrote it)")
-        created = check_outputs(step.command, step.args)
+            raise InputError(f"no such file or folder {str(missing[0])!r} (no earlier step "
+                             "wrote it)")
+        result = workflow(step.job).function(**step.params)
+        files = dict(result.write(step.out)) if step.out is not None else dict(result.files)
+    except (InputError, ValueError) as err:
+        mlflow.log_metric(f"step_{step.index}_exit_code", 2)
+        for f in _files_below(experiment.out) - before:  # nothing half-written stays
+            f.unlink(missing_ok=True)
+        line = err.line() if isinstance(err, InputError) else str(err)
+        raise InputError(f"{where}: {' '.join(line.split())}") from None
+    log_result = getattr(tracking, "log_result", None)
+    if log_result is not None:
+        log_result(result, nested=True)
+    code = ALERT_EXIT if getattr(result, "alerts", None) else 0
+    mlflow.log_metric(f"step_{step.index}_exit_code", code)
+    return StepResult(step, result, files, code)
+
+
+def _files_below(folder: Path) -> set[Path]:
+    return {p for p in folder.rglob("*") if p.is_file()} if folder.is_dir() else set()
+
+
+def _folders(folder: Path) -> set[Path]:
+    """The folders that exist now at or below ``folder``."""
+    if not folder.is_dir():
+        return set()
+    return {folder, *(p for p in folder.rglob("*") if p.is_dir())}
+
+
+def _remove_empty(folder: Path, kept: set[Path]) -> None:
+    """Remove the empty folders at or below ``folder`` that are not in ``kept``, deepest
+    first."""
+    if not folder.is_dir():
+        return
+    for path in sorted(_folders(folder) - kept, key=lambda p: len(p.parts), reverse=True):
         try:
-            return int(module.run(step.args) or 0)
-        except (InputError, ValueError):
-            remove_created(created)
-            raise
-    except (InputError, ValueError) as err:  # a user error, as the command line treats it
-        line = err.line() if isinstance(err, InputError) else " ".join(str(err).split())
-        print(f"backlash {step.command}: error: {line}", file=sys.stderr)
-        return 2
-
-
-def _short(word: str) -> str:
-    """A path below the working directory as a relative path, for display."""
-    if os.path.isabs(word) and inside(Path(word), Path.cwd().resolve()):
-        return os.path.relpath(word)
-    return word
+            path.rmdir()
+        except OSError:  # not empty: a finished step's files
+            pass
 
 
 def snapshot(experiment: Experiment) -> dict[Path, tuple]:
@@ -410,10 +422,16 @@ def _identity(path: Path) -> tuple:
 
 def log_outputs(experiment: Experiment, before: dict[Path, tuple]) -> None:
     """Log the files the steps wrote (new or changed since ``before``) under ``out/``."""
-    import mlflow
-
+    mlflow = _mlflow()
     for f in _files(experiment):
         if before.get(f) == _identity(f):
             continue
         folder = f.parent.relative_to(experiment.out).as_posix()
         mlflow.log_artifact(str(f), artifact_path="out" if folder == "." else f"out/{folder}")
+
+
+def _mlflow():
+    from pipeline import tracking
+
+    return tracking.mlflow_module()
+

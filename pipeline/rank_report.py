@@ -9,7 +9,7 @@ folder can be moved or zipped as a whole):
 ``rank_effects.png``    effect [um] of each input over its observed range with its
                         bootstrap interval, coloured by verdict
 ``rank_anova.png``      association: ANOVA score -ln(p) per input with bootstrap error bars
-                        (seed 004, Fig. 14)
+                        ([BacklashNN], Fig. 14)
 ``rank_views.png``      association: permutation importance, mutual information, k-NN
                         drop-column loss; and the drop-column importance of gradient boosting
 ``rank_confusion.png``  cross-validated confusion matrix of the weighted k-NN

@@ -1,4 +1,4 @@
-"""Replication of the backlash paper's results (seed 004, section 4 and 5) on one data set.
+"""Replication of the backlash paper's results ([BacklashNN], section 4 and 5) on one data set.
 
 For the paper's eight inputs, and again without the two deviation inputs (the backlash
 target is computed from the same linear test, so they carry the target itself):
@@ -54,19 +54,22 @@ def network_run(X: pd.DataFrame, y: pd.Series, random_state: int) -> dict:
 
 
 def replicate(X: pd.DataFrame, y: pd.Series, meta: pd.DataFrame, random_state: int = 0,
-              n_boot: int = 100, truth_um=None, estimator=None) -> dict:
+              n_boot: int = 100, truth_um=None, estimator=None, progress=None) -> dict:
     """Every replicated number with and without the deviation inputs. With the twin's true
     backlash per point, also the share of points whose true backlash lies in the measured
     point's class: the accuracy a perfect classifier of the truth would reach. ``estimator``:
-    the permutation-importance predictor of the association views (default gradient boosting).
+    the permutation-importance predictor of the association views (default gradient boosting);
+    ``progress(done, total, what)`` is told as each case starts and when all are done.
     """
     from features.ranking import final_rank, rank_features
+    from features.readings.errors import report
     from models.influence import conditional_influence
 
     cases = {"with deviations": list(X.columns),
              "without deviations": [c for c in X.columns if c not in DEVIATIONS]}
     results = {}
-    for case, columns in cases.items():
+    for done, (case, columns) in enumerate(cases.items()):
+        report(progress, done, len(cases), case)
         ranking = rank_features(X[columns], y, rank_by="anova", n_boot=n_boot, n_repeats=2,
                                 estimator=estimator, random_state=random_state)
         table = ranking.table
@@ -83,6 +86,7 @@ def replicate(X: pd.DataFrame, y: pd.Series, meta: pd.DataFrame, random_state: i
             "verdict": {c: verdicts.loc[c, "verdict"] for c in columns},
             "proxy_for": {c: verdicts.loc[c, "proxy_for"] for c in columns},
         }
+    report(progress, len(cases), len(cases), "done")
     return results
 
 

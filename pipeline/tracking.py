@@ -6,8 +6,13 @@ directory): a local SQLite file, a database URL, or ``http://HOST:PORT`` of a sh
 a server without ``BACKLASH_ARTIFACTS`` they go where the server stores them. ``configure()``
 applies this once per store; every other function here calls it, so commands never set URIs.
 
+``log_result(result)`` is the one adapter from a workflow's result to MLflow: it logs the result's
+``tracking_record()`` (params, metrics, artifacts, tags, a model to register, nested runs) and
+gives the champion alias to the best model it registered.
+
 Concurrency: the first use of a fresh store (schema creation and migration) happens under a
-file lock beside a SQLite database, or an advisory lock in PostgreSQL, so several processes may
+file lock (in the temporary folder, keyed by the database's path, so no lock file is left
+beside the user's files), or an advisory lock in PostgreSQL, so several processes may
 start on an empty store at once; experiments created concurrently resolve to one; ``exclusive()`` is a mutex held in the
 model registry itself (a unique registered-model name), so it works against any store,
 including a remote server, and is used for compare-and-set decisions such as the champion.
@@ -22,8 +27,12 @@ import hashlib
 import os
 import random
 import re
+import tempfile
 import time
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+
+from pipeline.results import TrackingRecord
 
 DEFAULT_URI = "sqlite:///mlflow.db"
 DEFAULT_ARTIFACTS = "mlartifacts"
@@ -128,7 +137,7 @@ def _create_store(mlflow, uri: str) -> None:
     the schema, which two processes must not do at the same time on one SQLite file."""
     path = _sqlite_path(uri) if uri.startswith("sqlite:") else None
     if path is not None:
-        lock = _file_lock(path.with_name(path.name + ".lock"))
+        lock = _file_lock(lock_path(path))
     elif uri.startswith("postgresql"):
         lock = _advisory_lock(uri)
     else:  # a server creates its schema once at start; other databases are not locked
@@ -139,10 +148,18 @@ def _create_store(mlflow, uri: str) -> None:
         store.search_registered_models(max_results=1)
 
 
+def lock_path(database: Path) -> Path:
+    """The lock file guarding the schema creation of a SQLite store: in the temporary folder,
+    named by a hash of the database's absolute path (every process on this machine finds the
+    same one; the user's working folder stays clean)."""
+    name = hashlib.sha256(str(Path(database).absolute()).encode()).hexdigest()[:24]
+    return Path(tempfile.gettempdir()) / f"backlash-mlflow-{name}.lock"
+
+
 def _file_lock(path: Path):
     from filelock import FileLock
 
-    return FileLock(str(path), timeout=300)
+    return FileLock(str(path), timeout=300, mode=0o666)  # shared by every user of the store
 
 
 @contextlib.contextmanager
@@ -295,3 +312,217 @@ def data_hash(frame) -> str:
     """Content hash of a data frame (sha256 of its canonical CSV bytes), logged with runs."""
     payload = frame.to_csv(index=False).encode()
     return hashlib.sha256(payload).hexdigest()
+
+
+# --------------------------------------------------------------------------- the one adapter
+
+@dataclass
+class RunRecord(TrackingRecord):
+    """A ``TrackingRecord`` with what model runs add.
+
+    Attributes
+    ----------
+    model : dict or None
+        A trained model to log and register as ``backlash-predictor``
+        (``pipeline.model_tracking.model_record``).
+    children : list of TrackingRecord
+        Runs nested under this one (one per compared model, one per tuning trial).
+    promote : bool
+        Give the champion alias to the best registered model of this record and its children
+        (lowest ``test_rmse_um``) when it beats the champion on the same data (``data_sha256``).
+    status : str
+        How the run ends: ``FINISHED``, or ``FAILED`` for a trial that failed.
+    """
+
+    model: dict | None = None
+    children: list = field(default_factory=list)
+    promote: bool = False
+    status: str = "FINISHED"
+
+
+def record_data(record: TrackingRecord) -> dict:
+    """``record`` as plain JSON data (paths as text), for another process to log."""
+    data = {f.name: getattr(record, f.name) for f in fields(record)}
+    data["artifacts"] = [str(path) for path in record.artifacts]
+    data["children"] = [record_data(child) for child in data.get("children", [])]
+    return data
+
+
+def log_result(result, *, nested: bool = False) -> dict:
+    """Log a workflow result (or a ``TrackingRecord``) to MLflow: one run in the record's
+    experiment, nested under an active run, its children nested under it.
+
+    Returns
+    -------
+    dict
+        ``run_id``; ``version`` and ``champion`` when a model was registered; ``children``: the
+        same per nested run, by run name. Empty when the result is not tracked.
+    """
+    record = result if isinstance(result, TrackingRecord) else result.tracking_record()
+    if record is None:
+        return {}
+    data = record_data(record)
+    with run(data["experiment"], data["run_name"], nested=nested, tags=data["tags"] or None) \
+            as active:
+        return {"run_id": active.info.run_id, **log_into(data)}
+
+
+def log_into(data: dict) -> dict:
+    """Log a record (``record_data``) into the active run; the logging function of
+    ``pipeline.background_run`` (plain data in, plain data out)."""
+    mlflow = mlflow_module()
+    if data.get("params"):
+        mlflow.log_params(params(data["params"]))
+    if data.get("metrics"):
+        mlflow.log_metrics(metrics(data["metrics"]))
+    for path in data.get("artifacts", []):
+        mlflow.log_artifact(path, artifact_path=data.get("artifact_path"))
+    out = {}
+    if data.get("model"):
+        out["version"] = log_model(data["model"])
+    children = {}
+    for child in data.get("children", []):
+        if child.get("status", "FINISHED") != "FINISHED":  # a failed trial: ended as FAILED
+            parent = mlflow.active_run().info
+            children[child["run_name"]] = {"run_id": log_child(
+                parent.experiment_id, parent.run_id, child)}
+            continue
+        with run(data["experiment"], child["run_name"], nested=True,
+                 tags=child.get("tags") or None) as active:
+            children[child["run_name"]] = {"run_id": active.info.run_id, **log_into(child)}
+    if children:
+        out["children"] = children
+    if data.get("promote"):
+        out["champion"] = _promote_best(data, out)
+    return out
+
+
+def _promote_best(data: dict, logged: dict) -> bool:
+    """Champion alias for the best registered model among the record and its children."""
+    import math
+
+    candidates = []
+    if "version" in logged:
+        candidates.append((data["metrics"].get("test_rmse_um", math.inf), logged["version"]))
+    for child in data.get("children", []):
+        version = logged.get("children", {}).get(child["run_name"], {}).get("version")
+        if version is not None:
+            candidates.append((child["metrics"].get("test_rmse_um", math.inf), version))
+    if not candidates:
+        return False
+    rmse, version = min(candidates, key=lambda c: float(c[0]))
+    return promote_if_best(version, str(data["params"]["data_sha256"]), float(rmse))
+
+
+def log_child(experiment_id: str, parent_run_id: str, record) -> str:
+    """Log ``record`` (a ``TrackingRecord`` or its ``record_data``: params, metrics, tags,
+    status) as a run nested under ``parent_run_id`` and ended at once, from any process (no
+    active run needed); returns its run id."""
+    from mlflow.entities import Metric, Param, RunStatus
+    from mlflow.utils.time import get_current_time_millis
+
+    data = record if isinstance(record, dict) else record_data(record)
+    store = client()
+    created = store.create_run(experiment_id, run_name=data["run_name"],
+                               tags={"mlflow.parentRunId": parent_run_id, **data["tags"]})
+    now = get_current_time_millis()
+    store.log_batch(created.info.run_id,
+                    metrics=[Metric(k, v, now, 0) for k, v in metrics(data["metrics"]).items()],
+                    params=[Param(k, v) for k, v in params(data["params"]).items()])
+    finished = data.get("status", "FINISHED") == "FINISHED"
+    store.set_terminated(created.info.run_id, RunStatus.to_string(
+        RunStatus.FINISHED if finished else RunStatus.FAILED))
+    return created.info.run_id
+
+
+# --------------------------------------------------------------------------- model registry
+
+REGISTERED_NAME = "backlash-predictor"
+CHAMPION = "champion"
+CHAMPION_LOCK = f"{REGISTERED_NAME}.champion-lock"
+MODEL_FIGURES = "figures"  # the folder of a model directory holding its figures
+REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "scikit-learn",
+                "skops", "pandas", "numpy", "scipy"]
+
+
+def log_model(model: dict) -> str:
+    """Log a trained model (``pipeline.model_tracking.model_record``) into the active run:
+    its estimator parameters, per-epoch history, the model directory and the model from code,
+    registered as ``backlash-predictor``; returns the registered version."""
+    import shutil
+
+    mlflow = mlflow_module()
+    mlflow.log_params(params(model["estimator_params"]))
+    for name, values in model["history"].items():
+        for epoch, value in enumerate(values):
+            if value is not None:
+                mlflow.log_metric(key(f"epoch_{name}"), value, step=epoch)
+    with tempfile.TemporaryDirectory() as tmp:
+        # a copy without figures/: they are logged apart, under their own artifact path
+        model_dir = shutil.copytree(model["model_dir"], Path(tmp) / "model_dir",
+                                    ignore=shutil.ignore_patterns(MODEL_FIGURES))
+        mlflow.log_artifacts(str(model_dir), artifact_path="model_dir")
+        version = _log_pyfunc(model, model_dir).registered_model_version
+    return str(version)
+
+
+def _log_pyfunc(model: dict, model_dir: Path):
+    """The model from code, registered, with signature and input example.
+
+    MLflow would also check that the example serves by loading the model into this process;
+    that imports the predictor's libraries into a logging process that needs none of them
+    (seconds per training), and the test suite checks the served model instead."""
+    import numpy as np
+    import pandas as pd
+    from mlflow.models import Model, infer_signature
+
+    example = pd.DataFrame(**model["example"])
+    return Model.log(
+        artifact_path=None, name="model", flavor=_PyfuncFlavor, flavor_name="pyfunc.ModelFromCode",
+        python_model=str(Path(__file__).parents[1] / "models" / "pyfunc_model.py"),
+        artifacts={"model_dir": str(model_dir)},
+        signature=infer_signature(example, np.asarray(model["example_prediction"])),
+        input_example=example, registered_model_name=REGISTERED_NAME,
+        pip_requirements=REQUIREMENTS,  # explicit: inferring them costs seconds per model
+        validate_serving_input=False)
+
+
+class _PyfuncFlavor:
+    """``mlflow.pyfunc`` as a flavor of ``Model.log``: ``Model.log`` reads its
+    ``validate_serving_input`` switch and passes it on, which ``pyfunc.save_model`` refuses."""
+
+    @staticmethod
+    def save_model(*, validate_serving_input: bool = True, **kwargs):
+        import mlflow.pyfunc
+
+        return mlflow.pyfunc.save_model(**kwargs)
+
+
+def promote_if_best(version: str, data_hash: str, rmse_um: float) -> bool:
+    """Give ``version`` the champion alias when it beats the champion on the same data set
+    (or there is none yet). A champion trained on other data is left alone.
+
+    Compare-and-set under a registry-wide lock, so two trainings finishing at once cannot
+    both read the old champion and both claim the alias.
+    """
+    with exclusive(CHAMPION_LOCK):
+        return _promote(client(), version, data_hash, rmse_um)
+
+
+def _promote(store, version: str, data_hash: str, rmse_um: float) -> bool:
+    import math
+
+    from mlflow.exceptions import MlflowException
+
+    try:
+        current = store.get_model_version_by_alias(REGISTERED_NAME, CHAMPION)
+    except MlflowException:
+        current = None
+    if current is not None:
+        found = store.get_run(current.run_id)
+        if found.data.params.get("data_sha256") != data_hash:
+            return False
+        if float(found.data.metrics.get("test_rmse_um", math.inf)) <= rmse_um:
+            return False
+    store.set_registered_model_alias(REGISTERED_NAME, CHAMPION, version)
+    return True

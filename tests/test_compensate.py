@@ -38,8 +38,7 @@ def golden_profile() -> AxisProfile:
 
 
 def written_files(name: str, out: Path, profile=None) -> dict:
-    writer, _ = CONTROLLERS[name]
-    return writer(profile or golden_profile(), out, Options())
+    return CONTROLLERS[name].writer(profile or golden_profile(), out, Options())
 
 
 @pytest.mark.parametrize("name", list(CONTROLLERS))
@@ -177,8 +176,8 @@ def test_twin_closed_loop_catches_a_flipped_sign(twin, tmp_path):
         table[:, 1:] = 2 * table[:, [0]] - table[:, 1:]  # actual mirrored: the sign mistake
         np.savetxt(comp_path, table, fmt="%.7f")
         machine = comp_path.stem.rsplit("_", 1)[0]
-        files[(machine, "X")] = {"table": comp_path,
-                                 "parameters": comp_path.with_name(f"{comp_path.stem}_linuxcnc.ini")}
+        ini = comp_path.with_name(f"{comp_path.stem}_linuxcnc.ini")
+        files[(machine, "X")] = {"table": comp_path, "parameters": ini}
     from pipeline.compensation.profile import measured_profiles
 
     profiles = measured_profiles(read_readings(twin))
@@ -210,10 +209,11 @@ def test_predictor_source(tmp_path, capsys):
 @pytest.mark.parametrize("extra, message", [
     (["--controller", "okuma"], "unknown controller 'okuma'"),
     (["--controller", "linuxcnc", "--conditions", "feed_mm_min=500"],
-     "--conditions applies to a model directory"),
+     "--conditions: applies to a model directory"),
     (["--controller", "heidenhain", "--spacing", "0.01"], "at most 256"),
-    (["--controller", "siemens", "--spacing", "-1"], "must be > 0"),
-    (["--controller", "linuxcnc", "--verify"], "--verify needs twin data"),
+    (["--controller", "siemens", "--spacing", "-1"],
+     "--spacing: must be None or a float in the range (0.0, inf)"),
+    (["--controller", "linuxcnc", "--verify"], "--verify: needs twin data"),
     (["--controller", ","], "unknown controller"),
     (["--controller", "fanuc", "--fanuc-unit-um", "0"], "--fanuc-unit-um"),
 ])
@@ -291,3 +291,75 @@ def test_zero_compensation_leaves_the_twin_unchanged_and_backlash_alone_is_taken
     assert per["B_i"].abs().max() < 1e-9 and iso230.per_target(plain)["B_i"].abs().min() > 4
     wrong = simulate(config, 4, compensation={("M01", "X"): ctl.Compensation(backlash_mm=-b)})
     assert iso230.per_target(wrong.readings)["B_i"].abs().min() > 1.9 * 4
+
+
+# --------------------------------------------------------------------------- Python API
+
+
+def test_python_api_writes_what_the_cli_writes(ess_file, tmp_path, capsys):
+    import backlash as bl
+
+    result = bl.compensate(ess_file, controller="linuxcnc,sinumerik")
+    assert result.controllers == ["linuxcnc", "siemens"] and result.files == {}
+    assert result.notes == ["ess_mcu1025 X: 2 flagged outlier reading(s) not used"]
+    assert capsys.readouterr() == ("", "")  # the library never prints
+    files = result.write(tmp_path / "api")
+    assert sorted(p.name for p in (tmp_path / "api").iterdir()) == sorted(files)
+    assert main(["compensate", str(ess_file), "--controller", "linuxcnc,siemens", "--out",
+                 str(tmp_path / "cli"), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    api = json.loads(json.dumps(result.to_json()))
+    assert api["axes"] == cli["axes"] and api["verify"] == cli["verify"] == []
+    for a, c in zip(api["files"], cli["files"]):
+        assert {k: Path(v).name for k, v in a.pop("files").items()} == {
+            k: Path(v).name for k, v in c.pop("files").items()}
+        assert a == c
+    for name in files:
+        assert (tmp_path / "api" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes()
+
+
+def test_python_api_takes_a_readings_frame_or_a_loaded_model(ess_file, tmp_path):
+    import backlash as bl
+    from models.registry import TrainedModel, make
+
+    readings = bl.read(ess_file)
+    from_frame = bl.compensate(readings, controller="csv")
+    assert from_frame.contents == bl.compensate(ess_file, controller="csv").contents
+    X = pd.DataFrame({"target": [0.0, 100.0, 200.0], "feed_mm_min": [500.0] * 3})
+    model = TrainedModel("constant", make("constant").fit(X, np.array([3.0, 3.0, 3.0])),
+                         ["target", "feed_mm_min"], "iso", 0.2,
+                         {"target": (0.0, 200.0), "feed_mm_min": (500.0, 500.0)}, X)
+    predicted = bl.compensate(model, controller="marlin", conditions={"feed_mm_min": 800})
+    assert predicted.profiles[0].backlash == pytest.approx(3.0)
+    assert "M425 X0.0030" in next(iter(predicted.contents.values())).decode()
+
+
+@pytest.mark.parametrize("kwargs, parameter, message", [
+    ({"controller": "okuma"}, "controller",
+     ("unknown controller 'okuma'; expected linuxcnc, siemens, fanuc, heidenhain, marlin, "
+      "reprap, grblhal, csv or all")),
+    ({"controller": 3}, "controller", "must be an instance of"),
+    ({"spacing": -1.0}, "spacing", r"must be None or a float in the range \(0.0, inf\)"),
+    ({"fanuc_unit_um": 0.0}, "fanuc_unit_um", "must be a float in the range"),
+    ({"conditions": {"feed_mm_min": 500}}, "conditions", "applies to a model directory"),
+    ({"conditions": {"speed": 3}}, "conditions", "unknown condition 'speed'"),
+    ({"verify": True}, "verify", "needs twin data"),
+    ({"controller": "heidenhain", "spacing": 0.01}, "spacing", "at most 256"),
+])
+def test_python_api_errors_name_the_parameter(kwargs, parameter, message, ess_file):
+    import backlash as bl
+
+    with pytest.raises(bl.InputError, match=message) as err:
+        bl.compensate(ess_file, **kwargs)
+    assert err.value.parameter == parameter
+
+
+def test_python_api_refuses_a_hand_made_frame_and_verify_on_a_frame(ess_file):
+    import backlash as bl
+
+    with pytest.raises(bl.InputError) as err:
+        bl.compensate(pd.DataFrame({"x": [1.0]}), controller="csv")
+    assert err.value.parameter == "data"
+    with pytest.raises(bl.InputError, match="not a frame") as err:
+        bl.compensate(bl.read(ess_file), controller="csv", verify=True)
+    assert err.value.parameter == "verify"

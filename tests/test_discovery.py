@@ -13,8 +13,9 @@ from independent_generator import generate as independent
 
 from models import discovery_benchmark as bench
 from models.discovery import discover
+from models.discovery_benchmark import read_scenarios
 from pipeline.cli import main
-from pipeline.commands.hidden_effects import SCENARIOS, read_scenarios
+from pipeline.workflows.hidden_effects import SCENARIOS
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +159,7 @@ def test_foreign_csv_names_the_missing_effect(tmp_path, capsys, feed_effect, nam
 @pytest.mark.parametrize("baseline, words", [
     ("backlash,gremlins", "unknown effect 'gremlins'"),
     ("", "got an empty string"),
-    (" , ", "empty --baseline"),
+    (" , ", "empty; expected"),
     ("backlash,backlash", "listed twice"),
 ])
 def test_bad_baseline_is_one_line_exit_2(tmp_path, capsys, baseline, words):

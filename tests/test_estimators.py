@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from sklearn.utils.estimator_checks import parametrize_with_checks
+from sklearn.utils._param_validation import InvalidParameterError
+from sklearn.utils.estimator_checks import check_param_validation, parametrize_with_checks
 
 from features.readings.errors import InputError
 from models import registry
@@ -93,3 +94,106 @@ def test_required_inputs_are_declared(name, needs):
     assert needs in registry.required_inputs(registry.make(name))
     with pytest.raises(InputError, match=f"needs the input {needs!r}"):
         registry.check_inputs(name, registry.make(name), ["feed_mm_min", "dwell_s"])
+
+
+# ----------------------------------------------------------------------------- parameters
+
+@pytest.mark.parametrize("name", registry.names())
+def test_parameters_are_validated_declaratively(name):
+    """Every predictor declares a constraint per parameter and enforces it at ``fit`` with a
+    ValueError naming the parameter (scikit-learn's own check of ``_parameter_constraints``)."""
+    estimator = registry.make(name)
+    check_param_validation(type(estimator).__name__, estimator)
+
+
+@pytest.mark.parametrize("name, params, parameter", [
+    ("wear-map", {"alpha": -1}, "alpha"),
+    ("wear-map", {"level": 2.0}, "level"),
+    ("wear-map", {"max_control": 0}, "max_control"),
+    ("wear-map", {"n_control": "everywhere"}, "n_control"),
+    ("shallow-lm", {"mu": -1e-3}, "mu"),
+    ("shallow-adam", {"batch_size": 0}, "batch_size"),
+    ("shallow-lm", {"hidden_sizes": (8, 0)}, "hidden_sizes"),
+    ("shallow-lm", {"activation": "softmax"}, "activation"),
+    ("shallow-lm-ensemble", {"n_members": 1}, "n_members"),
+    ("shallow-lm-ensemble", {"estimator__mu": -1.0}, "mu"),
+    ("hybrid", {"residual__mu": -1.0}, "mu"),
+    ("wear-map-hybrid", {"physics__level": 2.0}, "level"),
+    ("effect-model", {"n_centers": 0}, "n_centers"),
+    ("bspline", {"n_control": 0}, "n_control"),
+    ("bezier", {"degree": 0}, "degree"),
+    ("linear-temperature", {"temperature": 20}, "temperature"),
+])
+def test_a_bad_parameter_is_a_clear_error_at_fit(name, params, parameter):
+    X, y = _axis_points()
+    estimator = fast(registry.make(name, **params))
+    with pytest.raises(InvalidParameterError, match=f"The '{parameter}' parameter of") as caught:
+        estimator.fit(X, y)
+    assert isinstance(caught.value, ValueError)
+
+
+# ----------------------------------------------------------------------------- one JSON format
+
+def _hours_points(seed=0, n=60):
+    X, y = _axis_points(seed, n)
+    X["operating_hours"] = np.repeat([0.0, 500.0, 1000.0, 1500.0], n // 4)
+    return X, y + 0.002 * X["operating_hours"].to_numpy()
+
+
+@pytest.mark.parametrize("name, file_name", [("wear-map", "wear_map.json"),
+                                             ("hybrid", "hybrid.json"),
+                                             ("shallow-lm-ensemble", "ensemble.json")])
+def test_own_json_state_is_written_atomically_and_read_back(tmp_path, name, file_name):
+    from models import persistence
+
+    X, y = _hours_points()
+    model = fast(registry.make(name)).fit(X, y)
+    spec = persistence.save_estimator(model, tmp_path, "estimator")
+    assert (tmp_path / "estimator" / file_name).is_file()
+    assert sorted(p.name for p in tmp_path.rglob("*.tmp*")) == []
+    back = persistence.load_estimator(tmp_path, spec, registry.make(name))
+    np.testing.assert_allclose(back.predict(X), model.predict(X))
+    assert list(back.feature_names_in_) == list(X.columns)
+
+
+@pytest.mark.parametrize("name, file_name, key", [("wear-map", "wear_map.json", "coef_"),
+                                                  ("wear-map", "wear_map.json", "n_features_in"),
+                                                  ("hybrid", "hybrid.json", "residual"),
+                                                  ("shallow-lm-ensemble", "ensemble.json",
+                                                   "members")])
+def test_a_missing_key_is_an_input_error_naming_the_file(tmp_path, name, file_name, key):
+    import json
+
+    X, y = _hours_points()
+    folder = tmp_path / "estimator"
+    fast(registry.make(name)).fit(X, y).save(folder)
+    state = json.loads((folder / file_name).read_text())
+    del state[key]
+    (folder / file_name).write_text(json.dumps(state))
+    template = registry.make(name)
+    load = (type(template).load if name == "wear-map"
+            else lambda d: type(template).load(d, template=template))
+    with pytest.raises(InputError, match=f"broken {file_name}: lacks the key {key!r}") as caught:
+        load(folder)
+    assert caught.value.file.endswith(file_name)
+
+
+@pytest.mark.parametrize("name, file_name, change", [
+    ("wear-map", "wear_map.json", lambda s: s["params"].update(level=2.0)),
+    ("shallow-lm-ensemble", "ensemble.json", lambda s: s["params"].update(n_members=0)),
+])
+def test_saved_parameters_are_validated_on_load(tmp_path, name, file_name, change):
+    import json
+
+    X, y = _hours_points()
+    folder = tmp_path / "estimator"
+    fast(registry.make(name)).fit(X, y).save(folder)
+    state = json.loads((folder / file_name).read_text())
+    change(state)
+    (folder / file_name).write_text(json.dumps(state))
+    template = registry.make(name)
+    with pytest.raises(InputError, match="saved parameters are invalid"):
+        if name == "wear-map":
+            type(template).load(folder)
+        else:
+            type(template).load(folder, template=template)

@@ -1,5 +1,5 @@
 """`backlash run`: experiment files are data, checked before anything runs, confined to their
-output folder, and run through each command's own `run(args)`."""
+output folder, and run through the workflows (``workflow(job).function(**table)``)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def convert_step(source, target="{out}/psi.parquet") -> str:
 title = "convert"
 command = "convert"
 [steps.with]
-file = "{source}"
+data = "{source}"
 out = "{target}"
 """
 
@@ -57,7 +57,7 @@ def test_experiment_runs_steps_and_logs_only_its_own_outputs(tmp_path, psi_file,
                       + convert_step("beside.dat", "conv/psi.csv"), out=str(out))
     monkeypatch.chdir(elsewhere)  # inputs are relative to the file, not the working directory
     monkeypatch.setattr(cli, "main", no_argv)
-    assert experiment.execute(experiment.load(spec)) == 0
+    assert experiment.execute(experiment.load(spec)).code == 0
     assert len(pd.read_parquet(out / "psi.parquet")) == 50
     assert len(pd.read_csv(out / "conv" / "psi.csv")) == 50
 
@@ -70,41 +70,100 @@ def test_experiment_runs_steps_and_logs_only_its_own_outputs(tmp_path, psi_file,
                                                  "out/conv/psi.csv"}
 
 
-def test_namespace_is_the_parser_defaults_plus_the_step_options(tmp_path, psi_file):
+def test_step_parameters_are_the_table_with_paths_resolved(tmp_path, psi_file):
     spec = write_spec(tmp_path, f"""
 [[steps]]
-command = "drift"
+job = "drift"
 [steps.with]
 data = "{psi_file}"
 threshold_um = 4
 out = "drift"
 """)
     (step,) = experiment.load(spec).steps
-    args = step.args
-    assert args.threshold_um == 4.0 and isinstance(args.threshold_um, float)
-    assert (args.alpha, args.min_jump_sigma, args.json, args.format) == (0.05, 3.0, False, "auto")
-    assert args.model is None
-    assert args.out == str((tmp_path / "out" / "drift").resolve())  # relative to the out folder
-    assert args.data == str(psi_file.resolve())
-    assert step.argv[:3] == ["drift", str(psi_file.resolve()), "--out"]
+    # only what the table gives: the workflow's own defaults apply, no parser is replayed
+    assert step.params == {"data": str(psi_file.resolve()), "threshold_um": 4}
+    assert step.out == (tmp_path / "out" / "drift").resolve()  # relative to the out folder
+    assert step.inputs == [psi_file.resolve()] and step.outputs == [step.out]
+
+
+def test_each_step_calls_its_workflow_with_the_table_as_keywords(tmp_path, monkeypatch):
+    import dataclasses
+    import functools
+    import json
+
+    from pipeline.workflows import simulate
+
+    calls = []
+
+    @functools.wraps(simulate.simulate)  # the same parameters
+    def recorded(**params):
+        calls.append(params)
+        return simulate.simulate(**params)
+
+    monkeypatch.setattr(simulate, "WORKFLOW", dataclasses.replace(simulate.WORKFLOW,
+                                                                  function=recorded))
+    spec = write_spec(tmp_path, """
+[[steps]]
+title = "an inline campaign"
+job = "simulate"
+[steps.with]
+seed = 5
+out = "{out}/twin"
+[steps.with.config]
+fleet = { visits = 2 }
+plan = { repeats = 1, feeds_mm_min = [500.0], dwells_s = [3.0] }
+""")
+    seen = []
+    result = experiment.execute(experiment.load(spec),
+                                progress=lambda *args: seen.append(args))
+    assert calls == [{"seed": 5, "config": {"fleet": {"visits": 2}, "plan": {
+        "repeats": 1, "feeds_mm_min": [500.0], "dwells_s": [3.0]}}}]
+    parameters = json.loads((tmp_path / "out" / "twin" / "parameters.json").read_text())
+    assert parameters["seed"] == 5 and parameters["config"]["fleet"]["visits"] == 2
+    assert seen == [(0, 1, "an inline campaign"), (1, 1, "")]
+    (done,) = result.steps
+    assert result.code == 0 and set(done.files) == {"readings", "truth", "visits",
+                                                     "parameters"}
+
+
+def test_a_result_is_logged_when_the_tracking_adapter_exists(tmp_path, monkeypatch, psi_file):
+    from pipeline import tracking
+
+    logged = []
+    monkeypatch.setattr(tracking, "log_result", lambda result, **kw: logged.append(kw) or {},
+                        raising=False)
+    spec = write_spec(tmp_path, convert_step(psi_file, "{out}/a.csv"))
+    assert experiment.execute(experiment.load(spec)).code == 0
+    assert logged == [{"nested": True}]
+    monkeypatch.delattr(tracking, "log_result")  # and the runner works without it
+    assert experiment.execute(experiment.load(spec)).code == 0
 
 
 @pytest.mark.parametrize("library_error", [False, True])
-def test_failing_step_stops_the_experiment(tmp_path, capsys, monkeypatch, library_error):
+def test_failing_step_stops_the_experiment_and_leaves_no_empty_folder(
+        tmp_path, capsys, monkeypatch, library_error):
     bad = tmp_path / "bad.csv"
     bad.write_text("machine_id,axis\nM1,X\n")
     if library_error:  # library code names the parameter in a ValueError
-        def refuse(args):
+        import dataclasses
+
+        from pipeline.workflows import convert
+
+        def refuse(data, out=None, format="auto"):
             raise ValueError("alpha must lie in (0, 1), got 2 (bad.csv)")
 
-        monkeypatch.setattr(experiment.commands()["convert"], "run", refuse)
-    spec = write_spec(tmp_path, convert_step(bad, "{out}/x.csv")
+        monkeypatch.setattr(convert, "WORKFLOW", dataclasses.replace(convert.WORKFLOW,
+                                                                     function=refuse))
+    spec = write_spec(tmp_path, convert_step(bad, "{out}/sub/x.csv")
                       + convert_step(bad, "{out}/never-reached.csv"))
     assert main(["run", str(spec)]) == 2
     err = capsys.readouterr().err
-    assert "backlash convert: error: " in err and "bad.csv" in err and "Traceback" not in err
-    assert "step 1 failed with exit code 2" in err and "never-reached" not in err
-    assert not (tmp_path / "out" / "x.csv").exists()
+    # the step headers, then one error line naming the step
+    lines = err.strip().splitlines()
+    assert [line for line in lines if "error" in line] == lines[-1:] and "Traceback" not in err
+    assert lines[-1].startswith("backlash run: error: step 1 (convert): ") and "bad.csv" in err
+    assert "never-reached" not in err and "[2/2]" not in err
+    assert not (tmp_path / "out").exists()  # nothing half-written, no empty folder
 
 
 def test_input_an_earlier_step_should_have_written_is_checked_when_its_step_starts(
@@ -118,59 +177,69 @@ def test_input_an_earlier_step_should_have_written_is_checked_when_its_step_star
 
 
 # --------------------------------------------------------------------------- refusals
-STEP = '[[steps]]\ncommand = "convert"\n'
+STEP = '[[steps]]\njob = "convert"\n'
+SIM = '[[steps]]\njob = "simulate"\n[steps.with]\nout = "{out}/t"\n'
+ISO = '[[steps]]\njob = "iso"\n[steps.with]\ndata = "{here}/exp.toml"\n'
+
+
+def _has_workflow(name: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(f"pipeline.workflows.{name}") is not None
+
+
+TUNE = pytest.mark.skipif(not _has_workflow("tune"), reason="no tune workflow")
 
 
 @pytest.mark.parametrize("body, message", [
     ("name = \n", "invalid TOML"),
     ('name = "empty"\n', "no [[steps]]"),
-    ('outdir = "x"\n' + STEP, "unknown top-level key 'outdir'; expected name, description"),
-    ("name = 3\n" + STEP, "'name' must be a string, got an integer"),
-    ('steps = "iso"\n', "'steps' must be an array of tables"),
-    ('steps = ["iso"]\n', "step 1: expected a table"),
-    ('[[steps]]\ncommand = "bake"\n', "step 1: unknown command 'bake'"),
-    ('[[steps]]\ncommand = ["iso"]\n', "step 1: unknown command ['iso']"),
-    ('[[steps]]\ntitle = "no command"\n', "step 1: unknown command None"),
-    ('[[steps]]\ncommand = "run"\n', "step 1: unknown command 'run'"),
-    ('[[steps]]\ncommand = "iso"\nargs = ["x"]\n', "step 1: unknown key 'args'; expected title, command, with (a command's options go in "),
-    ('[[steps]]\ncommand = "iso"\nwith = "x"\n', "'with' must be a table of options"),
-    ('[[steps]]\ncommand = "iso"\ntitle = 1\n', "'title' must be a string"),
-    (STEP + '[steps.with]\nout = "{out}/a.csv"\nbogus = 1\n', "unknown option 'bogus'"),
-    ('[[steps]]\ncommand = "drift"\n[steps.with]\n"threshold-um" = 4\n',
-     "unknown option 'threshold-um' (write it as 'threshold_um')"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\n', "missing required option 'out'"),
-    ('[[steps]]\ncommand = "simulate"\n[steps.with]\nout = "{out}/t"\nseed = "abc"\n',
-     "option 'seed': expected a seed, got 'abc'"),
-    ('[[steps]]\ncommand = "simulate"\n[steps.with]\nout = "{out}/t"\nseed = 1.5\n',
-     "option 'seed': expected a seed, got 1.5"),
-    ('[[steps]]\ncommand = "simulate"\n[steps.with]\nout = "{out}/t"\nseed = [1, 2]\n',
-     "option 'seed': expected a single value, got an array"),
-    ('[[steps]]\ncommand = "simulate"\n[steps.with]\nout = "{out}/t"\nseed = true\n',
-     "option 'seed': expected a number, got a boolean"),
-    ('[[steps]]\ncommand = "iso"\n[steps.with]\nfile = "{here}/exp.toml"\njson = "yes"\n',
-     "option 'json': expected true or false, got a string"),
-    ('[[steps]]\ncommand = "iso"\n[steps.with]\nfile = "{here}/exp.toml"\nformat = "xml"\n',
-     "option 'format': expected one of auto, canonical, paper, ecmc, rtl, got 'xml'"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{outdir}/a.csv"\n',
+    ('outdir = "x"\n' + STEP, "unknown key 'outdir'; expected name, description, out, steps"),
+    ("name = 3\n" + STEP, "column 'name': expected text, got 3"),
+    ('steps = "iso"\n', "column 'steps': expected a list of tables, got 'iso'"),
+    ('steps = ["iso"]\n', "column 'steps[1]': expected a table, got 'iso'"),
+    ('[[steps]]\njob = "bake"\n', "step 1: unknown job 'bake'; expected one of convert, iso"),
+    ('[[steps]]\ncommand = "bake"\n', "step 1: unknown job 'bake'"),
+    ('[[steps]]\ncommand = ["iso"]\n', "column 'steps[1].command': expected text"),
+    ('[[steps]]\ntitle = "no job"\n', "step 1: no job given; expected one of convert"),
+    ('[[steps]]\njob = "run"\n', "step 1: unknown job 'run'"),
+    ('[[steps]]\njob = "iso"\ncommand = "iso"\n', "step 1: give 'job' or 'command', not both"),
+    ('[[steps]]\njob = "iso"\nargs = ["x"]\n',
+     "unknown key 'steps[1].args'; expected title, job, command, with"),
+    ('[[steps]]\njob = "iso"\nwith = "x"\n', "column 'steps[1].with': expected a table"),
+    ('[[steps]]\njob = "iso"\ntitle = 1\n', "column 'steps[1].title': expected text"),
+    (STEP + '[steps.with]\nout = "{out}/a.csv"\nbogus = 1\n',
+     "step 1 (convert): unknown parameter 'bogus'; expected one of data, out, format"),
+    ('[[steps]]\njob = "drift"\n[steps.with]\n"threshold-um" = 4\n',
+     "unknown parameter 'threshold-um' (write it as 'threshold_um')"),
+    (STEP + '[steps.with]\nout = "{out}/a.csv"\n', "step 1 (convert): missing parameter 'data'"),
+    (SIM + 'seed = "abc"\n', "step 1 (simulate): parameter 'seed': must be an int in the range"),
+    (SIM + 'seed = 1.5\n', "parameter 'seed': must be an int in the range [0, 4294967295]"),
+    (SIM + 'seed = [1, 2]\n', "parameter 'seed': must be an int"),
+    (SIM + 'preset = 3\n', "parameter 'preset': must be an instance of 'str'"),
+    (ISO + 'drop_outliers = "yes"\n', "parameter 'drop_outliers': must be an instance of"),
+    (ISO + 'format = "xml"\n', "parameter 'format': must be a str among"),
+    (ISO + 'json = true\n', "unknown parameter 'json'"),
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{outdir}/a.csv"\n',
      "unknown placeholder {outdir} in '{outdir}/a.csv'; expected {data}, {out}, {here}"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{out!r}/a.csv"\n',
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{out!r}/a.csv"\n',
      "unknown placeholder {out}"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{out/a.csv"\n',
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{out/a.csv"\n',
      "malformed placeholder"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "{out}/../../x.csv"\n',
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{out}/../../x.csv"\n',
      "lies outside the experiment's output folder"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "../x.csv"\n',
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "../x.csv"\n',
      "lies outside the experiment's output folder"),
-    (STEP + '[steps.with]\nfile = "{here}/exp.toml"\nout = "/tmp/elsewhere.csv"\n',
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "/tmp/elsewhere.csv"\n',
      "lies outside the experiment's output folder"),
-    ('[[steps]]\ncommand = "iso"\n[steps.with]\nfile = "{here}/exp.toml"\n'
-     + 'plot = "{here}/chart.png"\n', "option 'plot': "),
-    (STEP + '[steps.with]\nfile = "missing.csv"\nout = "{out}/a.csv"\n',
-     "option 'file': no such file or folder"),
-    ('[[steps]]\ncommand = "tune"\n[steps.with]\ndata = "{here}/exp.toml"\n',
-     "give option 'storage'"),
-    ('[[steps]]\ncommand = "tune"\n[steps.with]\ndata = "{here}/exp.toml"\n'
-     + 'storage = "sqlite:///{here}/optuna.db"\n', "lies outside the experiment's output folder"),
+    (ISO + 'out = "{here}/chart"\n', "step 1 (iso): parameter 'out': "),
+    (STEP + '[steps.with]\ndata = "missing.csv"\nout = "{out}/a.csv"\n',
+     "parameter 'data': no such file or folder"),
+    pytest.param('[[steps]]\njob = "tune"\n[steps.with]\ndata = "{here}/exp.toml"\n',
+                 "give parameter 'storage'", marks=TUNE),
+    pytest.param('[[steps]]\njob = "tune"\n[steps.with]\ndata = "{here}/exp.toml"\n'
+                 + 'storage = "sqlite:///{here}/optuna.db"\n',
+                 "lies outside the experiment's output folder", marks=TUNE),
 ])
 def test_bad_experiment_file_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, body,
                                                                     message):
@@ -223,14 +292,18 @@ def test_shipped_experiments_are_valid_and_stay_in_their_folder(path, tmp_path):
         assert all(experiment.inside(p, loaded.out) for p in step.outputs)
 
 
-@pytest.mark.parametrize("flags, kwargs, role", [
-    (["--out"], {}, "output"), (["--plot"], {"metavar": "OUT.png"}, "output"),
-    (["--report-out"], {}, "output"), (["data"], {}, "input"),
-    (["--model"], {"metavar": "DIR"}, "input"), (["source"], {"metavar": "DATA|MODEL_DIR"}, "input"),
-    (["--config"], {"metavar": "FILE.toml"}, "input"), (["--model"], {}, None),
-    (["--storage"], {}, "storage"), (["--seed"], {"type": int}, None)])
-def test_path_role_of_an_option(flags, kwargs, role):
-    import argparse
-
-    action = argparse.ArgumentParser().add_argument(*flags, **kwargs)
-    assert experiment.path_role(action) == role
+def test_inputs_are_the_records_and_out_is_the_results_folder(tmp_path, psi_file):
+    """Which parameters are paths comes from the workflow record, not from option names."""
+    spec = write_spec(tmp_path, f"""
+[[steps]]
+job = "predict"
+[steps.with]
+model = "{{out}}/models/m"
+plan = "{psi_file}"
+out = "forecast.csv"
+""")
+    (step,) = experiment.load(spec).steps
+    out = (tmp_path / "out").resolve()
+    assert step.params == {"model": str(out / "models" / "m"), "plan": str(psi_file.resolve())}
+    assert step.inputs == [out / "models" / "m", psi_file.resolve()]
+    assert step.out == out / "forecast.csv"

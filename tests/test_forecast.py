@@ -102,7 +102,7 @@ def test_single_visit_cannot_forecast_and_far_plans_warn(campaign, wear_model, t
     capsys.readouterr()
     assert main(["predict", str(trained), str(tmp_path / "far.csv"), "--out", str(out)]) == 0
     err = capsys.readouterr().err
-    assert "warning" in err and "x the training span" in err
+    assert "note: operating_hours" in err and "x the training span" in err
 
 
 @pytest.mark.parametrize("change, words", [

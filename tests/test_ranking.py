@@ -291,11 +291,10 @@ def test_twin_drivers_rank_above_inputs_without_effect():
 def test_rank_command_json_has_verdicts_and_headline_lists_only_drivers(tmp_path, capsys):
     """Twin data (paper plan, one repeat): JSON keeps the association keys and adds the
     verdicts; the report's headline names the drivers and nothing else."""
-    from models.physics.campaign import load_config, simulate
     from pipeline.cli import main
-    from pipeline.commands.simulate import write
+    from pipeline.workflows.simulate import simulate
 
-    write(simulate(load_config({"plan": {"repeats": 1}}, preset="paper"), seed=3), tmp_path / "t")
+    simulate({"plan": {"repeats": 1}}, preset="paper", seed=3).write(tmp_path / "t")
     code = main(["rank", str(tmp_path / "t" / "readings.csv"), "--out", str(tmp_path / "r"),
                  "--boot", "10", "--no-dropcolumn", "--json"])
     assert code == 0
@@ -326,23 +325,21 @@ def test_rank_command_refuses_negative_boot(tmp_path, capsys):
 
 
 def test_paper_replication_experiment_names_only_known_options():
-    """Every step of the replication experiment is a backlash subcommand and every option it
-    sets is one of that command's argparse destinations; outputs lie inside {out}."""
-    import argparse
+    """Every step of the replication experiment is a job and every value it sets is one of
+    that job's keyword parameters (or ``out``); outputs lie inside {out}."""
+    import inspect
     import tomllib
     from pathlib import Path
 
-    from pipeline.cli import build_parser
+    from pipeline.workflows import workflow
 
     path = Path(__file__).resolve().parents[1] / "experiments" / "paper_replication.toml"
     spec = tomllib.loads(path.read_text(encoding="utf-8"))
-    subs = next(a for a in build_parser()._actions
-                if isinstance(a, argparse._SubParsersAction))
-    commands = [step["command"] for step in spec["steps"]]
-    assert commands == ["simulate", "replicate", "rank"]
+    jobs = [step["job"] for step in spec["steps"]]
+    assert jobs == ["simulate", "replicate", "rank"]
     for step in spec["steps"]:
-        dests = {a.dest for a in subs.choices[step["command"]]._actions}
-        assert set(step["with"]) <= dests, (step["command"], set(step["with"]) - dests)
+        accepted = set(inspect.signature(workflow(step["job"]).function).parameters) | {"out"}
+        assert set(step["with"]) <= accepted, (step["job"], set(step["with"]) - accepted)
         assert step["with"]["out"].startswith("{out}/")
     config = path.parent / spec["steps"][0]["with"]["config"].replace("{here}/", "")
     assert config.is_file()

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from features.readings import read_readings, write_readings
+from features.readings.errors import BacklashWarning
 from pipeline.cli import main
 
 TARGETS = (0.0, 50.0, 100.0)
@@ -99,8 +100,9 @@ def test_paper_table_absolute_rows_are_converted_with_a_warning(tmp_path, capsys
         "Dev_pend_f [mm]": [0.024, 0.0243, 250.024, 250.0243],
         "Dev_pend_r [mm]": [0.0181, 0.0173, 250.0181, 250.0173],
     })
-    frame = read_readings(write_csv(tmp_path, wide, "table2.csv"))
-    assert "absolute positions" in capsys.readouterr().err
+    with pytest.warns(BacklashWarning, match="8 cells of the deviation columns hold absolute "
+                      "positions"):
+        frame = read_readings(write_csv(tmp_path, wide, "table2.csv"))
     lin_up = frame[(frame["method"] == "linear") & (frame["direction"] == "+")]
     np.testing.assert_allclose(lin_up["deviation_um"], [-17.2, -16.9, -17.2, -16.9], atol=1e-6)
     assert sorted(frame["cycle"].unique()) == [1, 2, 3, 4]
@@ -376,8 +378,8 @@ def test_paper_column_given_twice_under_two_spellings_is_refused(tmp_path, capsy
 def test_absolute_positions_convert_the_whole_test_including_target_0(tmp_path, capsys):
     table = valid_table()
     absolute = table.assign(deviation_um=table["target"] + table["deviation_um"] / 1000.0)
-    frame = read_readings(write_csv(tmp_path, absolute))
-    assert "18 deviation_um values hold absolute positions" in capsys.readouterr().err
+    with pytest.warns(BacklashWarning, match="18 deviation_um values hold absolute positions"):
+        frame = read_readings(write_csv(tmp_path, absolute))
     np.testing.assert_allclose(frame["deviation_um"], table["deviation_um"], atol=1e-6)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from features.readings.errors import InputError
+from features.readings.errors import BacklashWarning, InputError
 from features.table import PAPER_FEATURES, feature_table, prediction_inputs
 from features.targets import backlash_targets
 
@@ -68,11 +68,14 @@ def test_common_mode_drift_leaks_into_z_and_cancels_in_backlash():
 
 
 def test_feature_table_layout_and_iso_leaves_out_deviations():
-    paper = feature_table(ideal_tests(direct=True))
+    with pytest.warns(BacklashWarning, match="dwell_s constant over all points; left out"):
+        paper = feature_table(ideal_tests(direct=True))
     assert list(paper.X.columns) == ["target", "deviation_down_um", "deviation_up_um",
                                      "feed_mm_min", "machine_temp_c"]  # dwell_s constant: left out
     assert len(paper.X) == len(paper.y) == len(paper.meta) == 3 * 6
-    iso = feature_table(ideal_tests(direct=False))
+    with pytest.warns(BacklashWarning, match="inputs without deviation_down_um, "
+                      "deviation_up_um.*ISO target"):
+        iso = feature_table(ideal_tests(direct=False))
     assert iso.target_kind == "iso" and "deviation_up_um" not in iso.X
     chosen = feature_table(ideal_tests(direct=True), features=["target", "feed_mm_min"])
     assert list(chosen.X.columns) == ["target", "feed_mm_min"]
@@ -101,7 +104,27 @@ def test_two_tests_with_the_same_pair_keys_are_refused():
 
 
 def test_unknown_feature_and_target_kind():
-    with pytest.raises(InputError, match="unknown feature 'speed'"):
+    with pytest.raises(InputError, match="unknown feature 'speed'") as err:
         feature_table(ideal_tests(direct=True), features=["speed"])
-    with pytest.raises(InputError, match="unknown target 'pendulum'"):
+    assert err.value.parameter == "features"
+    with pytest.raises(InputError, match="unknown target 'pendulum'") as err:
         backlash_targets(ideal_tests(direct=True), "pendulum")
+    assert err.value.parameter == "kind"
+
+
+def test_library_errors_and_notes_name_python_parameters_not_options():
+    """Errors name the caller's parameter (the CLI maps it to its option); no text in
+    features/ names an option or prints."""
+    from pathlib import Path
+
+    from features.table import check_features
+
+    X = pd.DataFrame({"target": [1.0, 2.0], "feed_mm_min": [500.0, 500.0]})
+    with pytest.raises(InputError, match="constant") as err:
+        check_features(X, "data.csv")
+    assert err.value.parameter == "features" and "--" not in err.value.message
+    root = Path(__file__).resolve().parents[1] / "features"
+    for path in root.rglob("*.py"):
+        text = path.read_text(encoding="utf-8")
+        assert "print(" not in text, path
+        assert "sys.stderr" not in text, path

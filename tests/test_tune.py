@@ -134,7 +134,8 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     # a different heartbeat would judge live workers by the wrong grace period
     capsys.readouterr()
     assert main(["tune", str(readings_csv), *common[:-1], "5"]) == 2
-    assert "runs with --heartbeat-s 1" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--heartbeat-s" in err and "runs with a heartbeat of 1 s" in err
 
 
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):

@@ -1,6 +1,7 @@
 """The readings contract, the ground floor every other layer stands on: column names and
-units (``schema``), the one user-error type (``errors``), the accepted input layouts
-(``formats``), validation at the edge (``validation``) and atomic output (``fileio``).
+units (``schema``), the one user-error type and notes (``errors``), one record per accepted
+input layout (``layouts``) and their readers (``formats``, ``rtl``), validation at the edge
+(``validation``) and atomic output (``fileio``).
 See ``docs/data-contract.md``."""
 
 __all__ = ["read_readings", "write_readings"]

@@ -247,13 +247,14 @@ def read_toml(path, what: str = "file") -> dict:
     """A TOML file as a dict; an unreadable or invalid file is one ``InputError`` naming it."""
     import tomllib
 
-    from features.readings.errors import InputError
-
     try:
         return tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(f"cannot read {what}: no such file", file=path) from None
     except (UnicodeDecodeError, IsADirectoryError) as err:
         raise InputError(f"cannot read {what}: {err}", file=path) from None
+    except OSError as err:  # a symbolic-link loop, no permission, a device: one line
+        reason = "symbolic link loop" if err.errno == errno.ELOOP else err.strerror
+        raise InputError(f"cannot read {what}: {reason}", file=path) from None
     except tomllib.TOMLDecodeError as err:
         raise InputError(f"invalid TOML: {err}", file=path) from None

@@ -1,7 +1,8 @@
-"""The accepted input layouts besides the canonical table, each turned into long readings.
+"""Readers of the input layouts (records in ``features.readings.layouts``), each returning
+long readings not yet validated.
 
 - ``canonical``: the readings table itself, CSV or Parquet;
-- ``paper``: the wide layout of the backlash paper's Table 2 (seed 004), one row per
+- ``paper``: the wide layout of the backlash paper's Table 2 [BacklashNN], one row per
   target and condition with linear and pendulum deviations forward/reverse;
 - ``ecmc``: ``*_ISO230.dat`` files of the ecmc motion-control test scripts;
 - ``rtl``: Renishaw ``.rtl`` laser test files (``features.readings.rtl``).
@@ -9,7 +10,6 @@
 
 from __future__ import annotations
 
-import codecs
 import csv
 import io
 import re
@@ -18,9 +18,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from features.readings import schema
-from features.readings.errors import InputError
-from features.readings.rtl import looks_like_rtl
+from features.readings.errors import InputError, note
+from features.readings.layouts import (  # noqa: F401 - detect_format, read_text: their old home
+    PAPER_DEV_LIN_F,
+    check_delimiter,
+    detect_format,
+    read_text,
+)
 from features.readings.validation import (
     MAX_DEVIATION_POS_UNITS,
     ROW,
@@ -28,15 +32,12 @@ from features.readings.validation import (
     looks_absolute,
     to_float,
     to_int,
-    warn,
 )
-
-FORMATS = schema.FORMATS
 
 # Paper Table 2 columns: canonical wide names and the spellings accepted for them.
 PAPER_COLUMNS = {
     "position_mm": ("position_mm", "pos. [mm]", "pos [mm]", "pos", "position"),
-    "dev_lin_f_mm": ("dev_lin_f_mm", "dev_lin_f [mm]", "dev_lin_f"),
+    "dev_lin_f_mm": PAPER_DEV_LIN_F,
     "dev_lin_r_mm": ("dev_lin_r_mm", "dev_lin_r [mm]", "dev_lin_r"),
     "dev_pend_f_mm": ("dev_pend_f_mm", "dev_pend_f [mm]", "dev_pend_f"),
     "dev_pend_r_mm": ("dev_pend_r_mm", "dev_pend_r [mm]", "dev_pend_r"),
@@ -56,68 +57,6 @@ PAPER_REQUIRED = ("position_mm", "dev_lin_f_mm", "dev_lin_r_mm", "dev_pend_f_mm"
 PAPER_TO_SCHEMA = {"speed_mm_min": "feed_mm_min", "t_machine_c": "machine_temp_c",
                    "t_ambient_c": "ambient_temp_c"}
 
-
-
-def detect_format(path: Path, text: str | None = None) -> str:
-    if path.suffix.lower() == ".parquet":
-        return "canonical"
-    if looks_like_rtl(path):  # before the UTF-8 check: .rtl files may be Latin-1
-        return "rtl"
-    head = (read_text(path) if text is None else text)[:8192]
-    if not head.strip():
-        raise InputError("empty file; expected a header row and readings", file=path)
-    if "TGT_DATA[" in head or "REF_DATA_" in head:
-        return "ecmc"
-    header = head.splitlines()[0].lower() if head.strip() else ""
-    names = {c.strip().strip('"') for c in header.split(",")}
-    if {"direction", "method"} <= names:
-        return "canonical"
-    if any(alias in names for alias in PAPER_COLUMNS["dev_lin_f_mm"]):
-        return "paper"
-    _check_delimiter(header, path)
-    raise InputError(
-        "unknown format: expected a readings table (columns machine_id, axis, test_id, method, "
-        "target, direction, cycle, deviation_um), a paper Table-2 file (Dev_lin_f ...) "
-        "or an ecmc *_ISO230.dat file", file=path, row=1)
-
-
-# Byte-order marks of the Unicode encodings a spreadsheet may save; UTF-8 is the default.
-_BOMS = ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
-         (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
-         (codecs.BOM_UTF16_BE, "utf-16"))
-
-
-def read_text(path: Path) -> str:
-    """The whole file as text: UTF-8, or UTF-16/32 when it starts with a byte-order mark.
-
-    Every byte is decoded, so a stray Latin-1 byte anywhere is refused with its row; an
-    encoding without a mark (Latin-1, Windows-1252, ...) is never guessed, since a guess
-    can silently turn one machine or test name into another.
-    """
-    try:
-        data = path.read_bytes()
-    except IsADirectoryError:
-        raise InputError("is a folder; expected a readings file", file=path) from None
-    except OSError as err:
-        raise InputError(f"cannot read file: {err.strerror}", file=path) from None
-    encoding = next((enc for bom, enc in _BOMS if data.startswith(bom)), "utf-8-sig")
-    if encoding == "utf-8-sig" and b"\x00" in data:
-        raise InputError("cannot read file: binary content, expected CSV text", file=path)
-    try:
-        return data.decode(encoding)
-    except UnicodeDecodeError as err:
-        row = data.count(b"\n", 0, err.start) + 1
-        raise InputError(
-            f"byte 0x{data[err.start]:02x} at offset {err.start} is not {encoding.removesuffix('-sig').upper()} "
-            "text; save the file as UTF-8 (Latin-1 or Windows-1252 are not guessed)",
-            file=path, row=row) from None
-
-
-def _check_delimiter(header: str, path: Path) -> None:
-    for sep, name in ((";", "semicolon"), ("\t", "tab"), ("|", "pipe")):
-        if sep in header and "," not in header:
-            raise InputError(f"columns are separated by {name}s; expected commas", file=path,
-                             row=1)
 
 
 def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
@@ -144,7 +83,7 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
             raise InputError("empty file; expected a header row and readings",
                              file=path) from None
         if frame.shape[1] == 1:
-            _check_delimiter(frame.columns[0], path)
+            check_delimiter(frame.columns[0], path)
         frame = _drop_blank_columns(frame, header, path)
         check_header([str(c) for c in frame.columns], path)
         row_base = 2
@@ -155,6 +94,17 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
     if frame.empty:
         raise InputError("no readings: the file has a header but no data rows", file=path)
     return frame, row_base
+
+
+def read_canonical(path: Path) -> pd.DataFrame:
+    """The ``canonical`` layout: the readings table itself (CSV or Parquet)."""
+    return read_table(path)[0]
+
+
+def read_paper(path: Path) -> pd.DataFrame:
+    """The ``paper`` layout: the wide Table 2 of the backlash paper, as long readings."""
+    wide, row_base = read_table(path)
+    return paper_to_long(wide, path, row_base)
 
 
 def _drop_blank_columns(frame: pd.DataFrame, header: list[str], path: Path) -> pd.DataFrame:
@@ -372,5 +322,5 @@ def _absolute_rows_to_deviations(frame: pd.DataFrame, dev_cols: list[str], cols:
                 "expected mm (micrometres here would be 1000x too large)", file=path,
                 row=int(frame[ROW].iloc[i]), column=cols[col])
     if absolute.any():
-        warn(f"{path}: {4 * int(absolute.sum())} cells of the deviation columns hold absolute "
+        note(f"{path}: {4 * int(absolute.sum())} cells of the deviation columns hold absolute "
              "positions; converted to deviations (value - position)")

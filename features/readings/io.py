@@ -2,40 +2,58 @@
 
 from __future__ import annotations
 
+import errno
+import stat
 from pathlib import Path
 
 import pandas as pd
 
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path
-from features.readings.formats import FORMATS, detect_format, paper_to_long, read_ecmc, read_table
-from features.readings.rtl import read_rtl
+from features.readings.layouts import BY_NAME, FORMATS, detect_format
 from features.readings.validation import validate
 
 
 def read_readings(path, format: str = "auto") -> pd.DataFrame:
-    """Read a readings file in any accepted layout into the validated long frame."""
+    """Read a readings file in any accepted layout into the validated long frame.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The readings file.
+    format : str
+        A layout name of ``features.readings.layouts.RECORDS``, or ``"auto"`` to recognise
+        it from the file.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read or breaks the readings contract (naming file, row, column).
+    """
     path = Path(path)
     if format not in FORMATS:
         raise InputError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}",
-                         file=path)
-    if path.is_dir():
-        raise InputError("is a folder; expected a readings file", file=path)
-    if not path.is_file():
-        raise InputError("cannot read file: no such file", file=path)
+                         file=path, parameter="format")
+    check_readable(path)
     if format == "auto":
         format = detect_format(path)
-    if format == "ecmc":
-        raw, row_base = read_ecmc(path), None
-    elif format == "rtl":
-        raw, row_base = read_rtl(path), None
-    else:
-        raw, row_base = read_table(path)
-        if format == "paper":
-            raw = paper_to_long(raw, path, row_base)
-            row_base = None
-    return validate(raw, path, row_base)
+    return validate(BY_NAME[format].read(path), path, None)
 
+
+def check_readable(path: Path) -> None:
+    """Refuse a path that is no readable file (missing, a folder, a symbolic-link loop, a
+    device) with one line, before any reader sees it."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise InputError("cannot read file: no such file", file=path) from None
+    except OSError as err:
+        reason = "symbolic link loop" if err.errno == errno.ELOOP else err.strerror
+        raise InputError(f"cannot read file: {reason}", file=path) from None
+    if stat.S_ISDIR(mode):
+        raise InputError("is a folder; expected a readings file", file=path)
+    if not stat.S_ISREG(mode):
+        raise InputError("cannot read file: not a regular file", file=path)
 
 
 def write_readings(frame: pd.DataFrame, path) -> Path:

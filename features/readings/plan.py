@@ -17,6 +17,7 @@ import pandas as pd
 from features.readings import schema
 from features.readings.errors import InputError
 from features.readings.formats import read_table
+from features.readings.io import check_readable
 from features.readings.validation import (
     PLAUSIBLE,
     ROW,
@@ -49,8 +50,7 @@ def is_plan(path) -> bool:
 def read_plan(path) -> pd.DataFrame:
     """The validated plan: ``COLUMNS`` that the file has, typed; other columns refused."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError("cannot read file: no such file", file=path)
+    check_readable(path)
     raw, row_base = read_table(path)
     rows = (raw.pop(ROW) if ROW in raw else
             pd.Series(range(row_base, row_base + len(raw)), index=raw.index))

@@ -33,18 +33,6 @@ from features.readings.validation import finite_number
 _SECTION = re.compile(r"^([A-Z][A-Z0-9 \-]*)::\s*$")
 
 
-def looks_like_rtl(path: Path) -> bool:
-    """True for a ``.rtl`` name or a file whose start has the section markers."""
-    if path.suffix.lower() == ".rtl":
-        return True
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(65536)
-    except OSError:
-        return False
-    return b"TARGET DATA::" in head and b"RUNS::" in head
-
-
 def _lines(path: Path) -> list[str]:
     try:
         data = path.read_bytes()

@@ -12,11 +12,12 @@ plus ``visit`` and ``repeat`` (defaults filled in) and ``deviation_um`` (compute
 
 from __future__ import annotations
 
-# Input layouts a readings file may have (features.readings.formats reads each one).
-FORMATS = ("auto", "canonical", "paper", "ecmc", "rtl")
-# Help text of every DATA argument (generated from the format records once they exist).
-DATA_HELP = ("readings file: canonical CSV or Parquet, paper Table-2 CSV, ecmc .dat or "
-             "Renishaw .rtl")
+from features.readings import layouts
+
+# Input layouts a readings file may have (``--format`` choices) and the help text of every
+# readings (DATA) argument: generated from the records in features.readings.layouts.
+FORMATS = layouts.FORMATS
+DATA_HELP = layouts.DATA_HELP
 
 REQUIRED = ("machine_id", "axis", "test_id", "method", "target", "direction", "cycle")
 DEVIATION = "deviation_um"

@@ -66,61 +66,115 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pandas as pd
 
 from features.readings import schema
+from features.readings.config import as_table, from_table, read_config
 from features.readings.errors import InputError
-from features.readings.fileio import read_toml
 from features.readings.validation import PLAUSIBLE
-from models.physics import effects
+from models.physics import PRESETS, effects
 from models.physics.axis import SYSTEMS, simulate_tests
 from models.physics.cycles import path, target_positions
 
-BASE = {
-    "system": "direct",
-    "plan": {"targets_mm": None, "start_mm": 0.0, "stop_mm": 350.0, "n_targets": 8, "irregular": False,
-             "feeds_mm_min": [200.0, 500.0, 1200.0], "dwells_s": [3.0, 5.0, 7.0], "repeats": 3,
-             "cycles": 5, "methods": ["linear", "pendulum"], "overrun_mm": 5.0},
-    "fleet": {"machines": 1, "axes": ["X"], "visits": 1, "interval_days": 30,
-              "hours_per_day": 8.0, "wear_um_per_1000h": 0.6, "wear_local_um_per_1000h": 0.0,
-              "wear_center_mm": 175.0, "wear_width_mm": 60.0, "adjust_at": [],
-              "adjusted_b0_um": 1.2, "failure_at": 0, "failure_jump_um": 3.0,
-              "start": "2026-01-05"},
-    "environment": {"machine_temp_c": 21.0, "warmup_k": 1.5, "warmup_tau_s": 1200.0,
-                    "ambient_temp_c": 20.5, "pressure_hpa": 1013.0, "humidity_pct": 45.0,
-                    # run-to-run spread (standard deviation) of the conditions
-                    "machine_temp_spread_k": 0.5, "ambient_spread_k": 0.3,
-                    "pressure_spread_hpa": 4.0, "humidity_spread_pct": 5.0,
-                    # profiles along a run: linear drifts of the air, and the screw's cooling
-                    # towards ambient during each dwell (time constant; 0: no cooling)
-                    "ambient_drift_k_per_h": 0.0, "pressure_drift_hpa_per_h": 0.0,
-                    "humidity_drift_pct_per_h": 0.0, "cooling_tau_s": 0.0},
-    "noise": {"noise_um": 0.3, "resolution_um": 0.1},
-    "effects": {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
-                "backlash_feed": {"k_um_per_m_min": 1.2},
-                "backlash_temperature": {"k_um_per_k": -0.3},
-                "lead_error_linear": {}, "thermal_expansion": {}},
-}
-PRESETS = {
-    "paper": {},
-    "fleet": {"fleet": {"machines": 4, "axes": ["X", "Y", "Z"], "visits": 8,
-                        "adjust_at": [5], "wear_um_per_1000h": 0.2,
-                        "wear_local_um_per_1000h": 1.2, "wear_center_mm": 120.0}},
-    "drift": {"system": "indirect",
-              "plan": {"feeds_mm_min": [500.0], "dwells_s": [5.0], "repeats": 1},
-              "fleet": {"machines": 3, "visits": 20, "interval_days": 28, "hours_per_day": 14.0,
-                        "adjust_at": [9], "failure_at": 15, "failure_jump_um": 2.5}},
-    "demo": {"plan": {"repeats": 1},
-             "fleet": {"visits": 6, "interval_days": 45, "hours_per_day": 12.0}},
-    "indirect": {"system": "indirect"},
-    # wear concentrated where the axis works most, growing over eight visits
-    "wear": {"plan": {"repeats": 1},
-             "fleet": {"visits": 8, "interval_days": 45, "hours_per_day": 12.0,
-                       "wear_um_per_1000h": 0.2, "wear_local_um_per_1000h": 1.2,
-                       "wear_center_mm": 120.0, "wear_width_mm": 50.0}},
-}
+
+# --------------------------------------------------------------------------- the configuration
+@dataclass
+class Plan:
+    """The ISO 230-2 tests of one visit: targets [mm], feeds [mm/min], dwells [s], repeats
+    of each condition, cycles per test, methods and the overrun beyond the end targets [mm].
+    ``targets_mm`` (explicit targets) wins over ``start_mm``/``stop_mm``/``n_targets``."""
+
+    targets_mm: list[float] | None = None
+    start_mm: float = 0.0
+    stop_mm: float = 350.0
+    n_targets: int = 8
+    irregular: bool = False
+    feeds_mm_min: list[float] = field(default_factory=lambda: [200.0, 500.0, 1200.0])
+    dwells_s: list[float] = field(default_factory=lambda: [3.0, 5.0, 7.0])
+    repeats: int = 3
+    cycles: int = 5
+    methods: list[str] = field(default_factory=lambda: ["linear", "pendulum"])
+    overrun_mm: float = 5.0
+
+
+@dataclass
+class Fleet:
+    """Machines, axes and maintenance visits: the calendar [days], the use between visits
+    [h/day], wear rates [um per 1000 h] and the worn zone [mm], adjustments and a failure."""
+
+    machines: int = 1
+    axes: list[str] = field(default_factory=lambda: ["X"])
+    visits: int = 1
+    interval_days: float = 30
+    hours_per_day: float = 8.0
+    wear_um_per_1000h: float = 0.6
+    wear_local_um_per_1000h: float = 0.0
+    wear_center_mm: float = 175.0
+    wear_width_mm: float = 60.0
+    adjust_at: list[int] = field(default_factory=list)
+    adjusted_b0_um: float = 1.2
+    failure_at: int = 0
+    failure_jump_um: float = 3.0
+    start: str = "2026-01-05"
+
+
+@dataclass
+class Environment:
+    """Run conditions: start values, their run-to-run spread (standard deviations) and their
+    profiles along a run (the air's linear drifts, the screw's warm-up and cooling)."""
+
+    machine_temp_c: float = 21.0
+    warmup_k: float = 1.5
+    warmup_tau_s: float = 1200.0
+    ambient_temp_c: float = 20.5
+    pressure_hpa: float = 1013.0
+    humidity_pct: float = 45.0
+    machine_temp_spread_k: float = 0.5
+    ambient_spread_k: float = 0.3
+    pressure_spread_hpa: float = 4.0
+    humidity_spread_pct: float = 5.0
+    ambient_drift_k_per_h: float = 0.0
+    pressure_drift_hpa_per_h: float = 0.0
+    humidity_drift_pct_per_h: float = 0.0
+    cooling_tau_s: float = 0.0  # 0: no cooling towards the air during dwells
+
+
+@dataclass
+class Noise:
+    """The laser's reading noise (standard deviation) and resolution [um]."""
+
+    noise_um: float = 0.3
+    resolution_um: float = 0.1
+
+
+def _default_effects() -> dict:
+    return {"backlash": {"b0_um": 1.5}, "backlash_position": {"amplitude_um": 0.6},
+            "backlash_feed": {"k_um_per_m_min": 1.2},
+            "backlash_temperature": {"k_um_per_k": -0.3},
+            "lead_error_linear": {}, "thermal_expansion": {}}
+
+
+@dataclass
+class Campaign:
+    """A whole twin campaign (see the module docstring for the file)."""
+
+    system: Literal["indirect", "direct"] = "direct"
+    plan: Plan = field(default_factory=Plan)
+    fleet: Fleet = field(default_factory=Fleet)
+    environment: Environment = field(default_factory=Environment)
+    noise: Noise = field(default_factory=Noise)
+    # enabled effects and their parameters; a file's [effects] replaces the preset's whole
+    effects: dict[str, dict[str, float]] = field(default_factory=_default_effects)
+
+    def check(self, file) -> None:
+        """Refuse what no test campaign can be (one ``InputError`` naming the key)."""
+        _check(self, file)
+
+
+DEFAULT_PRESET = "paper"
 
 
 @dataclass
@@ -131,188 +185,164 @@ class Simulation:
     parameters: dict = field(default_factory=dict)
 
 
-def load_config(source, preset: str | None = None) -> dict:
-    """A full, validated configuration: a preset name, a dict of overrides or a TOML file,
-    applied on top of ``preset`` (a file or dict) or of the base plan."""
-    where = "config"
+def load_config(source=None, preset: str | None = None) -> Campaign:
+    """A full, checked campaign.
+
+    Parameters
+    ----------
+    source : str, Path, dict or Campaign, optional
+        A preset name, a campaign TOML file, a dict of the same shape, or a campaign (returned
+        as it is). Its values apply on top of ``preset``.
+    preset : str, optional
+        The preset the source overrides (default: the built-in defaults).
+
+    Raises
+    ------
+    InputError
+        An unknown preset (``parameter="preset"``), or a key or value the campaign cannot have
+        (naming the file and the key's dotted path).
+    """
+    if isinstance(source, Campaign):
+        return copy.deepcopy(source)
     if preset is not None and preset not in PRESETS:
         raise InputError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}",
-                         column="preset")
+                         parameter="preset")
+    base = read_config(PRESETS[preset], Campaign, what="preset") if preset else None
+    if source is None:
+        return base if base is not None else Campaign()
     if isinstance(source, (str, Path)) and str(source) in PRESETS:
-        overrides, where = PRESETS[str(source)], f"preset {source}"
-    elif isinstance(source, dict):
-        overrides = source
-    else:
-        where = str(source)
-        overrides = read_toml(source, "config")
-    base = _merge(BASE, PRESETS[preset], f"preset {preset}") if preset else BASE
-    config = _merge(base, overrides, where)
-    _validate(config, where)
-    return config
+        return read_config(PRESETS[str(source)], Campaign, base=base, what="preset")
+    if isinstance(source, dict):
+        return from_table(source, Campaign, base=base, file="config")
+    return read_config(source, Campaign, base=base, what="config")
 
 
-def _merge(base: dict, overrides: dict, where: str, prefix: str = "") -> dict:
-    out = copy.deepcopy(base)
-    if not isinstance(overrides, dict):
-        raise InputError(f"expected a table, got {overrides!r}", file=where,
-                         column=prefix.rstrip(".") or None)
-    for key, value in overrides.items():
-        if prefix == "effects.":
-            if not isinstance(value, dict):
-                raise InputError(f"expected a table of the effect's parameters, got {value!r}",
-                                 file=where, column=f"effects.{key}")
-            if key not in effects.EFFECTS:
-                raise InputError(f"unknown effect {key!r}; expected one of "
-                                 f"{', '.join(effects.EFFECTS)}", file=where,
-                                 column=f"effects.{key}")
-            unknown = set(value) - set(effects.DEFAULTS[key])
-            if unknown:
-                raise InputError(f"unknown parameter {min(unknown)!r} of {key}; expected "
-                                 f"{', '.join(effects.DEFAULTS[key]) or 'none'}", file=where,
-                                 column=f"effects.{key}")
-            for name, number in value.items():
-                _check_type(0.0, number, where, f"effects.{key}.{name}")
-            out[key] = dict(value)
-        elif key == "effects":
-            out[key] = _merge({}, value, where, "effects.")
-        elif key not in base:
-            raise InputError(f"unknown key {prefix + key!r}", file=where, column=prefix + key)
-        elif isinstance(base[key], dict):
-            out[key] = _merge(base[key], value, where, f"{prefix}{key}.")
-        else:
-            _check_type(base[key], value, where, prefix + key)
-            out[key] = value
-    return out
-
-
-TEXT_LISTS = ("plan.methods", "fleet.axes")
-
-
-def _check_type(default, value, where: str, column: str) -> None:
-    """A value must have the kind of its default: number, true/false, text, list of text
-    (methods, axes) or list of numbers (targets, feeds, dwells, visits)."""
-    def number(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-
-    if isinstance(default, bool):
-        kind, ok = "true or false", isinstance(value, bool)
-    elif number(default):
-        kind, ok = "a number", number(value)
-    elif isinstance(default, str):
-        kind, ok = "text", isinstance(value, str)
-    elif column in TEXT_LISTS:
-        kind = "a list of text"
-        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
-    else:  # lists of numbers; targets_mm may also stay unset
-        kind = "a list of numbers"
-        ok = (default is None and value is None) or (
-            isinstance(value, list) and all(number(v) for v in value))
-    if not ok:
-        raise InputError(f"expected {kind} (finite), got {value!r}", file=where, column=column)
-    if column in WHOLE and (value != int(value) if number(value) else
-                            any(v != int(v) for v in value)):
-        raise InputError(f"expected a whole number, got {value!r}", file=where, column=column)
-
-
-WHOLE = ("plan.n_targets", "plan.repeats", "plan.cycles", "fleet.machines", "fleet.visits",
-         "fleet.adjust_at", "fleet.failure_at")
 # Readings of one simulation held in memory at once [bytes per reading], readings and truth
 # frames with their intermediate arrays (measured on the fleet benchmark)
 BYTES_PER_READING = 600
 
 
-def _validate(config: dict, where: str) -> None:
+def _check(config: Campaign, where) -> None:
     def bad(column, message):
         raise InputError(message, file=where, column=column)
 
-    plan, fleet = config["plan"], config["fleet"]
+    plan, fleet, env = config.plan, config.fleet, config.environment
+    for name, params in config.effects.items():
+        if name not in effects.EFFECTS:
+            bad(f"effects.{name}", f"unknown effect {name!r}; expected one of "
+                                   f"{', '.join(effects.EFFECTS)}")
+        unknown = set(params) - set(effects.DEFAULTS[name])
+        if unknown:
+            bad(f"effects.{name}", f"unknown parameter {min(unknown)!r} of {name}; expected "
+                                   f"{', '.join(effects.DEFAULTS[name]) or 'none'}")
+    _check_counts(config, bad)
     _check_size(config, where)
-    if config["system"] not in SYSTEMS:
-        bad("system", f"expected one of {', '.join(SYSTEMS)}, got {config['system']!r}")
-    if plan["targets_mm"] is not None and len(plan["targets_mm"]) == 0:
+    if config.system not in SYSTEMS:
+        bad("system", f"expected one of {', '.join(SYSTEMS)}, got {config.system!r}")
+    if plan.targets_mm is not None and len(plan.targets_mm) == 0:
         bad("plan.targets_mm", "empty target list: a test needs at least 2 targets")
     if len(_targets(plan)) < 2:
         bad("plan", "a test needs at least 2 targets")
-    if not plan["feeds_mm_min"] or min(plan["feeds_mm_min"]) <= 0:
+    if plan.targets_mm is None and plan.stop_mm <= plan.start_mm:
+        bad("plan.stop_mm", f"the targets run from start_mm to stop_mm: stop_mm "
+                            f"({plan.stop_mm:g}) must be above start_mm ({plan.start_mm:g})")
+    if not plan.feeds_mm_min or min(plan.feeds_mm_min) <= 0:
         bad("plan.feeds_mm_min", "every feed must be > 0 mm/min")
-    if not plan["dwells_s"] or min(plan["dwells_s"]) < 0:
+    if not plan.dwells_s or min(plan.dwells_s) < 0:
         bad("plan.dwells_s", "every dwell must be >= 0 s")
-    if int(plan["cycles"]) < 2:
+    if plan.cycles < 2:
         bad("plan.cycles", "ISO 230-2 needs at least 2 cycles")
-    if set(plan["methods"]) - {"linear", "pendulum"} or not plan["methods"]:
+    if plan.overrun_mm < 0:
+        bad("plan.overrun_mm", f"the overrun is a distance >= 0 mm, got {plan.overrun_mm:g}")
+    if set(plan.methods) - {"linear", "pendulum"} or not plan.methods:
         bad("plan.methods", "expected a list of 'linear' and/or 'pendulum'")
     # the rules of the readings the campaign will write
     axes = (*schema.LINEAR_AXES, *schema.ROTARY_AXES)
-    unknown = [a for a in fleet["axes"] if a not in axes]
-    if unknown or not fleet["axes"]:
+    unknown = [a for a in fleet.axes if a not in axes]
+    if unknown or not fleet.axes:
         bad("fleet.axes", f"unknown axis {unknown[0] if unknown else ''!r}; expected some of "
                           f"{', '.join(axes)}")
-    for column, values in (("plan.targets_mm", plan["targets_mm"] or []),
-                           ("plan.feeds_mm_min", plan["feeds_mm_min"]),
-                           ("plan.dwells_s", plan["dwells_s"]), ("plan.methods", plan["methods"]),
-                           ("fleet.axes", fleet["axes"])):
+    for column, values in (("plan.targets_mm", plan.targets_mm or []),
+                           ("plan.feeds_mm_min", plan.feeds_mm_min),
+                           ("plan.dwells_s", plan.dwells_s), ("plan.methods", plan.methods),
+                           ("fleet.axes", fleet.axes)):
         doubled = sorted({str(v) for v in values if list(values).count(v) > 1})
         if doubled:
             bad(column, f"{doubled[0]} given twice; every test and target must be unique")
-    for column, values in (("plan.feeds_mm_min", plan["feeds_mm_min"]),
-                           ("plan.dwells_s", plan["dwells_s"])):
+    for column, values in (("plan.feeds_mm_min", plan.feeds_mm_min),
+                           ("plan.dwells_s", plan.dwells_s)):
         low, high, expected = PLAUSIBLE[column.split(".")[1].replace("feeds", "feed")
                                         .replace("dwells", "dwell")]
         if any(v > high for v in values):
             bad(column, f"{max(values):g} is not {expected}")
     for name in ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct"):
         low, high, expected = PLAUSIBLE[name]
-        if not low <= config["environment"][name] <= high:
-            bad(f"environment.{name}", f"{config['environment'][name]:g} is not {expected}")
+        if not low <= getattr(env, name) <= high:
+            bad(f"environment.{name}", f"{getattr(env, name):g} is not {expected}")
     try:
-        pd.Timestamp(fleet["start"])
+        pd.Timestamp(fleet.start)
     except ValueError:
-        bad("fleet.start", f"{fleet['start']!r} is not an ISO 8601 date")
-    for section, name in (("fleet", "machines"), ("fleet", "visits"), ("plan", "repeats")):
-        if int(config[section][name]) < 1:
-            bad(f"{section}.{name}", f"must be at least 1, got {config[section][name]}")
-    for column, value in (("effects.backlash.b0_um", config["effects"].get("backlash", {})
-                           .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet["adjusted_b0_um"]),
-                          ("fleet.wear_um_per_1000h", fleet["wear_um_per_1000h"]),
-                          ("fleet.wear_local_um_per_1000h", fleet["wear_local_um_per_1000h"])):
+        bad("fleet.start", f"{fleet.start!r} is not an ISO 8601 date")
+    for column, value in (("effects.backlash.b0_um", config.effects.get("backlash", {})
+                           .get("b0_um", 0.0)), ("fleet.adjusted_b0_um", fleet.adjusted_b0_um),
+                          ("fleet.wear_um_per_1000h", fleet.wear_um_per_1000h),
+                          ("fleet.wear_local_um_per_1000h", fleet.wear_local_um_per_1000h)):
         if value < 0:
             bad(column, f"negative backlash ({value}); lost motion is a clearance >= 0 um")
-    if fleet["wear_width_mm"] <= 0:
+    if fleet.wear_width_mm <= 0:
         bad("fleet.wear_width_mm", "the worn zone's width must be > 0 mm")
     for key in ("warmup_tau_s", "cooling_tau_s"):
-        if config["environment"][key] < 0 or (key == "warmup_tau_s"
-                                               and config["environment"][key] == 0):
+        if getattr(env, key) < 0 or (key == "warmup_tau_s" and env.warmup_tau_s == 0):
             bad(f"environment.{key}", "a thermal time constant must be > 0 s")
-    if config["noise"]["noise_um"] < 0 or config["noise"]["resolution_um"] < 0:
+    for key in ("machine_temp_spread_k", "ambient_spread_k", "pressure_spread_hpa",
+                "humidity_spread_pct"):
+        if getattr(env, key) < 0:
+            bad(f"environment.{key}", f"a spread is a standard deviation >= 0, got "
+                                      f"{getattr(env, key):g}")
+    if config.noise.noise_um < 0 or config.noise.resolution_um < 0:
         bad("noise", "noise and resolution must be >= 0")
 
 
-def n_readings(config: dict) -> int:
+def _check_counts(config: Campaign, bad) -> None:
+    """Counts, durations and calendar values that no campaign can have."""
+    plan, fleet = config.plan, config.fleet
+    for column, value in (("fleet.machines", fleet.machines), ("fleet.visits", fleet.visits),
+                          ("plan.repeats", plan.repeats), ("plan.n_targets", plan.n_targets)):
+        if value < 1:
+            bad(column, f"must be at least 1, got {value}")
+    if fleet.interval_days < 0:
+        bad("fleet.interval_days", f"the time between visits is a duration >= 0 days, got "
+                                   f"{fleet.interval_days:g}")
+    if not 0 <= fleet.hours_per_day <= 24:
+        bad("fleet.hours_per_day", f"an axis runs 0-24 h a day, got {fleet.hours_per_day:g}")
+    if fleet.failure_jump_um < 0:
+        bad("fleet.failure_jump_um", f"a failure adds lost motion (>= 0 um), got "
+                                     f"{fleet.failure_jump_um:g}")
+    if any(v < 1 for v in fleet.adjust_at):
+        bad("fleet.adjust_at", f"visits count from 1, got {min(fleet.adjust_at)}")
+    if fleet.failure_at < 0:
+        bad("fleet.failure_at", f"visits count from 1 (0: no failure), got {fleet.failure_at}")
+
+
+def n_readings(config) -> int:
     """Readings the campaign will write: machines x axes x visits x methods x feeds x dwells x
     repeats x cycles x 2 directions x targets."""
-    plan, fleet = config["plan"], config["fleet"]
-    n_targets = len(plan["targets_mm"]) if plan["targets_mm"] is not None else plan["n_targets"]
-    return int(np.prod([int(fleet["machines"]), len(fleet["axes"]), int(fleet["visits"]),
-                        len(plan["methods"]), len(plan["feeds_mm_min"]), len(plan["dwells_s"]),
-                        int(plan["repeats"]), int(plan["cycles"]), 2, int(n_targets)],
-                       dtype=float))
+    config = load_config(config) if not isinstance(config, Campaign) else config
+    plan, fleet = config.plan, config.fleet
+    n_targets = len(plan.targets_mm) if plan.targets_mm is not None else plan.n_targets
+    return int(np.prod([fleet.machines, len(fleet.axes), fleet.visits, len(plan.methods),
+                        len(plan.feeds_mm_min), len(plan.dwells_s), plan.repeats, plan.cycles,
+                        2, n_targets], dtype=float))
 
 
 def available_memory_bytes() -> float:
-    """Memory the machine can give now (MemAvailable), else its physical memory."""
-    import os
+    """Memory the machine can give now without swapping [bytes] (psutil's ``available``)."""
+    import psutil
 
-    try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    return float(psutil.virtual_memory().available)
 
 
-def _check_size(config: dict, where: str) -> None:
+def _check_size(config: Campaign, where) -> None:
     """Refuse up front a campaign that cannot fit in memory, before anything is computed."""
     need = n_readings(config) * BYTES_PER_READING
     have = available_memory_bytes()
@@ -322,79 +352,87 @@ def _check_size(config: dict, where: str) -> None:
                          "machines, visits or conditions per run", file=where, column="fleet")
 
 
-def _targets(plan: dict) -> np.ndarray:
-    if plan["targets_mm"] is not None:
-        return np.asarray(plan["targets_mm"], float)
-    return target_positions(plan["start_mm"], plan["stop_mm"], int(plan["n_targets"]),
-                            bool(plan["irregular"]))
+def _targets(plan: Plan) -> np.ndarray:
+    if plan.targets_mm is not None:
+        return np.asarray(plan.targets_mm, float)
+    return target_positions(plan.start_mm, plan.stop_mm, plan.n_targets, plan.irregular)
 
 
-def visit_table(config: dict, rng: np.random.Generator) -> pd.DataFrame:
+def visit_table(config, rng: np.random.Generator) -> pd.DataFrame:
     """One row per machine, axis and visit: date, operating hours, b0 and the event."""
-    fleet = config["fleet"]
-    b0_nominal = config["effects"].get("backlash", {}).get("b0_um", 0.0)
+    config = load_config(config)
+    fleet = config.fleet
+    b0_nominal = config.effects.get("backlash", {}).get("b0_um", 0.0)
     rows = []
-    for m in range(int(fleet["machines"])):
-        for axis in fleet["axes"]:
+    for m in range(fleet.machines):
+        for axis in fleet.axes:
             scale = rng.uniform(0.8, 1.25)  # machines and axes differ
             hours, b0, jump = 0.0, b0_nominal * scale, 0.0
-            for v in range(1, int(fleet["visits"]) + 1):
+            for v in range(1, fleet.visits + 1):
                 event = ""
                 if v > 1:
-                    hours += fleet["hours_per_day"] * fleet["interval_days"]
-                if v in fleet["adjust_at"]:
-                    hours, b0, jump, event = 0.0, fleet["adjusted_b0_um"] * scale, 0.0, "adjustment"
-                if v == fleet["failure_at"]:
-                    jump, event = fleet["failure_jump_um"], "failure"
-                local_rate = fleet["wear_local_um_per_1000h"] * scale
+                    hours += fleet.hours_per_day * fleet.interval_days
+                if v in fleet.adjust_at:
+                    hours, b0, jump, event = 0.0, fleet.adjusted_b0_um * scale, 0.0, "adjustment"
+                if v == fleet.failure_at:
+                    jump, event = fleet.failure_jump_um, "failure"
+                local_rate = fleet.wear_local_um_per_1000h * scale
                 rows.append({
                     "machine_id": f"M{m + 1:02d}", "axis": axis, "visit": f"{v:02d}",
-                    "started_at": pd.Timestamp(fleet["start"])
-                    + pd.Timedelta(days=(v - 1) * fleet["interval_days"], hours=8),
+                    "started_at": pd.Timestamp(fleet.start)
+                    + pd.Timedelta(days=(v - 1) * fleet.interval_days, hours=8),
                     "operating_hours": hours,
-                    "b0_um": b0 + fleet["wear_um_per_1000h"] * hours / 1000 + jump,
+                    "b0_um": b0 + fleet.wear_um_per_1000h * hours / 1000 + jump,
                     "wear_local_um_per_1000h": local_rate,
                     "wear_local_um": local_rate * hours / 1000,
                     "event": event})
     return pd.DataFrame(rows)
 
 
-def wear_rate_um_per_1000h(position_mm, fleet: dict, local_um_per_1000h=None) -> np.ndarray:
+def _fleet(fleet) -> Fleet:
+    """A ``Fleet``, also from its table (``parameters.json``'s ``config.fleet``)."""
+    return fleet if isinstance(fleet, Fleet) else from_table(fleet, Fleet, prefix="fleet.")
+
+
+def wear_rate_um_per_1000h(position_mm, fleet, local_um_per_1000h=None) -> np.ndarray:
     """True wear-rate map [um per 1000 h] along the screw:
     w(x) = uniform + local exp(-((x - c) / width)^2), ``local`` the machine's peak rate
-    (default the configured one)."""
-    local = fleet["wear_local_um_per_1000h"] if local_um_per_1000h is None else local_um_per_1000h
+    (default the configured one). ``fleet`` is a ``Fleet`` or its table."""
+    fleet = _fleet(fleet)
+    local = fleet.wear_local_um_per_1000h if local_um_per_1000h is None else local_um_per_1000h
     bump = effects.contribution("backlash_position", np.asarray(position_mm, float), 0, {},
-                                amplitude_um=1.0, center_mm=fleet["wear_center_mm"],
-                                width_mm=fleet["wear_width_mm"])
-    return fleet["wear_um_per_1000h"] + np.asarray(local, float) * bump
+                                amplitude_um=1.0, center_mm=fleet.wear_center_mm,
+                                width_mm=fleet.wear_width_mm)
+    return fleet.wear_um_per_1000h + np.asarray(local, float) * bump
 
 
-def local_wear_um(position_mm, fleet: dict, peak_um) -> np.ndarray:
+def local_wear_um(position_mm, fleet, peak_um) -> np.ndarray:
     """Local wear [um] at the positions for the given peak (the Gaussian worn zone)."""
+    fleet = _fleet(fleet)
     return np.asarray(peak_um, float) * effects.contribution(
         "backlash_position", np.asarray(position_mm, float), 0, {}, amplitude_um=1.0,
-        center_mm=fleet["wear_center_mm"], width_mm=fleet["wear_width_mm"])
+        center_mm=fleet.wear_center_mm, width_mm=fleet.wear_width_mm)
 
 
-def reference_backlash_um(config: dict, b0_um: np.ndarray, wear_local_um=0.0) -> np.ndarray:
+def reference_backlash_um(config, b0_um: np.ndarray, wear_local_um=0.0) -> np.ndarray:
     """True lost motion of each visit at reference conditions [um]: the play width b summed over
     the enabled lost-motion effects with ``backlash``'s b0 of the visit and its local wear, the
     screw at 20 degC, the plan's median feed, averaged over the plan's targets (b >= 0 at each
     target)."""
-    targets = _targets(config["plan"])
+    config = load_config(config)
+    targets = _targets(config.plan)
     shape = (len(b0_um), len(targets))
-    conditions = {"feed_mm_min": np.full(shape, float(np.median(config["plan"]["feeds_mm_min"]))),
+    conditions = {"feed_mm_min": np.full(shape, float(np.median(config.plan.feeds_mm_min))),
                   "machine_temp_c": np.full(shape, effects.REFERENCE_TEMP_C)}
     width = np.zeros(shape)
     for name in effects.LOST_MOTION:
-        if name in config["effects"]:
-            params = dict(config["effects"][name])
+        if name in config.effects:
+            params = dict(config.effects[name])
             if name == "backlash":
                 params["b0_um"] = np.asarray(b0_um, float)[:, None]
             width += effects.contribution(name, np.broadcast_to(targets, shape), 0, conditions,
                                           **params)
-    width += local_wear_um(np.broadcast_to(targets, shape), config["fleet"],
+    width += local_wear_um(np.broadcast_to(targets, shape), config.fleet,
                            np.broadcast_to(np.asarray(wear_local_um, float), len(b0_um))[:, None])
     return np.maximum(width, 0.0).mean(axis=1)
 
@@ -408,7 +446,7 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     conditions and noise."""
     config = load_config(config)
     rng = np.random.default_rng(seed)
-    plan, env = config["plan"], config["environment"]
+    plan, env = config.plan, config.environment
     visits = visit_table(config, rng)
     visits.insert(len(visits.columns) - 1, "reference_backlash_um",
                   reference_backlash_um(config, visits["b0_um"].to_numpy(float),
@@ -417,8 +455,8 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
         rng = np.random.default_rng([seed, session_seed])
     targets = _targets(plan)
     grid = pd.MultiIndex.from_product(
-        [range(len(visits)), plan["methods"], plan["feeds_mm_min"], plan["dwells_s"],
-         range(1, int(plan["repeats"]) + 1)],
+        [range(len(visits)), plan.methods, plan.feeds_mm_min, plan.dwells_s,
+         range(1, plan.repeats + 1)],
         names=["v", "method", "feed_mm_min", "dwell_s", "repeat"]).to_frame(index=False)
     tests = grid.join(visits, on="v")
     tests["test_id"] = (tests["machine_id"] + "-" + tests["axis"] + "-v" + tests["visit"] + "-"
@@ -428,24 +466,25 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     order = np.arange(len(tests)) % (len(tests) // len(visits))
     tests["started_at"] = tests["started_at"] + pd.to_timedelta(order * 20, unit="min")
     n = len(tests)
-    tests["machine_temp_start_c"] = env["machine_temp_c"] + rng.normal(0, env["machine_temp_spread_k"], n)
-    tests["warmup_k"] = env["warmup_k"] * tests["feed_mm_min"] / 1000.0
-    tests["ambient_temp_c"] = env["ambient_temp_c"] + rng.normal(0, env["ambient_spread_k"], n)
-    tests["pressure_hpa"] = env["pressure_hpa"] + rng.normal(0, env["pressure_spread_hpa"], n)
-    tests["humidity_pct"] = np.clip(env["humidity_pct"] + rng.normal(0, env["humidity_spread_pct"],
-                                                                     n), 5, 95)
+    tests["machine_temp_start_c"] = env.machine_temp_c + rng.normal(0, env.machine_temp_spread_k,
+                                                                     n)
+    tests["warmup_k"] = env.warmup_k * tests["feed_mm_min"] / 1000.0
+    tests["ambient_temp_c"] = env.ambient_temp_c + rng.normal(0, env.ambient_spread_k, n)
+    tests["pressure_hpa"] = env.pressure_hpa + rng.normal(0, env.pressure_spread_hpa, n)
+    tests["humidity_pct"] = np.clip(env.humidity_pct + rng.normal(0, env.humidity_spread_pct, n),
+                                    5, 95)
     readings, truth = [], []
     for method, part in tests.groupby("method", sort=False):
-        p = path(method, targets, int(plan["cycles"]), float(plan["overrun_mm"]))
+        p = path(method, targets, plan.cycles, float(plan.overrun_mm))
         arrays = {c: part[c].to_numpy(float) for c in
                   ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
                    "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
-        arrays["wear_center_mm"] = float(config["fleet"]["wear_center_mm"])
-        arrays["wear_width_mm"] = float(config["fleet"]["wear_width_mm"])
+        arrays["wear_center_mm"] = float(config.fleet.wear_center_mm)
+        arrays["wear_width_mm"] = float(config.fleet.wear_width_mm)
         for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
                     "humidity_drift_pct_per_h", "cooling_tau_s"):
-            arrays[key] = float(env[key])
-        arrays["params"] = {name: dict(params) for name, params in config["effects"].items()}
+            arrays[key] = float(getattr(env, key))
+        arrays["params"] = {name: dict(params) for name, params in config.effects.items()}
         if "backlash" in arrays["params"]:
             arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
         # bounded blocks of tests keep the (tests x waypoints) arrays small; the noise is drawn
@@ -460,17 +499,17 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
             comp = None if compensation is None else [
                 compensation.get(key) for key in zip(part["machine_id"].iloc[block],
                                                      part["axis"].iloc[block])]
-            out = simulate_tests(p, targets, arrays_block, config["effects"], config["system"],
-                                 config["noise"]["noise_um"], config["noise"]["resolution_um"],
+            out = simulate_tests(p, targets, arrays_block, config.effects, config.system,
+                                 config.noise.noise_um, config.noise.resolution_um,
                                  rng, compensation=comp)
             readings.append(_readings_frame(part.iloc[block], out))
             truth.append(_truth_frame(part.iloc[block], out, config))
     readings = pd.concat(readings, ignore_index=True)
     truth = pd.concat(truth, ignore_index=True)
-    parameters = {"config": config, "seed": seed, "targets_mm": targets.tolist(),
+    parameters = {"config": as_table(config), "seed": seed, "targets_mm": targets.tolist(),
                   "reference_conditions": {
                       "machine_temp_c": effects.REFERENCE_TEMP_C,
-                      "feed_mm_min": float(np.median(plan["feeds_mm_min"])),
+                      "feed_mm_min": float(np.median(plan.feeds_mm_min)),
                       "ambient_temp_c": effects.REFERENCE_TEMP_C,
                       "pressure_hpa": effects.REFERENCE_PRESSURE_HPA,
                       "humidity_pct": effects.REFERENCE_HUMIDITY_PCT}}
@@ -495,7 +534,7 @@ def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
     return frame
 
 
-def _truth_frame(tests: pd.DataFrame, out: dict, config: dict) -> pd.DataFrame:
+def _truth_frame(tests: pd.DataFrame, out: dict, config: Campaign) -> pd.DataFrame:
     """Mean over cycles per test, target and direction of the true lost motion and of every
     effect's contribution [um], and the wear (uniform plus local) at the target [um]."""
     key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
@@ -510,10 +549,10 @@ def _truth_frame(tests: pd.DataFrame, out: dict, config: dict) -> pd.DataFrame:
                **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
     for key_name, column in columns.items():
         frame[column] = (out[key_name] @ onehot).ravel()
-    fleet = config["fleet"]
+    fleet = config.fleet
     hours = np.repeat(tests["operating_hours"].to_numpy(float), len(groups))
     peak = np.repeat(tests["wear_local_um"].to_numpy(float), len(groups))
-    frame["wear_um"] = (fleet["wear_um_per_1000h"] * hours / 1000
+    frame["wear_um"] = (fleet.wear_um_per_1000h * hours / 1000
                         + local_wear_um(frame["target"].to_numpy(float), fleet, peak))
     return frame
 

@@ -23,6 +23,12 @@ sees). The parsers below turn each file's own sign convention into those offsets
 
 The twin (``models.physics.axis``) runs the commanded path plus these offsets through its play
 operator, so the reversal step is taken up by the clearance exactly as on the machine.
+
+``READERS`` is the controller model's half of the controller records: per controller name, how
+the files written for one machine axis are read back. The other half (writer, aliases, units,
+axis kinds, description) is ``pipeline.compensation.CONTROLLERS``, keyed by the same names and
+holding these readers. The records cannot live here, since their writers are pipeline code and
+models never import the pipeline; a test checks that both halves name the same controllers.
 """
 
 from __future__ import annotations
@@ -37,7 +43,6 @@ from features.readings.errors import InputError
 from features.readings.validation import finite_number
 
 LINUXCNC_MAX_LINES = 256
-CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "marlin", "reprap", "grblhal", "csv")
 
 
 @dataclass(frozen=True)
@@ -145,7 +150,8 @@ def linuxcnc(comp_path, ini_path=None) -> Compensation:
                         "linuxcnc COMP_FILE_TYPE 0")
 
 
-_EEC = re.compile(r"\$AA_ENC_COMP(_STEP|_MIN|_MAX|_IS_MODULO)?\[(\d+),(?:(\d+),)?(\w+)\]\s*=\s*(\S+)")
+_EEC = re.compile(
+    r"\$AA_ENC_COMP(_STEP|_MIN|_MAX|_IS_MODULO)?\[(\d+),(?:(\d+),)?(\w+)\]\s*=\s*(\S+)")
 
 
 def siemens(eec_path, md_path=None) -> Compensation:
@@ -278,21 +284,36 @@ def csv_table(path) -> Compensation:
                         frame["correction_minus_um"].to_numpy(float) / 1000.0, 0.0, "csv")
 
 
+# Controller name -> reader of the files written for one machine axis: ``files`` maps a role
+# (``table``, ``parameters``) to a path, as the writers return them.
+READERS = {
+    "linuxcnc": lambda files: linuxcnc(files.get("table"), files.get("parameters")),
+    "siemens": lambda files: siemens(files.get("table"), files.get("parameters")),
+    "fanuc": lambda files: fanuc(files.get("parameters") or files.get("table")),
+    "heidenhain": lambda files: heidenhain(files.get("table"), files.get("parameters")),
+    "marlin": lambda files: m425(files.get("parameters")),
+    "reprap": lambda files: m425(files.get("parameters")),
+    "grblhal": lambda files: grblhal(files.get("parameters")),
+    "csv": lambda files: csv_table(files.get("table")),
+}
+
+
 def load(controller: str, files: dict) -> Compensation:
-    """Parse the files written for one machine axis: ``files`` maps a role (``table``,
-    ``parameters``) to a path."""
-    table, params = files.get("table"), files.get("parameters")
-    readers = {
-        "linuxcnc": lambda: linuxcnc(table, params),
-        "siemens": lambda: siemens(table, params),
-        "fanuc": lambda: fanuc(params or table),
-        "heidenhain": lambda: heidenhain(table, params),
-        "marlin": lambda: m425(params),
-        "reprap": lambda: m425(params),
-        "grblhal": lambda: grblhal(params),
-        "csv": lambda: csv_table(table),
-    }
-    if controller not in readers:
+    """Parse the files written for one machine axis as ``controller`` reads them.
+
+    Parameters
+    ----------
+    controller : str
+        A name of ``READERS``.
+    files : dict of str to path
+        Role (``table``, ``parameters``) -> file, as the writers return them.
+
+    Returns
+    -------
+    Compensation
+        What the controller adds to the commanded position [mm].
+    """
+    if controller not in READERS:
         raise InputError(f"unknown controller {controller!r}; expected one of "
-                         f"{', '.join(CONTROLLERS)}", column="--controller")
-    return readers[controller]()
+                         f"{', '.join(READERS)}", parameter="controller")
+    return READERS[controller](files)

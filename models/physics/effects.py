@@ -42,8 +42,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import BSpline
 from scipy.special import comb
+
+# [Mechta2022]'s B-spline basis (eqs. 4-5), one definition for the whole package
+from features.statistics import bspline_basis  # noqa: F401 - part of this module's API
 
 REFERENCE_TEMP_C = 20.0
 REFERENCE_PRESSURE_HPA = 1013.25
@@ -54,8 +56,8 @@ EDLEN_PPM_PER_HPA = 0.27
 EDLEN_PPM_PER_PCT = -0.0085
 STEEL_ALPHA_UM_PER_M_K = 11.5
 
-SEED_004 = "backlash paper (seed 004), section 2.2.2"
-SEED_000 = "intra-axis error models (seed 000), eqs. 1-5, 18 and 20"
+BACKLASH_PAPER = "[BacklashNN], section 2.2.2"
+ERROR_MODELS = "intra-axis error models [Mechta2022], eqs. 1-5, 18 and 20"
 
 
 # ------------------------------------------------------------------------------ bases
@@ -66,20 +68,11 @@ def unit_interval(position_mm, start_mm, stop_mm) -> np.ndarray:
 
 
 def bezier_basis(t, degree: int = 4) -> np.ndarray:
-    """Bernstein polynomials B_i,n(t) = C(n, i) t^i (1 - t)^(n - i), i = 0..n (seed 000, eqs.
+    """Bernstein polynomials B_i,n(t) = C(n, i) t^i (1 - t)^(n - i), i = 0..n ([Mechta2022], eqs.
     1-3); shape ``t.shape + (n + 1,)``."""
     t = np.asarray(t, float)[..., None]
     i = np.arange(degree + 1)
     return comb(degree, i) * t ** i * (1 - t) ** (degree - i)
-
-
-def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
-    """B-spline basis N_i,k(t) of degree k on a uniform clamped (non-periodic) knot vector with
-    ``n_control`` control points (seed 000, eqs. 4-5); shape ``(len(t), n_control)``."""
-    degree = min(degree, n_control - 1)
-    inner = np.linspace(0.0, 1.0, n_control - degree + 1)
-    knots = np.r_[[0.0] * degree, inner, [1.0] * degree]
-    return BSpline.design_matrix(np.ravel(np.asarray(t, float)), knots, degree).toarray()
 
 
 # ------------------------------------------------------------------------------ lost motion
@@ -100,7 +93,7 @@ def backlash(position_mm, direction, conditions, b0_um=2.0):
 
     References
     ----------
-    Backlash paper (seed 004), section 2.2.2.
+    [BacklashNN], section 2.2.2.
     """
     return np.broadcast_to(np.asarray(b0_um, float), np.shape(position_mm))
 
@@ -126,8 +119,8 @@ def backlash_position(position_mm, direction, conditions, amplitude_um=1.0, cent
 
     References
     ----------
-    Backlash paper (seed 004), section 2.2.2 (wear of the nut); the general smooth form the
-    discovery workflow also tries is seed 000's B-spline (``bspline_basis``).
+    [BacklashNN], section 2.2.2 (wear of the nut); the general smooth form the
+    discovery workflow also tries is [Mechta2022]'s B-spline (``bspline_basis``).
     """
     return amplitude_um * np.exp(-((np.asarray(position_mm) - center_mm) / width_mm) ** 2)
 
@@ -149,7 +142,7 @@ def backlash_feed(position_mm, direction, conditions, k_um_per_m_min=1.0):
 
     References
     ----------
-    Backlash paper (seed 004), section 2.2.2 (speed dependence of lost motion).
+    [BacklashNN], section 2.2.2 (speed dependence of lost motion).
     """
     return k_um_per_m_min * np.asarray(conditions["feed_mm_min"]) / 1000.0
 
@@ -172,7 +165,7 @@ def backlash_temperature(position_mm, direction, conditions, k_um_per_k=-0.3):
 
     References
     ----------
-    Backlash paper (seed 004), section 2.2.2 and Table 2 (machine temperature as an input).
+    [BacklashNN], section 2.2.2 and Table 2 (machine temperature as an input).
     """
     return k_um_per_k * (np.asarray(conditions["machine_temp_c"]) - REFERENCE_TEMP_C)
 
@@ -195,7 +188,7 @@ def lead_error_linear(position_mm, direction, conditions, k_um_per_m=8.0):
 
     References
     ----------
-    ISO 230-2:2014, systematic positioning deviation; seed 000, section 2.
+    ISO 230-2:2014, systematic positioning deviation; [Mechta2022], section 2.
     """
     return k_um_per_m * np.asarray(position_mm) / 1000.0
 
@@ -232,7 +225,7 @@ def lead_error_periodic(position_mm, direction, conditions, amplitude_um=1.0, pi
 
 def lead_error_profile(position_mm, direction, conditions, p0_um=0.0, p1_um=2.0, p2_um=-1.5,
                        p3_um=1.5, p4_um=0.0, start_mm=0.0, stop_mm=350.0):
-    """Smooth non-linear positioning error along the axis: seed 000's Bezier intra-axis model of
+    """Smooth non-linear positioning error along the axis: [Mechta2022]'s Bezier intra-axis model of
     degree 4 with five control points, what a pitch-error compensation table corrects.
 
     Parameters
@@ -439,29 +432,29 @@ def _record(function, **fields) -> Effect:
 
 RECORDS: dict[str, Effect] = {r.name: r for r in (
     _record(backlash, kind="lost_motion", unit="um", amplitude="b0_um", plausible=(0.0, 50.0),
-            inputs=(), reference=SEED_004,
+            inputs=(), reference=BACKLASH_PAPER,
             separating_test="compare linear and pendulum tests, or repeat with the indicator "
                             "at the nut",
             reading="a constant clearance between motor and table that every reversal has to "
                     "take up"),
     _record(backlash_position, kind="lost_motion", unit="um", amplitude="amplitude_um",
             plausible=(-20.0, 20.0), nuisance={"center_mm": "targets"}, inputs=("target",),
-            reference=SEED_004,
+            reference=BACKLASH_PAPER,
             separating_test="measure the reversal value at more targets along the travel",
             reading="the clearance changes along the axis: screw and nut are worn where the "
                     "axis works most"),
     _record(backlash_feed, kind="lost_motion", unit="um per m/min", amplitude="k_um_per_m_min",
-            plausible=(-10.0, 10.0), inputs=("feed_mm_min",), reference=SEED_004,
+            plausible=(-10.0, 10.0), inputs=("feed_mm_min",), reference=BACKLASH_PAPER,
             separating_test="repeat at several feed rates",
             reading="friction grows with speed and winds up the drive's axial stiffness, so "
                     "the lost motion grows with feed"),
     _record(backlash_temperature, kind="lost_motion", unit="um/K", amplitude="k_um_per_k",
-            plausible=(-3.0, 3.0), inputs=("machine_temp_c",), reference=SEED_004,
+            plausible=(-3.0, 3.0), inputs=("machine_temp_c",), reference=BACKLASH_PAPER,
             separating_test="repeat at a different machine temperature",
             reading="the ball nut's preload changes with screw temperature and with it the "
                     "clearance"),
     _record(lead_error_linear, kind="position", unit="um/m", amplitude="k_um_per_m",
-            plausible=(-200.0, 200.0), inputs=("target",), reference="ISO 230-2:2014; seed 000",
+            plausible=(-200.0, 200.0), inputs=("target",), reference="ISO 230-2:2014; [Mechta2022]",
             separating_test="repeat at a different machine temperature and air state",
             reading="the screw's lead (or the scale) is off by a constant ratio, so the error "
                     "grows in proportion to position"),
@@ -476,7 +469,7 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
     _record(lead_error_profile, kind="position", unit="um", amplitude="peak_um",
             plausible=(0.0, 100.0),
             nuisance={"n_control": "per_target", "start_mm": "start", "stop_mm": "stop"},
-            inputs=("target",), reference=SEED_000,
+            inputs=("target",), reference=ERROR_MODELS,
             separating_test="measure pitch and yaw along the axis (an Abbe error has the same "
                             "shape along one line), or repeat at more targets",
             reading="a smooth non-linear positioning error along the axis, what a pitch-error "
@@ -501,7 +494,7 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
             reading="the laser's wavelength in air is not compensated for the air's state"),
     _record(abbe, kind="position", unit="urad at 150 mm offset", amplitude="pitch_urad",
             plausible=(-200.0, 200.0), nuisance={"length_mm": "travel", "center_mm": "middle"},
-            inputs=("target",), reference="seed 000, eq. 17",
+            inputs=("target",), reference="[Mechta2022], eq. 17",
             separating_test="measure the carriage's pitch angle along the axis, or repeat with "
                             "a different Abbe offset",
             reading="the carriage pitches along a bowed guideway and the offset between beam "

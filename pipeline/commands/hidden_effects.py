@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-HELP = "Benchmark the missing-effect workflow on twin data in which effects were hidden."
+from pipeline.workflows.hidden_effects import SCENARIOS, WORKFLOW
+
+HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
-SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "hidden_effect_scenarios.toml"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,54 +22,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the score as JSON")
 
 
-def read_scenarios(path) -> dict:
-    """The scenario specification of a TOML file (see ``models.discovery_benchmark``)."""
-    from features.readings.errors import InputError
-    from features.readings.fileio import read_toml
-
-    spec = read_toml(path, "scenarios")
-    unknown = set(spec) - {"baseline", "seeds", "resolution_um", "truth", "hidden", "designs",
-                           "special"}
-    if unknown:
-        raise InputError(f"unknown key {min(unknown)!r}", file=path, column=min(unknown))
-    if not spec.get("designs"):
-        raise InputError("no [designs.*]: a benchmark needs at least one design", file=path)
-    return spec
-
-
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from features.readings.errors import InputError
-    from features.readings.fileio import atomic_path, clean_nan, dumps, write_json
-    from models import discovery_benchmark
+    from features.readings.fileio import dumps
     from pipeline import tracking
+    from pipeline.commands.common import progress_bar
+    from pipeline.workflows.hidden_effects import hidden_effects
 
-    if args.seeds is not None and args.seeds < 1:
-        raise InputError("--seeds must be at least 1", column="--seeds")
-    spec = read_scenarios(args.scenarios)
-    seeds = None if args.seeds is None else tuple(range(1, args.seeds + 1))
-    try:
-        scenarios = discovery_benchmark.expand(spec, seeds)
-    except InputError as err:
-        raise InputError(err.message, file=args.scenarios, column=err.column) from None
-    table = discovery_benchmark.run(scenarios, progress=lambda s: tqdm(
-        s, desc="scenarios", file=sys.stderr, leave=False))
-    score = discovery_benchmark.score(table)
-    by_design = discovery_benchmark.score_by_design(table)
-    out = Path(args.out)
-    with atomic_path(out / "scenarios.csv") as tmp:
-        table.to_csv(tmp, index=False)
-    with atomic_path(out / "score_by_design.csv") as tmp:
-        by_design.to_csv(tmp, index=False)
-    write_json(out / "score.json", score)
-    with tracking.run("hidden-effects", "hidden-effect benchmark"):
-        import mlflow
-
-        mlflow.log_metrics({k: v for k, v in clean_nan(score).items() if v is not None})
-        for name in ("scenarios.csv", "score_by_design.csv", "score.json"):
-            mlflow.log_artifact(str(out / name))
-    print(by_design.to_string(index=False), file=sys.stderr)
+    tracking.check_uri()
+    with progress_bar("scenarios") as progress:
+        result = hidden_effects(args.scenarios, seeds=args.seeds, progress=progress)
+    result.write(args.out)
+    tracking.log_result(result)
+    score = result.score
+    print(result.by_design.to_string(index=False), file=sys.stderr)
     print(f"named correctly {score['named_correctly']}/{score['hidden_scenarios']} "
           f"({score['named_correctly_pct']:.0f} %), wrong {score['wrong']}, false names on nulls "
           f"{score['false_names_on_nulls']}/{score['null_scenarios']}, confounded/aliased "
@@ -79,5 +44,5 @@ def run(args: argparse.Namespace) -> int:
           f"{score['max_gap_after_over_noise']:.2f}, slowest scenario "
           f"{score['max_seconds_per_scenario']:.2f} s CPU", file=sys.stderr)
     if args.json:
-        print(dumps(clean_nan(score)))
+        print(dumps(result.to_json()))
     return 0

@@ -4,19 +4,20 @@ beside the paper's association views, as an HTML report logged to MLflow."""
 from __future__ import annotations
 
 import argparse
-import os
+import sys
 
-from features.readings.errors import InputError
-from pipeline.commands.common import FORMATS, parse_features, zero_or_more
+from features.readings.schema import DATA_HELP
+from pipeline.commands.common import FORMATS, parse_features
+from pipeline.commands.options import zero_or_more
+from pipeline.workflows.rank import WORKFLOW
 
-HELP = ("Which inputs drive backlash given the others (driver with its effect in um, proxy, "
-        "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
-        "permutation importance, mutual information); writes an HTML report.")
+HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+FLAGS = {"dropcolumn": "--no-dropcolumn"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="readings file: CSV, Parquet, paper Table-2 CSV or ecmc .dat")
+    parser.add_argument("data", help=DATA_HELP)
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory; its predictor gives the permutation "
@@ -47,123 +48,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="input layout (default: detect)")
 
 
-def parse_bins(text: str):
-    """``"4"`` -> 4 quantile classes; ``"2,4.5"`` -> class boundaries [um]."""
-    parts = [p.strip() for p in str(text).split(",") if p.strip()]
-    try:
-        if len(parts) == 1 and parts[0].lstrip("+").isdigit():
-            bins = int(parts[0])
-            if bins < 2:
-                raise InputError(f"--bins must be at least 2, got {bins}")
-            return bins
-        return [float(p) for p in parts] or _bad_bins(text)
-    except ValueError:
-        return _bad_bins(text)
-
-
-def _bad_bins(text):
-    raise InputError(f"--bins expects a class count such as 4 or boundaries in um such as "
-                     f"2,4,6; got {text!r}")
-
-
 def run(args: argparse.Namespace) -> int:
-    import sys
-
-    from features.readings import read_readings
-    from features.readings.fileio import clean_nan, dumps
-    from features.table import feature_table
-    from models.influence import explain
+    from features.readings.fileio import dumps
     from pipeline import tracking
-    from pipeline.rank_report import write_rank_report
+    from pipeline.commands.common import progress_bar
+    from pipeline.workflows.rank import rank
 
     tracking.check_uri()
-    bins = parse_bins(args.bins)
-    features = parse_features(args.features)
-    model, notes = load_predictor(args.model)
-    if model is not None and features is None:
-        features = list(model.feature_names_)
-    target = args.target or (model.target_kind if model is not None else "auto")
-
-    readings = read_readings(args.data, args.format)
-    table = feature_table(readings, target=target, features=features)
-    if model is not None:
-        missing = [f for f in model.feature_names_ if f not in table.X.columns]
-        if missing:
-            raise InputError(f"the model needs input {missing[0]!r}, which --features leaves "
-                             "out", file=args.model)
-        notes.append("permutation importance of the given trained model, scored on these "
-                     "data; if the model was trained on them, the scores are optimistic")
-    else:
-        notes.append("no --model given: a gradient boosting regressor was fitted per "
-                     "cross-validation fold for the permutation importance")
-    if table.reason:
-        notes.append(f"backlash target {table.target_kind}: {table.reason}")
-    if _visits(table.meta) is None:
-        notes.append("a single visit: no input can be told apart from the visit, and "
-                     "operating hours cannot be tested")
-
-    result = explain(table.X, table.y, table.meta, bins=bins, n_neighbors=args.k,
-                     estimator=model, prefit=model is not None, rank_by=args.rank_by,
-                     n_boot=args.boot, dropcolumn=not args.no_dropcolumn,
-                     random_state=args.seed, source=str(args.data))
-    result.notes.extend(notes)
-    paths = write_rank_report(result, args.out, source=str(args.data),
-                              target_kind=table.target_kind)
-    log_to_mlflow(result, paths, args, table, readings)
-
-    print_table(result, paths["html"], file=sys.stderr)
+    with progress_bar("rank") as progress:
+        result = rank(args.data, format=args.format, model=args.model, bins=args.bins,
+                      features=parse_features(args.features), target=args.target, k=args.k,
+                      rank_by=args.rank_by, boot=args.boot, dropcolumn=not args.no_dropcolumn,
+                      seed=args.seed, progress=progress)
+    result.write(args.out)
+    tracking.log_result(result)
+    print_table(result, result.files["html"], file=sys.stderr)
     if args.json:
-        print(dumps(clean_nan(result.to_json())))
+        print(dumps(result.to_json()))
     return 0
-
-
-def load_predictor(directory):
-    """The trained model of ``--model`` (``models.registry.load_model``), or None."""
-    if directory is None:
-        return None, []
-    from models.registry import load_model
-
-    return load_model(directory), []
-
-
-def _visits(meta):
-    if "visit" not in meta or meta["visit"].nunique(dropna=True) < 2:
-        return None
-    return meta["visit"].astype(str).to_numpy()
-
-
-def log_to_mlflow(result, paths, args, table, readings) -> None:
-    """One MLflow run in experiment ``rank``: parameters, every score as a metric, the files."""
-    from pipeline import tracking
-
-    t = result.table
-    with tracking.run("rank", f"rank {os.path.basename(str(args.data))}"):
-        mlflow = tracking.mlflow_module()
-        mlflow.log_params(tracking.params({
-            "data": str(args.data), "data_sha256": tracking.data_hash(readings),
-            "n_points": result.n_points, "features": ",".join(t.index),
-            "bins": args.bins, "k": args.k, "rank_by": result.ranking.rank_by, "seed": args.seed,
-            "boot": args.boot,
-            "target_kind": table.target_kind, "model": args.model or "",
-            "permutation_model": result.ranking.permutation_model[:500],
-        }))
-        metrics = {"knn_accuracy": result.knn.accuracy,
-                   "knn_accuracy_std": result.knn.accuracy_std,
-                   "n_drivers": float(len(result.drivers()))}
-        for name, row in t.iterrows():
-            metrics.update({f"driver_{name}": float(row["verdict"] == "driver"),
-                            f"effect_um_{name}": row["effect_um"],
-                            f"effect_low_um_{name}": row["effect_low_um"],
-                            f"effect_high_um_{name}": row["effect_high_um"],
-                            f"anova_score_{name}": row["anova_score"],
-                            f"anova_score_std_{name}": row["anova_score_std"],
-                            f"permutation_um_{name}": row["permutation_um"],
-                            f"mutual_info_{name}": row["mutual_info"],
-                            f"knn_drop_{name}": row["knn_drop"],
-                            f"rank_{name}": float(row["rank"])})
-        mlflow.log_metrics(tracking.metrics(metrics))
-        for path in paths.values():
-            mlflow.log_artifact(str(path), artifact_path="rank")
 
 
 def print_table(result, html_path, file) -> None:

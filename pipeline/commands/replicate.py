@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import FORMATS, zero_or_more
+from pipeline.commands.common import FORMATS
+from pipeline.commands.options import zero_or_more
+from pipeline.workflows.replicate import WORKFLOW
 
-HELP = ("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, k-NN "
-        "accuracy) on paired tests, with and without the deviation inputs.")
+HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 
 
@@ -29,20 +30,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings import read_readings
-    from features.table import PAPER_FEATURES, feature_table
-    from pipeline.replication import comparison_rows, markdown, replicate, write_replication
+    from pipeline.commands.common import progress_bar
+    from pipeline.workflows.replicate import replicate
 
-    readings = read_readings(args.data, args.format)
-    table = feature_table(readings, target="paper", features=list(PAPER_FEATURES))
-    truth = None
-    if args.truth:
-        from models.evaluation import true_backlash
-        from pipeline.commands.common import read_truth
-
-        truth = true_backlash(table.meta, read_truth(args.truth), table.target_kind)
-    results = replicate(table.X, table.y, table.meta, args.seed, args.boot, truth)
-    paths = write_replication(results, args.out, source=str(args.data))
-    print(markdown(comparison_rows(results)), file=sys.stderr)
+    with progress_bar("replicate") as progress:
+        result = replicate(args.data, format=args.format, truth=args.truth, boot=args.boot,
+                           seed=args.seed, progress=progress)
+    paths = result.write(args.out)
+    print(result.markdown(), file=sys.stderr)
     print(f"report: {paths['html']}", file=sys.stderr)
     return 0

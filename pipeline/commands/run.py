@@ -3,19 +3,50 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 
-HELP = ("Run an experiment file (TOML steps: a command and its options each) and log it to "
+HELP = ("Run an experiment file (TOML steps: a job and its parameters each) and log it to "
         "MLflow.")
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+# The output folder is checked by the runner (it may come from the file): a failing step
+# removes only what that step wrote, never the finished steps' files.
+OUTPUTS: dict = {}
+ALERT_EXIT = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="experiment file, e.g. experiments/demo.toml")
     parser.add_argument("--out", help="output folder (default: the file's `out`); relative to "
                                       "the working directory")
+    parser.add_argument("--json", action="store_true",
+                        help="print the steps and the files they wrote as JSON on stdout")
 
 
 def run(args: argparse.Namespace) -> int:
     from pipeline import experiment
 
-    return experiment.execute(experiment.load(args.file, args.out))
+    loaded = experiment.load(args.file, args.out)
+    result = experiment.execute(loaded, progress=_show_step)
+    print(file=sys.stderr)
+    for done in result.steps:
+        alert = " (alert)" if done.code == ALERT_EXIT else ""
+        files = ", ".join(_short(f) for f in done.paths()) or "nothing written"
+        print(f"[{done.step.index}] {done.step.job}{alert}: {files}", file=sys.stderr)
+    if args.json:
+        from features.readings.fileio import dumps
+
+        print(dumps(result.to_json()))
+    print(f"experiment {loaded.name!r}: MLflow run {result.run_id} in {result.tracking_uri}; "
+          f"outputs in {_short(loaded.out)}/", file=sys.stderr)
+    return result.code
+
+
+def _show_step(done: int, total: int, title: str) -> None:
+    if done < total:
+        print(f"\n[{done + 1}/{total}] {title}", file=sys.stderr, flush=True)
+
+
+def _short(path) -> str:
+    """A path below the working directory as a relative path, for display."""
+    relative = os.path.relpath(path)
+    return str(path) if relative.startswith("..") else relative

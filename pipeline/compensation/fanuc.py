@@ -31,7 +31,7 @@ VALUE_LIMIT = 127
 def write(profile, out_dir, options) -> dict:
     unit_um = options.fanuc_unit_um
     if not unit_um > 0:
-        raise InputError("must be > 0", column="--fanuc-unit-um")
+        raise InputError("must be > 0", parameter="fanuc_unit_um")
     points = grid(profile.target, options.spacing_mm, MAX_POINTS)
     error, interp_error = resample(profile.target, profile.position_error, points)
     ref = reference_position(points, options.reference_mm)
@@ -44,11 +44,12 @@ def write(profile, out_dir, options) -> dict:
     rebuilt = np.cumsum(np.r_[0, values[1:]]) * magnification
     rebuilt -= rebuilt[ref_index]
     quantisation = float(np.max(np.abs(rebuilt * unit_um - correction)))
-    interval = (points[1] - points[0]) * 1000.0 / unit_um if len(points) > 1 else 1.0
+    step_mm = points[1] - points[0] if len(points) > 1 else 0
+    interval = step_mm * 1000.0 / unit_um if len(points) > 1 else 1.0
     backlash_units = round(profile.backlash / profile.scale * 1000.0 / unit_um)
     if abs(backlash_units) > 9999:
         raise InputError(f"backlash {backlash_units} detection units exceeds 1851's 9999; "
-                         "choose a coarser --fanuc-unit-um", column="--fanuc-unit-um")
+                         "choose a coarser detection unit", parameter="fanuc_unit_um")
     numbers = FIRST_POINT + np.arange(len(points))
     ref_number = int(numbers[ref_index])
     unconfirmed = ["sign of the pitch-error values (written as corrections, -error)",
@@ -56,9 +57,9 @@ def write(profile, out_dir, options) -> dict:
                    "distribution of an increment within its section"]
     a = profile.axis
     head = header(profile, "FANUC", ";", [
-        (f"detection unit {unit_um:g} um; interval {points[1] - points[0] if len(points) > 1 else 0:g} "
-        f"mm; interpolation error at the measured targets {interp_error:.4f} um, rounding to "
-        f"detection units {quantisation:.4f} um"),
+        (f"detection unit {unit_um:g} um; interval {step_mm:g} mm; interpolation error at the "
+         f"measured targets {interp_error:.4f} um, rounding to detection units "
+         f"{quantisation:.4f} um"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
     body = [f"DETECTION UNIT = {unit_um:g} um",
             f"REFERENCE POSITION = {ref:.4f} mm",

@@ -24,7 +24,7 @@ MAX_LINES = 256
 def write(profile, out_dir, options) -> dict:
     if len(profile.target) > MAX_LINES:
         raise InputError(f"{len(profile.target)} targets; a LinuxCNC table holds at most "
-                         f"{MAX_LINES} lines", column="DATA")
+                         f"{MAX_LINES} lines", parameter="data")
     x = profile.target
     plus = x + profile.mean_up / profile.scale
     minus = x + profile.mean_down / profile.scale

@@ -120,23 +120,37 @@ def _pool(per: pd.DataFrame, machine: str, axis: str, notes: list) -> AxisProfil
                        "measured", notes)
 
 
-def parse_conditions(text: str | None) -> dict[str, float]:
-    """``feed_mm_min=500,machine_temp_c=21`` -> dict; only readings-table condition names."""
-    if not text:
+def parse_conditions(conditions) -> dict[str, float]:
+    """Conditions for a predictor: ``"feed_mm_min=500,machine_temp_c=21"`` or a mapping of
+    readings-table condition names to numbers -> dict of floats.
+
+    Raises
+    ------
+    InputError
+        For a malformed item, an unknown name or a value that is not a number
+        (``parameter="conditions"``).
+    """
+    if not conditions:
         return {}
+    if isinstance(conditions, str):
+        items = []
+        for item in conditions.split(","):
+            if "=" not in item:
+                raise InputError(f"{item!r}: expected NAME=VALUE", parameter="conditions")
+            items.append(tuple(p.strip() for p in item.split("=", 1)))
+    else:
+        items = [(str(name), value) for name, value in dict(conditions).items()]
+    allowed = (*schema.NUMERIC_OPTIONAL,)
     out = {}
-    for item in text.split(","):
-        if "=" not in item:
-            raise InputError(f"{item!r}: expected NAME=VALUE", column="--conditions")
-        name, value = (p.strip() for p in item.split("=", 1))
-        allowed = (*schema.NUMERIC_OPTIONAL,)
+    for name, value in items:
         if name not in allowed:
             raise InputError(f"unknown condition {name!r}; expected one of {', '.join(allowed)}",
-                             column="--conditions")
+                             parameter="conditions")
         try:
             out[name] = float(value)
-        except ValueError:
-            raise InputError(f"{name}={value!r} is not a number", column="--conditions") from None
+        except (TypeError, ValueError):
+            raise InputError(f"{name}={value!r} is not a number",
+                             parameter="conditions") from None
     return out
 
 
@@ -147,7 +161,7 @@ def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | No
     ranges = model.input_ranges_
     if "target" not in ranges:
         raise InputError("the model has no 'target' input range; cannot choose positions",
-                         column="MODEL_DIR")
+                         parameter="data")
     low, high = (float(v) for v in ranges["target"])
     step = spacing_mm or (high - low) / 10 or 1.0
     target = np.arange(low, high + step / 2, step)
@@ -162,8 +176,7 @@ def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | No
             plan[name] = float(model.training_inputs_[name].median())
             notes.append(f"{name} not given: training median {plan[name].iloc[0]:g} used")
         else:
-            raise InputError(f"the model needs {name}; give it with --conditions",
-                             column="--conditions")
+            raise InputError(f"the model needs {name}; give its value", parameter="conditions")
     unused = sorted(set(conditions) - set(features))
     if unused:
         notes.append(f"conditions the model does not use: {', '.join(unused)}")
@@ -199,16 +212,17 @@ def grid(target: np.ndarray, spacing: float | None, max_points: int) -> np.ndarr
         if spacing is None:
             spacing = nice_step(float(np.min(steps)) / 4) if len(steps) else 1.0
         if spacing <= 0:
-            raise InputError("must be > 0", column="--spacing")
+            raise InputError("must be > 0", parameter="spacing")
         start = np.floor(low / spacing + 1e-9) * spacing
     n = int(np.ceil((high - start) / spacing - 1e-9)) + 1
     if n > max_points:
         raise InputError(f"{n} points at {spacing:g} mm spacing; this controller takes at most "
-                         f"{max_points}: choose a larger --spacing", column="--spacing")
+                         f"{max_points}: choose a larger spacing", parameter="spacing")
     return start + spacing * np.arange(n)
 
 
-def resample(target: np.ndarray, values: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, float]:
+def resample(target: np.ndarray, values: np.ndarray, points: np.ndarray
+             ) -> tuple[np.ndarray, float]:
     """Values at ``points`` by linear interpolation (end values held), and the interpolation
     error at the measured targets [same unit]: max |table interpolated back - measured|."""
     table = np.interp(points, target, values)

@@ -44,8 +44,9 @@ def write_report(results: list[dict], controller: str, out_dir) -> Path:
     out_dir = Path(out_dir)
     parts = [(f"<p class='summary'>Controller <b>{html.escape(controller)}</b>: the twin re-ran "
              "the ISO 230-2 tests with the written files applied by its controller model, in a "
-             "new session (new noise and conditions, shared by the runs before and after). Figures are means over the "
-             "tests used [um]; an axis passes when neither B nor E grows beyond the noise.</p>")]
+             "new session (new noise and conditions, shared by the runs before and after). "
+             "Figures are means over the tests used [um]; an axis passes when neither B nor E "
+             "grows beyond the noise.</p>")]
     for r in results:
         png = chart(r, out_dir / f"verify_{r['machine_id']}_{r['axis']}.png")
         rows = "".join(

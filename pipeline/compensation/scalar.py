@@ -26,7 +26,7 @@ LINEAR = ("X", "Y", "Z")
 def _scalar(profile, controller: str) -> tuple[float, list[str]]:
     if profile.axis not in LINEAR:
         raise InputError(f"{controller} backlash compensation covers X, Y and Z only, not "
-                         f"{profile.axis}", column="--controller")
+                         f"{profile.axis}", parameter="controller")
     spread = float(np.ptp(profile.reversal)) if len(profile.reversal) > 1 else 0.0
     return profile.backlash / profile.scale, [
         (f"scalar backlash = mean lost motion {profile.backlash:.3f} um; the reversal varies by "

@@ -4,8 +4,9 @@ The twin's readings folder holds ``parameters.json`` (configuration and seed). T
 (same seed) are measured again in a new session (new run conditions and noise, so the
 compensation is not judged on the noise it was made from), once without and once with the
 controller models parsed from the *written files* (``models.physics.controller.load``); both
-runs share that session's conditions and noise, so their difference is the compensation alone. The ISO 230-2 figures of the tests the
-compensation was made from (latest visit, linear tests) are compared before and after.
+runs share that session's conditions and noise, so their difference is the compensation alone.
+The ISO 230-2 figures of the tests the compensation was made from (latest visit, linear tests)
+are compared before and after.
 An axis passes when neither B nor E grows beyond the noise (a sign error doubles them).
 """
 
@@ -28,8 +29,8 @@ def twin_parameters(data_path) -> dict:
     """``parameters.json`` written by ``backlash simulate`` beside the readings."""
     path = Path(data_path).parent / "parameters.json"
     if not path.is_file():
-        raise InputError("--verify needs twin data: no parameters.json beside the readings "
-                         "(written by backlash simulate)", file=data_path, column="--verify")
+        raise InputError("needs twin data: no parameters.json beside the readings (written by "
+                         "simulate)", file=data_path, parameter="verify")
     try:
         parameters = json.loads(path.read_text(encoding="utf-8"))
         return {"config": parameters["config"], "seed": int(parameters["seed"])}

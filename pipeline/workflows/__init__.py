@@ -9,6 +9,8 @@ progress goes to the ``progress`` callback) and names Python parameters in its e
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from features.readings.errors import InputError
 
 
@@ -30,8 +32,10 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
     InputError
         Naming the first parameter that breaks its constraint (``.parameter`` is its name).
     """
-    from sklearn.utils._param_validation import (InvalidParameterError,
-                                                 validate_parameter_constraints)
+    from sklearn.utils._param_validation import (
+        InvalidParameterError,
+        validate_parameter_constraints,
+    )
 
     for name, value in values.items():
         if name not in constraints:
@@ -45,11 +49,35 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
 def _constraint_text(message: str, name: str) -> str:
     """scikit-learn says "The 'x' parameter of f must be A. Got B instead."; the error already
     names the parameter, so keep "must be A; got B"."""
-    head, _, rest = message.partition(" must be ")
+    _, _, rest = message.partition(" must be ")
     if not rest:
         return message
     expected, _, got = rest.rpartition(". Got ")
     return f"must be {expected}; got {got.removesuffix(' instead.')}" if got else f"must be {rest}"
+
+
+class Constraints(Mapping):
+    """A workflow's ``PARAMETERS``: parameter name -> constraints, built by ``build()`` on
+    first use. Importing scikit-learn's constraint classes costs about a second, and every
+    command imports its workflow just to show ``--help``."""
+
+    def __init__(self, build):
+        self._build = build
+        self._table = None
+
+    def _built(self) -> dict:
+        if self._table is None:
+            self._table = self._build()
+        return self._table
+
+    def __getitem__(self, name):
+        return self._built()[name]
+
+    def __iter__(self):
+        return iter(self._built())
+
+    def __len__(self):
+        return len(self._built())
 
 
 def readings_of(data, format: str = "auto", parameter: str = "data"):
@@ -67,12 +95,12 @@ def readings_of(data, format: str = "auto", parameter: str = "data"):
 
 
 # --------------------------------------------------------------------------- the registry
-from dataclasses import dataclass  # noqa: E402
-import importlib  # noqa: E402
+import importlib
+from dataclasses import dataclass
 
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
 NAMES = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
-         "replicate", "drift", "discover", "hidden-effects", "compensate")
+         "replicate", "drift", "discover", "hidden-effects", "compensate", "uncertainty")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,181 @@
+"""Readings in and out: read any accepted layout, validate a frame made by hand, write the
+canonical table, or all three at once (``convert``).
+
+>>> import backlash as bl
+>>> readings = bl.read("ess_mcu1025_ISO230.dat")          # doctest: +SKIP
+>>> bl.write(readings, "ess.parquet")                     # doctest: +SKIP
+>>> bl.convert("table2.csv", "table2.parquet").tests      # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import InputError
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+
+
+def _parameters() -> dict:
+    """The constraints of the parameters (scikit-learn's constraint language), built on first
+    use: importing scikit-learn would slow every command's start."""
+    import pandas as pd
+    from sklearn.utils._param_validation import StrOptions
+
+    return {
+        "data": [str, os.PathLike, pd.DataFrame],
+        "path": [str, os.PathLike],
+        "out": [str, os.PathLike],
+        "format": [StrOptions(set(schema.FORMATS))],
+        "source": [str, os.PathLike],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+def read(path, format: str = "auto"):
+    """Read a readings file in any accepted layout into the validated readings frame.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The readings file.
+    format : str
+        ``"auto"`` (recognise the layout from the file) or a layout name of
+        ``features.readings.layouts.RECORDS`` (``schema.FORMATS``).
+
+    Returns
+    -------
+    DataFrame
+        One row per reading, the columns of ``docs/data-contract.md`` (deviations in um,
+        arcsec for rotary axes); ``attrs["source"]`` is the file.
+
+    Raises
+    ------
+    InputError
+        The file cannot be read or breaks the readings contract: names file, row and column.
+    """
+    check_params(_parameters(), {"path": path, "format": format}, "read")
+    from features.readings.io import read_readings
+
+    return read_readings(path, format)
+
+
+def validate(frame, source: str = "<memory>"):
+    """Check and normalise a readings frame built in code, as ``read`` does for a file.
+
+    Parameters
+    ----------
+    frame : DataFrame
+        Long readings with the columns of ``docs/data-contract.md`` (aliases and
+        ``measured`` instead of ``deviation_um`` accepted, as in a file).
+    source : str
+        The name errors and notes give the frame (rows count from 1).
+
+    Returns
+    -------
+    DataFrame
+        The validated readings frame (a new frame; ``frame`` is not changed).
+    """
+    import pandas as pd
+
+    from features.readings.validation import validate as validate_frame
+
+    if not isinstance(frame, pd.DataFrame):
+        raise TypeError(f"frame must be a pandas DataFrame; got {type(frame).__name__}")
+    check_params(_parameters(), {"source": source}, "validate")
+    return validate_frame(frame, Path(source), None)
+
+
+def write(readings, path) -> Path:
+    """Write validated readings as CSV or Parquet (by the suffix of ``path``), atomically.
+
+    Raises
+    ------
+    InputError
+        ``readings`` is not a validated readings frame, or ``path`` is not a .csv or .parquet
+        name or cannot be written.
+    """
+    check_params(_parameters(), {"path": path}, "write")
+    from features.readings.io import write_readings
+    from features.readings.validation import check_readings
+
+    return write_readings(check_readings(readings), path)
+
+
+@dataclass
+class ConvertResult(Result):
+    """Validated readings and where they were written.
+
+    Attributes
+    ----------
+    readings : DataFrame
+        The validated readings.
+    tests : int
+        Number of tests (machine, axis, visit, test_id) in them.
+    out : Path or None
+        The file written by ``convert`` (None until written).
+    """
+
+    readings: object  # pandas.DataFrame
+    tests: int
+    out: Path | None = None
+
+    def write(self, out) -> dict[str, Path]:
+        """Write the readings to ``out``: a .csv or .parquet file name, or a folder (an
+        existing one or a name without suffix: then ``readings.csv`` inside it)."""
+        out = Path(out)
+        if out.is_dir() or not out.suffix:
+            out = out / "readings.csv"
+        self.out = write(self.readings, out)
+        self.files["readings"] = self.out
+        return self.files
+
+    def to_json(self) -> dict:
+        return {"readings": len(self.readings), "tests": self.tests,
+                "out": None if self.out is None else str(self.out)}
+
+
+def convert(data, out=None, format: str = "auto") -> ConvertResult:
+    """Read a readings file in any accepted layout, validate it and write the canonical table.
+
+    Parameters
+    ----------
+    data : str, path-like or DataFrame
+        The readings file (or a frame ``read`` returned).
+    out : str or path-like, optional
+        Output file, .csv or .parquet; never the input file. None: nothing written (see
+        ``ConvertResult.write``).
+    format : str
+        Input layout, ``"auto"`` to recognise it.
+
+    Returns
+    -------
+    ConvertResult
+    """
+    check_params(_parameters(), {"data": data, "format": format}, "convert")
+    if out is not None:
+        check_params(_parameters(), {"out": out}, "convert")
+        # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line
+        # error, not raise RuntimeError here.
+        if isinstance(data, (str, os.PathLike)) and os.path.realpath(out) == os.path.realpath(
+                data):
+            raise InputError("is the input file; expected a new file name (the original is "
+                             "kept)", file=out, parameter="out")
+    readings = readings_of(data, format)
+    tests = readings.groupby(list(schema.TEST_KEYS)).ngroups
+    result = ConvertResult(readings=readings, tests=tests)
+    if out is not None:  # exactly this file (a name without suffix is refused, not a folder)
+        result.out = result.files["readings"] = write(readings, out)
+    return result
+
+
+WORKFLOW = Workflow(
+    name="convert", function=convert,
+    summary="Read a readings file (canonical, paper Table 2, ecmc or Renishaw .rtl), validate "
+            "it, write CSV/Parquet.",
+    inputs=("data",))

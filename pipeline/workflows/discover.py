@@ -1,0 +1,158 @@
+"""Find where simulation and measurement disagree, name the missing physical effect, add it
+and show the gap shrink (``models.discovery``).
+
+>>> import backlash as bl
+>>> result = bl.discover("readings.csv")        # doctest: +SKIP
+>>> result.named, result.rmse_after_um          # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from numbers import Integral
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import note
+from pipeline.results import Result, TrackingRecord
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+
+DEFAULT_BASELINE = "backlash,lead_error_linear"
+
+
+def _parameters() -> dict:
+    """The constraints of ``discover``'s parameters (scikit-learn's constraint language),
+    built on first use: importing scikit-learn would slow every command's start."""
+    from sklearn.utils._param_validation import Interval, StrOptions
+
+    return {
+        "format": [StrOptions(set(schema.FORMATS))],
+        "baseline": [str, list, tuple],
+        "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class DiscoveryResult(Result):
+    """The effects named, step by step, and what is left of the gap.
+
+    Attributes
+    ----------
+    discovery : models.discovery.Discovery
+        Steps (effect, parameters, 95 % interval, delta BIC, CV gain, gap before and after
+        [um]), ambiguous groups, residuals before and after, the unexplained gap.
+    baseline : list of str
+        Effects of the simulation model the search started from.
+    source : str
+        Where the readings came from.
+    readings : DataFrame
+        The validated readings (the report plots the residuals along their targets).
+    """
+
+    discovery: object
+    baseline: list
+    source: str
+    readings: object = field(repr=False)
+    seed: int = 0
+
+    @property
+    def named(self) -> list[str]:
+        """Effects named, in the order they were added."""
+        return self.discovery.named
+
+    @property
+    def ambiguous(self) -> list[list[str]]:
+        """Groups of effects that explain the gap equally well on this design."""
+        return self.discovery.ambiguous
+
+    @property
+    def steps(self) -> list:
+        return self.discovery.steps
+
+    @property
+    def rmse_before_um(self) -> float:
+        """Gap [um]: RMSE of the baseline simulation against the measurement."""
+        return self.discovery.rmse_before_um
+
+    @property
+    def rmse_after_um(self) -> float:
+        """Gap [um] with the named effects added."""
+        return self.discovery.rmse_after_um
+
+    @property
+    def repeatability_um(self) -> float:
+        return self.discovery.repeatability_um
+
+    @property
+    def unexplained(self) -> dict | None:
+        """The structure left in the residual, or None when the gap is explained."""
+        return self.discovery.unexplained
+
+    def write(self, out) -> dict[str, Path]:
+        """``discovery.html`` and ``discovery.png`` (``pipeline.discovery_report``)."""
+        from pipeline import discovery_report
+
+        self.files = discovery_report.write(self.discovery, self.readings, out, self.source)
+        return self.files
+
+    def to_json(self) -> dict:
+        from features.readings.fileio import clean_nan
+
+        return clean_nan(self.discovery.to_json())
+
+    def tracking_record(self) -> TrackingRecord:
+        """One run in experiment ``discover``: baseline, effects named, the gap, the report."""
+        from pipeline.tracking import data_hash
+
+        d = self.discovery
+        return TrackingRecord(
+            "discover", f"discover {self.source}",
+            params={"data": self.source, "baseline": ",".join(self.baseline),
+                    "data_sha256": data_hash(self.readings),
+                    "named": ",".join(d.named) or "none"},
+            metrics={"rmse_before_um": d.rmse_before_um, "rmse_after_um": d.rmse_after_um,
+                     "repeatability_um": d.repeatability_um},
+            artifacts=list(self.files.values()), artifact_path="discover")
+
+
+def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
+             seed: int = 0) -> DiscoveryResult:
+    """Name the physical effects the baseline simulation model is missing.
+
+    Parameters
+    ----------
+    data : str, path or DataFrame
+        Readings (``measured_at`` for time effects): a file or a frame as ``read`` returns it.
+    format : str, default 'auto'
+        Input layout of a file.
+    baseline : str or list of str, default 'backlash,lead_error_linear'
+        Effects of the simulation model (names of ``models.physics.effects.RECORDS``;
+        comma-separated text allowed).
+    seed : int, default 0
+        Seed of the bootstrap that checks each named effect is stable.
+
+    Returns
+    -------
+    DiscoveryResult
+    """
+    check_params(_parameters(), {"format": format, "baseline": baseline, "seed": seed}, "discover")
+    from models import discovery as search
+
+    names = search.check_baseline(baseline)  # before the data are read
+    readings = readings_of(data, format)
+    source = (str(data) if isinstance(data, (str, os.PathLike))
+              else readings.attrs.get("source", "readings"))
+    found = search.discover(readings, names, random_state=seed, source=source)
+    for text in found.notes:
+        note(text)
+    return DiscoveryResult(found, names, source, readings, seed, notes=list(found.notes))
+
+
+WORKFLOW = Workflow(
+    name="discover", function=discover, inputs=("data",),
+    summary=("Find where simulation and measurement disagree, name the missing physical "
+             "effect, add it and show the gap shrink."))

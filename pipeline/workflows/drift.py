@@ -1,0 +1,164 @@
+"""Backlash across maintenance visits: robust trend, change points, the date it crosses a
+threshold, and (with a trained model) its residual and input drift.
+
+>>> import backlash as bl
+>>> result = bl.drift("readings.csv", threshold_um=4.0)   # doctest: +SKIP
+>>> result.alerts                                         # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from numbers import Real
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import note
+from pipeline.results import Result, TrackingRecord
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+
+
+def _parameters() -> dict:
+    """The constraints of ``drift``'s parameters (scikit-learn's constraint language), built on
+    first use: importing scikit-learn would slow every command's start."""
+    from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+
+    return {
+        "format": [StrOptions(set(schema.FORMATS))],
+        "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
+        "model": [str, os.PathLike, HasMethods(["predict"]), None],
+        "warn_months": [Interval(Real, 0, None, closed="left")],
+        "alpha": [Interval(Real, 0, 0.5, closed="neither")],
+        "min_jump_sigma": [Interval(Real, 0, None, closed="neither")],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class DriftResult(Result):
+    """The drift of every machine axis with two or more visits.
+
+    Attributes
+    ----------
+    series : list of models.drift.DriftSeries
+        One per machine axis: the visits (|B_mean| [um] and sigma [um]), change points,
+        Theil-Sen trend [um/month] since the last change point, threshold crossing and alerts.
+    source : str
+        Where the readings came from.
+    readings : DataFrame
+        The validated readings.
+    parameters : dict
+        The workflow's parameters as given (logged with the run).
+    """
+
+    series: list
+    source: str
+    readings: object = field(repr=False)
+    parameters: dict = field(default_factory=dict)
+
+    @property
+    def alerts(self) -> list[dict]:
+        """Every alert of every series (``kind``, ``message``, ``machine_id``, ``axis``)."""
+        return [{**a, "machine_id": s.machine_id, "axis": s.axis}
+                for s in self.series for a in s.alerts]
+
+    def write(self, out) -> dict[str, Path]:
+        """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.drift_report``)."""
+        from pipeline.drift_report import write_drift_report
+
+        self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes)
+        return self.files
+
+    def to_json(self) -> dict:
+        from features.readings.fileio import clean_nan
+
+        return clean_nan({"series": [s.to_json() for s in self.series]})
+
+    def tracking_record(self) -> TrackingRecord:
+        """One run in experiment ``drift``: parameters, per-series figures, the report files."""
+        from pipeline.tracking import data_hash
+
+        p = self.parameters
+        model = p.get("model")
+        params = {"data": self.source, "data_sha256": data_hash(self.readings),
+                  "threshold_um": p.get("threshold_um"),
+                  "model": "" if model is None else str(model) if isinstance(
+                      model, (str, os.PathLike)) else type(model).__name__,
+                  "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
+                  "warn_months": p.get("warn_months"), "n_series": len(self.series)}
+        metrics = {"n_alerts": float(sum(len(s.alerts) for s in self.series))}
+        for s in self.series:
+            key = f"{s.machine_id}_{s.axis}"  # any id: the adapter makes valid metric names
+            metrics[f"backlash_um_{key}"] = float(s.visits["backlash_um"].iloc[-1])
+            metrics[f"slope_um_per_month_{key}"] = s.trend.get("slope", float("nan"))
+            metrics[f"n_change_points_{key}"] = float(len(s.change_points))
+        return TrackingRecord("drift", f"drift {os.path.basename(self.source)}", params=params,
+                              metrics=metrics, artifacts=list(self.files.values()),
+                              artifact_path="drift")
+
+
+def drift(data, *, format: str = "auto", threshold_um: float | None = None, model=None,
+          warn_months: float = 6.0, alpha: float = 0.05,
+          min_jump_sigma: float = 3.0) -> DriftResult:
+    """Follow backlash across maintenance visits.
+
+    Parameters
+    ----------
+    data : str, path or DataFrame
+        Readings with several visits (``visit``, ``started_at``): a file or a frame as
+        ``read`` returns it.
+    format : str, default 'auto'
+        Input layout of a file.
+    threshold_um : float, optional
+        Backlash limit [um]: forecast the date it is crossed.
+    model : str, path or fitted predictor, optional
+        Trained model (directory or object): monitor its residuals and inputs.
+    warn_months : float, default 6.0
+        Alert when the crossing may come within this many months of the last visit.
+    alpha : float, default 0.05
+        Significance level of the trend tests and intervals, in (0, 0.5).
+    min_jump_sigma : float, default 3.0
+        A change point must move the level by this many standard errors.
+
+    Returns
+    -------
+    DriftResult
+        Its ``alerts`` are empty when nothing needs attention.
+    """
+    values = {"format": format, "threshold_um": threshold_um, "model": model,
+              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma}
+    check_params(_parameters(), values, "drift")
+    from features.visits import SERIES_KEYS, visit_backlash
+    from models import drift as drift_model
+    from models import monitoring
+
+    predictor = model
+    if isinstance(model, (str, os.PathLike)):
+        from models.registry import load_model
+
+        predictor = load_model(model)
+    readings = readings_of(data, format)
+    visits = visit_backlash(readings)
+    counts = visits.groupby(list(SERIES_KEYS)).size()
+    notes = [f"{m} axis {a}: a single visit, no drift analysis"
+             for (m, a), c in counts.items() if c < 2]
+    for text in notes:
+        note(text)
+    series = [drift_model.analyse_series(g, threshold_um=threshold_um, alpha=alpha,
+                                         min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+              for _, g in visits.groupby(list(SERIES_KEYS), sort=True) if len(g) >= 2]
+    if predictor is not None:
+        drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
+    source = (str(data) if isinstance(data, (str, os.PathLike))
+              else readings.attrs.get("source", "readings"))
+    return DriftResult(series, source, readings, values, notes=notes)
+
+
+WORKFLOW = Workflow(
+    name="drift", function=drift, inputs=("data", "model"),
+    summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
+             "it crosses a threshold, and (with --model) residual and input drift of a trained "
+             "model. Exit 3 when an alert fires."))

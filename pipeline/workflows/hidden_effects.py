@@ -1,0 +1,126 @@
+"""The missing-effect workflow's benchmark: twin data in which effects were hidden from the
+baseline, nulls, confounded and aliased designs (``models.discovery_benchmark``). Scenarios are
+data: a TOML file (default ``experiments/hidden_effect_scenarios.toml``).
+
+>>> import backlash as bl
+>>> result = bl.hidden_effects(seeds=1)     # doctest: +SKIP
+>>> result.score["named_correctly_pct"]     # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from numbers import Integral
+from pathlib import Path
+
+from features.readings.errors import InputError, Progress, report
+from pipeline.results import Result, TrackingRecord
+from pipeline.workflows import Constraints, Workflow, check_params
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "hidden_effect_scenarios.toml"
+FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "score": "score.json"}
+
+
+def _parameters() -> dict:
+    """The constraints of ``hidden_effects``'s parameters (scikit-learn's constraint
+    language), built on first use: importing scikit-learn would slow every command's start."""
+    from sklearn.utils._param_validation import HasMethods, Interval
+
+    return {
+        "scenarios": [str, os.PathLike, dict, HasMethods(["check"])],
+        "seeds": [Interval(Integral, 1, None, closed="left"), None],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class HiddenEffectsResult(Result):
+    """The benchmark's outcome per scenario and its score.
+
+    Attributes
+    ----------
+    table : DataFrame
+        One row per scenario: design, kind, hidden effects, what was named, the outcome
+        (correct, ambiguous, missed, wrong, false name), gaps [um] and CPU seconds.
+    score : dict
+        Summary figures (named correctly, false names on nulls, mean gap shrink...).
+    by_design : DataFrame
+        The score per generator and design.
+    """
+
+    table: object
+    score: dict
+    by_design: object = field(repr=False)
+
+    def write(self, out) -> dict[str, Path]:
+        """``scenarios.csv``, ``score_by_design.csv`` and ``score.json``."""
+        from features.readings.fileio import atomic_path, write_json
+
+        paths = {role: Path(out) / name for role, name in FILES.items()}
+        with atomic_path(paths["scenarios"]) as tmp:
+            self.table.to_csv(tmp, index=False)
+        with atomic_path(paths["by_design"]) as tmp:
+            self.by_design.to_csv(tmp, index=False)
+        write_json(paths["score"], self.score)
+        self.files = paths
+        return paths
+
+    def to_json(self) -> dict:
+        from features.readings.fileio import clean_nan
+
+        return clean_nan(self.score)
+
+    def tracking_record(self) -> TrackingRecord:
+        """One run in experiment ``hidden-effects``: the score as metrics, the files."""
+        score = {k: v for k, v in self.to_json().items() if v is not None}
+        return TrackingRecord("hidden-effects", "hidden-effect benchmark", metrics=score,
+                              artifacts=list(self.files.values()))
+
+
+def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
+                   progress: Progress | None = None) -> HiddenEffectsResult:
+    """Benchmark the missing-effect workflow on twin data in which effects were hidden.
+
+    Parameters
+    ----------
+    scenarios : str, path, dict or Scenarios, default experiments/hidden_effect_scenarios.toml
+        Scenario file (TOML), or its specification as a dict of the same shape or a
+        ``models.discovery_benchmark.Scenarios``.
+    seeds : int, optional
+        Seeds per design (1 to ``seeds``); default the scenario file's seeds.
+    progress : callable, optional
+        ``progress(done, total, what)``, told as each scenario starts.
+
+    Returns
+    -------
+    HiddenEffectsResult
+    """
+    check_params(_parameters(), {"scenarios": scenarios, "seeds": seeds}, "hidden_effects")
+    from models import discovery_benchmark as bench
+
+    given_as_file = isinstance(scenarios, (str, os.PathLike))
+    try:
+        spec = bench.read_scenarios(scenarios)
+        expanded = bench.expand(spec, None if seeds is None else tuple(range(1, seeds + 1)))
+    except InputError as err:
+        if given_as_file or err.parameter is not None:
+            raise
+        raise InputError(err.message, column=err.column, parameter="scenarios") from None
+    table = bench.run(expanded, progress=lambda items: _reported(items, progress))
+    return HiddenEffectsResult(table, bench.score(table), bench.score_by_design(table))
+
+
+def _reported(scenarios: list, progress: Progress | None):
+    """The scenarios one by one, telling ``progress`` as each starts."""
+    for done, scenario in enumerate(scenarios):
+        report(progress, done, len(scenarios), scenario["name"])
+        yield scenario
+    report(progress, len(scenarios), len(scenarios), "done")
+
+
+WORKFLOW = Workflow(
+    name="hidden-effects", function=hidden_effects, inputs=("scenarios",),
+    summary="Benchmark the missing-effect workflow on twin data in which effects were hidden.")

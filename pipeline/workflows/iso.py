@@ -1,0 +1,164 @@
+"""ISO 230-2 figures of every test in a readings file: per target and per axis, with the
+readings far from their siblings flagged (and, on request, left out).
+
+>>> import backlash as bl
+>>> result = bl.iso("ess_mcu1025_ISO230.dat")             # doctest: +SKIP
+>>> result.figures[["test_id", "A", "E", "M", "R", "B"]]  # doctest: +SKIP
+>>> result.plot("ess.png")                                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import InputError, note
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+
+# Keys of each test's object in the JSON form (``backlash iso --json``): a public contract.
+JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
+             "E_up", "E_down", "M", "R", "R_up", "R_down", "B", "B_mean")
+PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R_i")
+# Columns of the figures table the CLI prints.
+TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
+
+
+def _parameters() -> dict:
+    """The constraints of ``iso``'s parameters (scikit-learn's constraint language), built on
+    first use: importing scikit-learn would slow every command's start."""
+    import pandas as pd
+    from sklearn.utils._param_validation import StrOptions
+
+    return {
+        "data": [str, os.PathLike, pd.DataFrame],
+        "format": [StrOptions(set(schema.FORMATS))],
+        "drop_outliers": ["boolean"],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class IsoResult(Result):
+    """ISO 230-2 figures of every test (um, arcsec for rotary axes).
+
+    Attributes
+    ----------
+    targets : DataFrame
+        One row per test and target (``features.iso230.per_target``).
+    figures : DataFrame
+        One row per test: A, E, M, R, B and their directional parts
+        (``features.iso230.axis_figures``).
+    outliers : DataFrame
+        The readings flagged as outliers (``features.iso230.outliers``), whether dropped or
+        kept.
+    dropped : bool
+        Whether the outliers were left out of the figures.
+    """
+
+    targets: object  # pandas.DataFrame
+    figures: object
+    outliers: object
+    dropped: bool = False
+
+    def to_json(self) -> list[dict]:
+        """One object per test with ``JSON_KEYS`` and its ``per_target`` rows
+        (``PER_TARGET_KEYS``); NaN becomes None."""
+        from features.readings.fileio import clean_nan
+
+        keys = list(schema.TEST_KEYS)
+        per_test = {k: g for k, g in self.targets.groupby(keys, sort=False)}
+        out = []
+        for row in self.figures[list(JSON_KEYS)].to_dict("records"):
+            rows = per_test[tuple(row[k] for k in keys)].sort_values("target")
+            row["per_target"] = rows[list(PER_TARGET_KEYS)].to_dict("records")
+            out.append(row)
+        return clean_nan(out)
+
+    def table(self) -> str:
+        """The axis figures as a text table (three decimals)."""
+        return self.figures[list(TABLE_COLUMNS)].to_string(
+            index=False, float_format=lambda v: f"{v:.3f}")
+
+    def plot(self, path) -> Path:
+        """Write the ISO chart (one panel per test, at most ``iso_chart.MAX_PANELS``) as PNG.
+
+        Raises
+        ------
+        InputError
+            ``path`` is not a .png name, or there are too many tests for one chart.
+        """
+        from pipeline.iso_chart import MAX_PANELS, plot_tests
+
+        path = Path(path)
+        if path.suffix.lower() != ".png":
+            raise InputError("expected a .png file name", file=path, parameter="path")
+        if len(self.figures) > MAX_PANELS:
+            raise InputError(f"the chart draws at most {MAX_PANELS} tests, the readings have "
+                             f"{len(self.figures)}; split them first", parameter="path")
+        plot_tests(self.targets, self.figures, path)
+        self.files["chart"] = path
+        return path
+
+    def write(self, out) -> dict[str, Path]:
+        """Write ``iso_figures.csv``, ``iso_targets.csv`` and (for at most ``MAX_PANELS``
+        tests) the chart ``iso_chart.png`` into the folder ``out``."""
+        from features.readings.fileio import atomic_path
+        from pipeline.iso_chart import MAX_PANELS
+
+        out = Path(out)
+        for role, frame in (("figures", self.figures), ("targets", self.targets)):
+            with atomic_path(out / f"iso_{role}.csv") as tmp:
+                frame.to_csv(tmp, index=False)
+            self.files[role] = out / f"iso_{role}.csv"
+        if len(self.figures) <= MAX_PANELS:
+            self.plot(out / "iso_chart.png")
+        return self.files
+
+
+def iso(data, format: str = "auto", drop_outliers: bool = False) -> IsoResult:
+    """ISO 230-2 figures of every test (ISO 230-2:2014 clause 2; ``features.iso230``).
+
+    Parameters
+    ----------
+    data : str, path-like or DataFrame
+        A readings file, or a frame ``read`` returned.
+    format : str
+        Input layout of a file, ``"auto"`` to recognise it.
+    drop_outliers : bool
+        Leave the readings flagged as outliers out of the figures (default: flag, keep).
+
+    Returns
+    -------
+    IsoResult
+        Figures per target and per test; each outlier is a note.
+    """
+    from features import iso230
+
+    check_params(_parameters(), {"data": data, "format": format,
+                                 "drop_outliers": drop_outliers}, "iso")
+    readings = readings_of(data, format)
+    flagged = iso230.outliers(readings)
+    outliers = readings.loc[flagged]
+    if drop_outliers:
+        readings = readings.loc[~flagged]
+    targets = iso230.per_target(readings)
+    result = IsoResult(targets=targets, figures=iso230.axis_figures(readings, targets),
+                       outliers=outliers, dropped=drop_outliers)
+    action = "dropped" if drop_outliers else "kept; dropping outliers leaves it out"
+    for r in outliers.itertuples():
+        text = (f"outlier ({action}): test {r.test_id} target {r.target:g} direction "
+                f"{r.direction} cycle {r.cycle}: deviation {r.deviation_um:.3f}")
+        result.notes.append(text)
+        note(text)
+    return result
+
+
+WORKFLOW = Workflow(
+    name="iso", function=iso,
+    summary="ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.",
+    inputs=("data",))

@@ -1,0 +1,198 @@
+"""Predict backlash with a trained model: at every interior target of new tests (linear tests
+suffice), or at the points of a plan (a visit not measured yet: targets and conditions).
+
+>>> import backlash as bl
+>>> forecast = bl.predict("model/", plan="plan.csv")           # doctest: +SKIP
+>>> forecast.predictions[["target", "backlash_um", "backlash_low_um"]]   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from sklearn.utils._param_validation import StrOptions
+
+from features.readings.errors import InputError, note
+from features.readings.schema import FORMATS
+from models.registry import TrainedModel
+from pipeline.results import Result
+from pipeline.workflows import Workflow, check_params, readings_of
+
+KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
+INTERVAL = ("backlash_low_um", "backlash_high_um")
+# a plan this many times the training span of operating hours beyond its end gets a note
+EXTRAPOLATION_WARNING = 1.5
+PARAMETERS = {
+    "model": [str, os.PathLike, TrainedModel],
+    "data": [str, os.PathLike, pd.DataFrame, None],
+    "plan": [str, os.PathLike, pd.DataFrame, None],
+    "format": [StrOptions(set(FORMATS))],
+}
+
+
+@dataclass
+class PredictionResult(Result):
+    """Predicted backlash [um] per point.
+
+    Attributes
+    ----------
+    predictions : DataFrame
+        The point's keys (or the plan's columns) and ``backlash_um``; a predictor with an
+        interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
+        predictions are clipped at 0 (backlash is a magnitude).
+    model : str
+        Registry name of the predictor.
+    """
+
+    predictions: pd.DataFrame
+    model: str
+
+    @property
+    def has_interval(self) -> bool:
+        return INTERVAL[0] in self.predictions
+
+    def write(self, out) -> dict[str, Path]:
+        """Write the predictions as a CSV file ``out``."""
+        from features.readings.fileio import atomic_path
+
+        if not str(out).lower().endswith(".csv"):
+            raise InputError("expected a .csv file name", file=out, parameter="out")
+        with atomic_path(out) as tmp:
+            self.predictions.to_csv(tmp, index=False)
+        self.files = {"predictions": Path(out)}
+        return self.files
+
+    def to_json(self) -> dict:
+        from features.readings.fileio import clean_nan
+
+        out = self.predictions
+        dates = {c: str for c in out.columns if str(out[c].dtype).startswith("datetime")}
+        return clean_nan({"model": self.model, "predictions": out.astype(dates)
+                          .to_dict("records")})
+
+    def tracking_record(self):
+        from pipeline.results import TrackingRecord
+
+        values = self.predictions["backlash_um"]
+        return TrackingRecord(
+            experiment="predict", run_name=f"predict {self.model}",
+            params={"model": self.model, "points": len(values), "interval": self.has_interval},
+            metrics={"backlash_min_um": values.min(), "backlash_mean_um": values.mean(),
+                     "backlash_max_um": values.max()},
+            artifacts=list(self.files.values()))
+
+
+def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionResult:
+    """Backlash [um] from a trained model at the points of new tests or of a plan.
+
+    Parameters
+    ----------
+    model : str, path-like or TrainedModel
+        A model directory written by ``train`` (or the model ``load_model`` returns).
+    data : str, path-like or DataFrame, optional
+        Readings (linear tests suffice: they give the deviation inputs). A CSV/Parquet file
+        without deviations is read as a plan.
+    plan : str, path-like or DataFrame, optional
+        A plan table: targets and conditions of a visit not measured yet
+        (``features.readings.plan``). Give ``data`` or ``plan``.
+    format : str
+        Input layout of ``data`` (default: detect).
+
+    Returns
+    -------
+    PredictionResult
+        A plan far beyond the training span of operating hours gets a note (the forecast
+        extrapolates the wear rate that far).
+    """
+    from features.readings.plan import is_plan, read_plan
+    from features.table import prediction_inputs
+    from models.registry import load_model
+
+    check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
+                 "predict")
+    if (data is None) == (plan is None):
+        raise InputError("give the readings (data) or a plan, not both", parameter="data")
+    trained = model if isinstance(model, TrainedModel) else load_model(model)
+    if plan is None and isinstance(data, (str, os.PathLike)) and format in (
+            "auto", "canonical") and is_plan(data):
+        plan = data
+    if plan is not None:
+        source = str(plan) if isinstance(plan, (str, os.PathLike)) else "plan"
+        table = read_plan(plan) if isinstance(plan, (str, os.PathLike)) else plan
+        inputs = plan_inputs(table, trained, source)
+        keys = list(table.columns)
+    else:
+        inputs = prediction_inputs(readings_of(data, format), trained.feature_names_)
+        keys = list(KEYS)
+        check_forecast(trained, inputs, str(data), plan=False)
+    X = inputs[trained.feature_names_]
+    estimator = trained.estimator
+    if hasattr(estimator, "predict_interval"):
+        mean, low, high = estimator.predict_interval(X)
+        out = inputs[keys].assign(backlash_um=np.maximum(mean, 0.0),
+                                  backlash_low_um=np.maximum(low, 0.0),
+                                  backlash_high_um=np.maximum(high, 0.0))
+    else:
+        out = inputs[keys].assign(backlash_um=np.maximum(trained.predict(inputs), 0.0))
+    return PredictionResult(predictions=out, model=trained.name)
+
+
+def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
+    """Model inputs at the plan's points: the plan's columns; inputs the estimator does not use
+    take their training mean; a condition the estimator uses but the plan lacks is left missing
+    (NaN), which widens the interval of a wear map; an input only a measurement can give (the
+    linear test's deviations) is refused in one line."""
+    used = set(getattr(model.estimator, "used_features_", model.feature_names_))
+    optional = set(getattr(model.estimator, "conditions_", ()))
+    training = model.training_inputs_
+    inputs = plan.copy()
+    for name in model.feature_names_:
+        if name in plan:
+            continue
+        if name in used and name not in optional:
+            why = (" a plan cannot give it: measure the linear tests, or train a forecasting "
+                   "predictor (wear-map)" if name.startswith("deviation") else "")
+            raise InputError(f"model {model.name!r} needs input {name!r}, which the plan "
+                             f"lacks;{why or ' add the column'}", file=source, column=name)
+        fill = (float(training[name].mean()) if name not in used and training is not None
+                and name in training else np.nan)
+        inputs[name] = fill
+    check_forecast(model, inputs, source, plan=True)
+    return inputs
+
+
+def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None:
+    """A model trained on one spread of operating hours cannot forecast others; a plan far
+    beyond the training hours gets a note with the extrapolation factor."""
+    if plan and getattr(model.estimator, "can_forecast_", True) is False:
+        hours = model.input_ranges_.get("operating_hours")
+        raise InputError(f"model {model.name!r} was trained on a single visit (no spread in "
+                         f"operating hours{f', {hours[0]:g} h only' if hours else ''}): it cannot "
+                         "forecast; train on several visits", file=source,
+                         column="operating_hours")
+    if "operating_hours" not in inputs or "operating_hours" not in model.input_ranges_:
+        return
+    low, high = model.input_ranges_["operating_hours"]
+    hours = inputs["operating_hours"].astype(float)
+    if getattr(model.estimator, "can_forecast_", True) is False or high <= low:
+        if plan or (hours != low).any():
+            raise InputError(f"model {model.name!r} was trained on a single visit (operating "
+                             f"hours {low:g} h only): it cannot forecast other hours; train on "
+                             "several visits", file=source, column="operating_hours")
+        return
+    factor = (float(hours.max()) - high) / (high - low)
+    if factor > EXTRAPOLATION_WARNING:
+        note(f"operating_hours up to {hours.max():g} h is {factor:.1f}x the training span "
+             f"({low:g}-{high:g} h) beyond its end; the forecast extrapolates the wear rate "
+             "that far")
+
+
+WORKFLOW = Workflow(
+    name="predict", function=predict,
+    summary="Predict backlash with a trained model directory from new tests or from a plan "
+            "table (targets and conditions); write a CSV.",
+    inputs=("model", "data", "plan"))

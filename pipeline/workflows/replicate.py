@@ -1,0 +1,126 @@
+"""The backlash paper's results (best epoch, regression R, ANOVA Table 5, k-NN accuracy) on one
+data set of paired tests, with and without the deviation inputs (``pipeline.replication``).
+
+>>> import backlash as bl
+>>> result = bl.replicate("twin/readings.csv", truth="twin/truth.csv")   # doctest: +SKIP
+>>> print(result.markdown())                                             # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from numbers import Integral
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import Progress
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+
+
+def _parameters() -> dict:
+    """The constraints of ``replicate``'s parameters (scikit-learn's constraint language),
+    built on first use: importing scikit-learn would slow every command's start."""
+    import pandas as pd
+    from sklearn.utils._param_validation import Interval, StrOptions
+
+    return {
+        "format": [StrOptions(set(schema.FORMATS))],
+        "truth": [str, os.PathLike, pd.DataFrame, None],
+        "boot": [Interval(Integral, 0, None, closed="left")],
+        "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class ReplicationResult(Result):
+    """Every replicated number, with and without the deviation inputs.
+
+    Attributes
+    ----------
+    cases : dict
+        ``"with deviations"`` and ``"without deviations"``: the network's run (best epoch,
+        regression R per phase, training history), k-NN accuracy, ANOVA -ln(p) per input and
+        its order, verdicts given the others (``pipeline.replication.replicate``).
+    source : str
+        Where the readings came from.
+    """
+
+    cases: dict
+    source: str
+
+    @property
+    def rows(self) -> list[dict]:
+        """The side-by-side table: quantity, paper, with deviations, without, note."""
+        from pipeline.replication import comparison_rows
+
+        return comparison_rows(self.cases)
+
+    def markdown(self) -> str:
+        """The side-by-side table as Markdown."""
+        from pipeline.replication import markdown
+
+        return markdown(self.rows)
+
+    def write(self, out) -> dict[str, Path]:
+        """``replication.html``, ``.md``, ``.json`` and the Fig. 10 and 13 figures."""
+        from pipeline.replication import write_replication
+
+        self.files = write_replication(self.cases, out, source=self.source)
+        return self.files
+
+
+def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: int = 0,
+              progress: Progress | None = None) -> ReplicationResult:
+    """Replicate the backlash paper's results on paired linear and pendulum tests.
+
+    Parameters
+    ----------
+    data : str, path or DataFrame
+        Readings with paired linear and pendulum tests: a file or a frame as ``read``
+        returns it.
+    format : str, default 'auto'
+        Input layout of a file.
+    truth : str, path or DataFrame, optional
+        The twin's truth table (``simulate``): also the k-NN accuracy the true backlash would
+        reach in the measured classes (the ceiling set by noise).
+    boot : int, default 100
+        Bootstrap resamples.
+    seed : int, default 0
+        Random seed.
+    progress : callable, optional
+        ``progress(done, total, what)``, told as each case (with and without the deviation
+        inputs) starts.
+
+    Returns
+    -------
+    ReplicationResult
+    """
+    check_params(_parameters(), {"format": format, "truth": truth, "boot": boot, "seed": seed},
+                 "replicate")
+    from features.table import PAPER_FEATURES, feature_table
+    from pipeline import replication
+
+    readings = readings_of(data, format)
+    table = feature_table(readings, target="paper", features=list(PAPER_FEATURES))
+    truth_um = None
+    if truth is not None:
+        from models.evaluation import read_truth, true_backlash
+
+        frame = truth if not isinstance(truth, (str, os.PathLike)) else read_truth(truth)
+        truth_um = true_backlash(table.meta, frame, table.target_kind)
+    cases = replication.replicate(table.X, table.y, table.meta, seed, boot, truth_um,
+                                  progress=progress)
+    source = (str(data) if isinstance(data, (str, os.PathLike))
+              else readings.attrs.get("source", "readings"))
+    return ReplicationResult(cases, source)
+
+
+WORKFLOW = Workflow(
+    name="replicate", function=replicate, inputs=("data", "truth"),
+    summary=("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, "
+             "k-NN accuracy) on paired tests, with and without the deviation inputs."))

@@ -1,0 +1,150 @@
+"""Simulate: the feed-drive twin runs ISO 230-2 test campaigns and writes readings and truth.
+
+The twin (``models.physics``) produces a readings table in the same schema as a laser does, so
+everything downstream treats simulated and measured data alike, and it records the truth: the
+lost motion and every effect's contribution per test, target and direction, and per visit the
+operating hours, b0, the wear and the event (adjustment, failure).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from features.readings.errors import InputError
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params
+
+MAX_SEED = 2**32 - 1
+
+
+def _parameters() -> dict:
+    """The constraints of ``simulate``'s parameters, built on first use (scikit-learn and the
+    twin are slow to import, and every command's start imports this module)."""
+    from numbers import Integral
+
+    from sklearn.utils._param_validation import Interval
+
+    from models.physics.campaign import Campaign
+
+    seed = Interval(Integral, 0, MAX_SEED, closed="both")
+    return {"config": [str, os.PathLike, dict, Campaign, None],
+            "preset": [str, None],  # checked against the shipped presets by ``load_config``
+            "seed": [seed], "session_seed": [seed, None]}
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+FILES = {"readings": "readings.csv", "truth": "truth.csv", "visits": "truth_visits.csv",
+         "parameters": "parameters.json"}
+
+
+@dataclass
+class SimulationResult(Result):
+    """A simulated campaign.
+
+    Attributes
+    ----------
+    readings : DataFrame
+        The readings table, as a laser would write it (``SCHEMA.md``).
+    truth : DataFrame
+        Per test, target and direction: the true lost motion and every effect's contribution
+        [um], and the wear at the target [um].
+    visits : DataFrame
+        Per machine, axis and visit: date, operating hours [h], b0 [um], local wear [um], the
+        lost motion at reference conditions [um] and the event.
+    parameters : dict
+        The full configuration, the seed, the targets [mm] and the reference conditions.
+    config : Campaign
+        The configuration as typed data.
+    """
+
+    readings: object  # pandas.DataFrame
+    truth: object
+    visits: object
+    parameters: dict
+    config: object = field(repr=False, default=None)  # models.physics.campaign.Campaign
+
+    def write(self, out) -> dict[str, Path]:
+        """The four files into folder ``out`` together: written into a temporary folder, then
+        renamed into place (a failure leaves none of them)."""
+        import shutil
+
+        from features.readings import write_readings
+        from features.readings.fileio import temp_folder, write_json
+
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = temp_folder(out)
+        try:
+            write_readings(self.readings, tmp / FILES["readings"])
+            self.truth.to_csv(tmp / FILES["truth"], index=False)
+            self.visits.to_csv(tmp / FILES["visits"], index=False)
+            write_json(tmp / FILES["parameters"], self.parameters)
+            out.mkdir(exist_ok=True)
+            for name in FILES.values():
+                os.replace(tmp / name, out / name)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        self.files = {role: out / name for role, name in FILES.items()}
+        return self.files
+
+    def summary(self) -> str:
+        """One line: readings, tests and the measuring system."""
+        return (f"{len(self.readings)} readings in {self.readings['test_id'].nunique()} tests "
+                f"({self.parameters['config']['system']} measuring system)")
+
+    def to_json(self) -> dict:
+        return {"readings": len(self.readings), "tests": int(self.readings["test_id"].nunique()),
+                "system": self.parameters["config"]["system"], "seed": self.parameters["seed"],
+                "files": {role: str(path) for role, path in self.files.items()}}
+
+
+def simulate(config=None, preset: str | None = None, seed: int = 0,
+             session_seed: int | None = None, compensation: dict | None = None
+             ) -> SimulationResult:
+    """Simulate a test campaign on the feed-drive twin.
+
+    Parameters
+    ----------
+    config : str, Path, dict or Campaign, optional
+        A campaign TOML file (or a dict of the same shape, or a ``Campaign``); its values
+        apply on top of ``preset``.
+    preset : str, optional
+        A shipped campaign (``models.physics.PRESETS``: the files in
+        ``experiments/presets/``); default the paper's plan on one axis.
+    seed : int
+        Random seed: the same configuration and seed give the same numbers.
+    session_seed : int, optional
+        Re-measure the same machines (same ``seed``) in a new session: new run conditions
+        and noise.
+    compensation : dict, optional
+        (machine_id, axis) -> controller model applied to the commanded path
+        (``models.physics.controller``); the random draws do not depend on it.
+
+    Returns
+    -------
+    SimulationResult
+        Readings, truth per test and per visit, and the parameters; ``write(out)`` writes
+        ``readings.csv``, ``truth.csv``, ``truth_visits.csv`` and ``parameters.json``.
+    """
+    from models.physics.campaign import load_config
+    from models.physics.campaign import simulate as run_twin
+
+    check_params(_parameters(), {"config": config, "preset": preset, "seed": seed,
+                              "session_seed": session_seed}, "simulate")
+    for name, value in (("seed", seed), ("session_seed", session_seed)):
+        if isinstance(value, bool):  # an Integral to Python, never meant as a seed
+            raise InputError(f"must be a whole number, got {value!r}", parameter=name)
+    campaign = load_config(config, preset=preset)
+    sim = run_twin(campaign, seed, compensation=compensation, session_seed=session_seed)
+    return SimulationResult(sim.readings, sim.truth, sim.visits, sim.parameters,
+                            config=campaign)
+
+
+WORKFLOW = Workflow(
+    name="simulate", function=simulate, inputs=("config",),
+    summary="Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and "
+            "truth.")

@@ -1,0 +1,225 @@
+"""Train one backlash predictor on paired tests: score it on a hold-out split, save it.
+
+>>> import backlash as bl
+>>> result = bl.train("readings.csv", model="wear-map")      # doctest: +SKIP
+>>> result.metrics["test_rmse_um"]                             # doctest: +SKIP
+>>> result.write("model/")                                     # doctest: +SKIP
+>>> model = bl.load_model("model/")                            # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from numbers import Integral
+from pathlib import Path
+
+import pandas as pd
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from features.readings.errors import InputError, note
+from features.readings.schema import FORMATS
+from models import registry
+from pipeline.results import Result
+from pipeline.workflows import Workflow, check_params, readings_of
+
+MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
+TARGETS = ("auto", "paper", "iso")
+SPLITS = ("random", "forward")
+PATH_OR_FRAME = [str, os.PathLike, pd.DataFrame]
+# The parameters every model job shares (train, compare, backtest, tune).
+DATA_PARAMETERS = {
+    "data": PATH_OR_FRAME,
+    "format": [StrOptions(set(FORMATS))],
+    "target": [StrOptions(set(TARGETS))],
+    "features": [list, tuple, None],
+    "truth": [*PATH_OR_FRAME, None],
+    "seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
+}
+PARAMETERS = {**DATA_PARAMETERS, "model": [str, None],  # names checked by the registry
+              "split": [StrOptions(set(SPLITS))]}
+
+
+@dataclass
+class ModelData:
+    """What a model job works on: the readings, their feature table, the noise floor of one
+    measured backlash point [um], the twin's truth table (or None) and the data's name."""
+
+    readings: pd.DataFrame
+    table: object  # features.table.FeatureTable
+    noise_floor_um: float
+    truth: pd.DataFrame | None
+    source: str
+
+    @property
+    def digest(self) -> str:
+        from pipeline.tracking import data_hash
+
+        return data_hash(self.readings)
+
+
+def model_data(data, format: str = "auto", target: str = "auto", features=None,
+               truth=None) -> ModelData:
+    """Readings -> feature table (checked), noise floor and truth table (see ``train``)."""
+    from features.table import check_features, feature_table
+    from models.evaluation import read_truth, target_noise_floor
+
+    readings = readings_of(data, format)
+    source = str(data) if isinstance(data, (str, os.PathLike)) else readings.attrs.get(
+        "source", "data")
+    table = feature_table(readings, target=target, features=check_feature_names(features))
+    check_features(table.X, source)
+    if truth is not None and not isinstance(truth, pd.DataFrame):
+        truth = read_truth(truth)
+    return ModelData(readings, table, target_noise_floor(readings, table.target_kind), truth,
+                     source)
+
+
+def check_feature_names(features) -> list[str] | None:
+    """``features`` as a list of distinct column names, or None for the default inputs."""
+    if features is None:
+        return None
+    names = list(features)
+    if not names or not all(isinstance(n, str) and n.strip() for n in names):
+        raise InputError("expected a non-empty list of feature-table column names",
+                         parameter="features")
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise InputError(f"names {duplicated[0]!r} twice", parameter="features")
+    return names
+
+
+@dataclass
+class TrainResult(Result):
+    """A trained predictor with its scores.
+
+    Attributes
+    ----------
+    model : str
+        Registry name of the predictor.
+    fit : models.training.Fit
+        The fitted estimator, its split and predictions.
+    trained : models.registry.TrainedModel
+        What ``write`` saves as a model directory (and ``predict`` takes).
+    metrics : dict
+        ``test_*``, ``train_*`` (RMSE and MAE [um], R^2, MAPE [%]) and, on twin data,
+        ``truth_*`` and ``noise_floor_um``.
+    params : dict
+        What the run logs as MLflow parameters (model, split, target, features, data hash...).
+    """
+
+    model: str
+    fit: object
+    trained: object
+    metrics: dict
+    params: dict
+    n_points: int = 0
+    target_kind: str = ""
+    target_reason: str = ""
+    figures: list[Path] = field(default_factory=list)
+
+    def write(self, out) -> dict[str, Path]:
+        """Save the model directory ``out`` (``model.json``, the estimator, the training
+        inputs) and the figures of the fit in ``out/figures``."""
+        from pipeline import model_tracking
+        from pipeline.model_report import write_figures
+
+        model_dir = registry.save_model(self.trained, out)
+        self.figures = write_figures(self.fit, model_dir / model_tracking.FIGURES)
+        self.files = {"model": model_dir, **{p.stem: p for p in self.figures}}
+        return self.files
+
+    def to_json(self) -> dict:
+        return {"model": self.model, "target_kind": self.target_kind, "metrics": self.metrics,
+                **({"model_dir": str(self.files["model"])} if "model" in self.files else {})}
+
+    def tracking_record(self):
+        """Params, metrics, the figures and the model (registered; champion if best on the
+        same data). A result not written yet is written to a temporary folder first."""
+        import tempfile
+
+        from pipeline import model_tracking
+        from pipeline.tracking import RunRecord
+
+        if "model" not in self.files:
+            self.write(Path(tempfile.mkdtemp(prefix="backlash-train-")) / self.model)
+        return RunRecord(
+            experiment="train", run_name=f"train {self.model}", params=self.params,
+            metrics=self.metrics, artifacts=list(self.figures),
+            artifact_path=model_tracking.FIGURES,
+            model=model_tracking.model_record(self.fit, self.files["model"]), promote=True)
+
+
+def train(data, *, model: str | None = None, format: str = "auto", target: str = "auto",
+          features: list[str] | None = None, split: str = "random", truth=None,
+          seed: int = 0) -> TrainResult:
+    """Fit one predictor on the backlash points of paired tests and score it on a hold-out.
+
+    Parameters
+    ----------
+    data : str, path-like or DataFrame
+        Readings file (any input format) or a readings frame from ``read``.
+    model : str, optional
+        Predictor name (``models.registry.PREDICTORS``); default the recommended wear map.
+    format : str
+        Input layout of ``data`` (default: detect).
+    target : {'auto', 'paper', 'iso'}
+        Backlash definition: pendulum minus linear (paper), the ISO reversal value (iso) or
+        chosen from the measuring-system evidence (auto).
+    features : list of str, optional
+        Feature-table columns to use (default: the paper's inputs the data supply, plus
+        ``dwell_s`` and ``operating_hours``).
+    split : {'random', 'forward'}
+        Hold-out: a random 15 % (paper) or the later visits (forward).
+    truth : str, path-like or DataFrame, optional
+        The twin's truth table (``simulate``): also score against the true backlash.
+    seed : int
+        Random seed of the split and of the estimator.
+
+    Returns
+    -------
+    TrainResult
+        Notes say which visits a wear map's clock uses (it restarts at an adjustment).
+    """
+    from models.training import fit_model, since_adjustment
+
+    check_params(PARAMETERS, {"data": data, "model": model, "format": format, "target": target,
+                              "features": features, "split": split, "truth": truth,
+                              "seed": seed}, "train")
+    name = model or registry.RECOMMENDED
+    registry.check_name(name)
+    loaded = model_data(data, format, target, features, truth)
+    table, clock = loaded.table, None
+    if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
+        from models.wear_map import epoch_lines
+
+        table, clock = since_adjustment(table, loaded.readings)
+        for line in [*epoch_lines(clock["series"]), clock["change_points"]]:
+            if line and line != "searched":
+                note(line)
+    fit = fit_model(table, name, split, seed, loaded.truth, loaded.noise_floor_um,
+                    loaded.source)
+    digest = loaded.digest
+    meta = {"split": split, "data_sha256": digest, "data": loaded.source,
+            "noise_floor_um": loaded.noise_floor_um, "target_reason": table.reason,
+            "seed": seed, **({"wear_clock": clock} if clock else {})}
+    params = {"model": name, "split": split, "target_kind": table.target_kind,
+              "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
+              "n_test": len(fit.test_index), "data": loaded.source, "data_sha256": digest,
+              "seed": seed}
+    return TrainResult(model=name, fit=fit, trained=fit.trained_model(meta),
+                       metrics=fit.metrics, params=params, n_points=len(loaded.table.y),
+                       target_kind=table.target_kind, target_reason=table.reason)
+
+
+def load_model(path):
+    """A model directory written by ``train`` (``TrainResult.write``), checked before anything
+    is built (``models.registry.load_model``); ``predict`` takes it."""
+    return registry.load_model(path)
+
+
+WORKFLOW = Workflow(
+    name="train", function=train,
+    summary="Train a backlash predictor on paired tests and save it (default: the recommended "
+            "model).",
+    inputs=("data", "truth"))

@@ -1,0 +1,87 @@
+"""The workflow contract holds for every job: one record per job, the CLI and the API built on
+it, a library that never prints, thin command modules."""
+
+from __future__ import annotations
+
+import ast
+import warnings
+from pathlib import Path
+
+import pytest
+
+from features.readings.errors import BacklashWarning, InputError
+from pipeline import api
+from pipeline.commands import NAMES as COMMANDS
+from pipeline.workflows import NAMES as JOBS
+from pipeline.workflows import Workflow, check_params, workflow
+
+ROOT = Path(__file__).resolve().parents[1]
+LIBRARY = [p for package in ("features", "models") for p in (ROOT / package).rglob("*.py")]
+LIBRARY += [p for p in (ROOT / "pipeline").rglob("*.py")
+            if "commands" not in p.parts and p.name not in ("cli.py",)]
+
+
+@pytest.mark.parametrize("name", JOBS)
+def test_every_job_has_one_record_the_cli_uses(name):
+    record = workflow(name)
+    assert isinstance(record, Workflow) and record.name == name and callable(record.function)
+    from pipeline.cli import build_parser
+
+    command = build_parser().commands[name]
+    assert command.description == record.summary
+
+
+def test_the_command_registry_is_the_jobs_plus_the_runner():
+    from pipeline.cli import build_parser
+
+    assert COMMANDS == (*JOBS, "run")
+    assert tuple(build_parser().commands) == COMMANDS
+
+
+def test_every_public_api_name_resolves_to_a_documented_function():
+    assert sorted(api.__all__) == sorted([*api._WHERE, "InputError", "BacklashWarning"])
+    for name in api.__all__:
+        value = getattr(api, name)
+        assert value.__doc__, f"bl.{name} has no docstring"
+    with pytest.raises(AttributeError):
+        api.no_such_job  # noqa: B018
+
+
+def test_the_library_never_prints():
+    printing = []
+    for path in LIBRARY:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id == "print"):
+                printing.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not printing, printing
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "pipeline" / "commands").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_command_modules_are_thin(path):
+    assert len(path.read_text(encoding="utf-8").splitlines()) <= 120
+
+
+def test_check_params_names_the_parameter_and_what_it_expected():
+    from numbers import Integral
+
+    from sklearn.utils._param_validation import Interval, StrOptions
+
+    constraints = {"bins": [Interval(Integral, 2, None, closed="left")],
+                   "split": [StrOptions({"random", "forward"})]}
+    check_params(constraints, {"bins": 5, "split": "forward"}, "rank")
+    with pytest.raises(InputError, match=r"must be an int in the range \[2, inf\); got 1") as err:
+        check_params(constraints, {"bins": 1}, "rank")
+    assert err.value.parameter == "bins"
+    assert err.value.line(lambda p: f"--{p}").startswith("--bins: must be")
+
+
+def test_a_note_reaches_a_python_user_as_a_backlash_warning():
+    from features.readings.errors import note
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        note("two readings left out")
+    assert [w.category for w in caught] == [BacklashWarning]
+    assert str(caught[0].message) == "two readings left out"
