@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -51,6 +52,10 @@ def _isolated_tracking(tmp_path_factory, monkeypatch, mlflow_template):
     shutil.copyfile(mlflow_template, store / "mlflow.db")
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{store / 'mlflow.db'}")
     monkeypatch.setenv("BACKLASH_ARTIFACTS", str(store / "mlartifacts"))
+    mlflow = sys.modules.get("mlflow")
+    if mlflow is not None:  # an earlier test set the global URI; queries follow this store
+        mlflow.set_tracking_uri(os.environ["MLFLOW_TRACKING_URI"])
+        mlflow.set_registry_uri(os.environ["MLFLOW_TRACKING_URI"])
 
 
 @pytest.fixture(scope="session")

@@ -229,8 +229,9 @@ def test_sigterm_during_convert_removes_the_temporary_file(tmp_path, big_csv):
     out = tmp_path / "out"
     proc = _cli("convert", str(big_csv), "--out", str(out / "big.csv"))
     seen = _signal_while_writing(proc, out, signal.SIGTERM)
-    assert seen and proc.returncode == 128 + signal.SIGTERM
-    assert "Traceback" not in proc.stderr.read()
+    err = proc.stderr.read()
+    assert seen and proc.returncode == 128 + signal.SIGTERM, err
+    assert "Traceback" not in err
     assert list(out.iterdir()) == []
 
 

@@ -85,3 +85,11 @@ def test_a_note_reaches_a_python_user_as_a_backlash_warning():
         note("two readings left out")
     assert [w.category for w in caught] == [BacklashWarning]
     assert str(caught[0].message) == "two readings left out"
+
+
+def test_the_docs_list_every_command_with_a_page_of_its_own():
+    index = (ROOT / "docs" / "index.md").read_text(encoding="utf-8")
+    listed = [line.split("`backlash ")[1].split()[0].rstrip("`") for line in index.splitlines()
+              if line.startswith("| `backlash ")]
+    assert listed == list(COMMANDS)
+    assert all((ROOT / "docs" / f"{name}.md").is_file() for name in COMMANDS)
