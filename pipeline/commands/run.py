@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 HELP = ("Run an experiment file (TOML steps: a job and its parameters each) and log it to "
         "MLflow.")
@@ -30,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     for done in result.steps:
         alert = " (alert)" if done.code == ALERT_EXIT else ""
-        files = ", ".join(_short(f) for f in done.paths()) or "nothing written"
+        files = _listing([Path(f) for f in done.paths()])
         print(f"[{done.step.index}] {done.step.job}{alert}: {files}", file=sys.stderr)
     if args.json:
         from features.readings.fileio import dumps
@@ -44,6 +45,14 @@ def run(args: argparse.Namespace) -> int:
 def _show_step(done: int, total: int, title: str) -> None:
     if done < total:
         print(f"\n[{done + 1}/{total}] {title}", file=sys.stderr, flush=True)
+
+
+def _listing(paths: list) -> str:
+    """The step's outputs, a folder standing for the files written inside it."""
+    top = [p for p in paths if not any(q in p.parents for q in paths)]
+    inside = len(paths) - len(top)
+    more = f" (and {inside} files inside)" if inside else ""
+    return (", ".join(_short(p) for p in top) + more) if top else "nothing written"
 
 
 def _short(path) -> str:
