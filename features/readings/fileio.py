@@ -60,6 +60,8 @@ def atomic_path(path: str | os.PathLike):
         _open_temps.add(tmp)
     try:
         yield Path(tmp)
+        if "terminating" in _handler:  # SIGTERM came where its SystemExit was swallowed
+            raise SystemExit(128 + signal.SIGTERM)
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs follow the umask
         os.replace(tmp, path)
     except OSError as err:
@@ -189,6 +191,9 @@ def _install_sigterm_handler() -> None:
 
 
 def _on_sigterm(signum, frame) -> None:
+    # The SystemExit below is lost when the signal lands in a finaliser or a C callback that
+    # ignores exceptions; the flag keeps the write from being renamed into place anyway.
+    _handler["terminating"] = True
     with _lock:
         temps = list(_open_temps)
     for tmp in temps:
