@@ -31,7 +31,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal, NamedTuple
 
 from features.readings.errors import InputError
@@ -551,3 +551,33 @@ def budget_values(budget: UncertaintyBudget, arithmetic: str | None = None) -> B
     expanded = expanded_parameters_um(v["u_D"], v["u_M"], v["u_T"], v["u_EVE"], v["u_S"],
                                       budget.cycles, budget.coverage_factor)
     return BudgetValues(arithmetic or budget.arithmetic, lines, v["u_P"], expanded)
+
+
+def expanded_at_length_um(budget: UncertaintyBudget, length_mm: float, cycles: int) -> dict:
+    """Expanded uncertainties [um] of the ISO 230-2 figures of a test of measuring length
+    ``length_mm`` [mm] and ``cycles`` runs per direction, from the contributors of ``budget``.
+
+    The budget's ``length_mm`` and ``cycles`` are replaced by the test's own and the budget
+    is evaluated in the ISO arithmetic (every length-dependent line at the test's length):
+    the ``[paper]`` lengths describe one published test, not the one at hand.
+
+    Parameters
+    ----------
+    budget : UncertaintyBudget
+        The contributors (laser, misalignment, temperature, environment, setup) and k.
+    length_mm : float
+        The test's measuring length [mm] (its largest minus its smallest target); > 0.
+    cycles : int
+        n, the runs per direction of the test; at least 1.
+
+    Returns
+    -------
+    dict
+        ``R_dir``, ``B``, ``R``, ``E``, ``M``, ``A`` [um], as ``expanded_parameters_um``.
+    """
+    if not length_mm > 0 or cycles < 1:
+        raise InputError(f"needs a measuring length > 0 and at least one run per direction; "
+                         f"got {length_mm} mm and {cycles} runs", parameter="length_mm")
+    test = replace(budget, length_mm=float(length_mm), cycles=int(cycles), arithmetic="iso")
+    return budget_values(test, "iso").expanded_um
+

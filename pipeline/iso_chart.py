@@ -32,12 +32,23 @@ def draw_test(ax, ax_reversal, targets: pd.DataFrame, figures: pd.Series) -> Non
     ax_reversal.axhline(0, color="black", lw=0.5)
     ax_reversal.set_ylabel(f"B_i [{unit}]")
     ax_reversal.set_xlabel(f"target [{schema.position_unit(figures['axis'])}]")
-    box = "\n".join(f"{k:<6} {figures[k]:9.3f}" for k in ("A", "A_up", "A_down", "E", "E_up",
-                                                            "E_down", "M", "R", "R_up", "R_down",
-                                                            "B", "B_mean"))
-    ax.text(1.02, 1.0, f"ISO 230-2 [{unit}]\n{box}", transform=ax.transAxes, va="top",
+    box = "\n".join(_box_line(figures, k) for k in ("A", "A_up", "A_down", "E", "E_up",
+                                                      "E_down", "M", "R", "R_up", "R_down",
+                                                      "B", "B_mean"))
+    title = f"ISO 230-2 [{unit}]" + (" ± U" if "U_B_um" in figures.index else "")
+    ax.text(1.02, 1.0, f"{title}\n{box}", transform=ax.transAxes, va="top",
             family="monospace", fontsize=8,
             bbox={"boxstyle": "round", "facecolor": "white", "alpha": 0.9})
+
+
+def _box_line(figures: pd.Series, key: str) -> str:
+    """``A      12.345``, or ``A      12.345 ± 3.330`` when the figures carry ``U_A_um``
+    (the expanded uncertainty of an ISO/TR 230-9 budget, k = 2 by default)."""
+    line = f"{key:<6} {figures[key]:9.3f}"
+    u = figures.get(f"U_{key}_um")
+    if u is not None and pd.notna(u):
+        line += f" ± {u:.3f}"
+    return line
 
 
 def plot_tests(targets: pd.DataFrame, figures: pd.DataFrame, path) -> None:

@@ -21,6 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", metavar="OUT.png", help="write the ISO chart (one panel per test)")
     parser.add_argument("--drop-outliers", action="store_true",
                         help="leave flagged outlier readings out of the figures")
+    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
+                        help="ISO/TR 230-9 budget: add U_A_um ... U_B_um (expanded "
+                             "uncertainties at each test's measuring length)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.plot and not args.plot.lower().endswith(".png"):  # refused before any reading
         raise InputError("expected a .png file name", file=args.plot, parameter="path")
-    result = iso(args.file, args.format, args.drop_outliers)
+    result = iso(args.file, args.format, args.drop_outliers, uncertainty=args.uncertainty)
     if args.plot:
         result.plot(args.plot)
     print(result.table(), file=sys.stderr)

@@ -5,6 +5,12 @@ readings far from their siblings flagged (and, on request, left out).
 >>> result = bl.iso("ess_mcu1025_ISO230.dat")             # doctest: +SKIP
 >>> result.figures[["test_id", "A", "E", "M", "R", "B"]]  # doctest: +SKIP
 >>> result.plot("ess.png")                                # doctest: +SKIP
+
+With an ISO/TR 230-9 budget (``features.uncertainty``) each test also gets the expanded
+uncertainties of A, E, M, R and B at its own measuring length and number of runs:
+
+>>> result = bl.iso("ess_mcu1025_ISO230.dat", uncertainty="paper_uncertainty.toml")  # doctest: +SKIP
+>>> result.figures[["B", "U_B_um"]]                                                 # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
@@ -24,6 +31,9 @@ JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_d
 PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R_i")
 # Columns of the figures table the CLI prints.
 TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
+# Expanded uncertainties [um] added to the figures, the JSON objects and the table when a
+# budget is given, by the figure of ``features.uncertainty.expanded_parameters_um`` they take.
+UNCERTAINTY_KEYS = {"U_A_um": "A", "U_E_um": "E", "U_M_um": "M", "U_R_um": "R", "U_B_um": "B"}
 
 
 def _parameters() -> dict:
@@ -36,6 +46,7 @@ def _parameters() -> dict:
         "data": [str, os.PathLike, pd.DataFrame],
         "format": [StrOptions(set(schema.FORMATS))],
         "drop_outliers": ["boolean"],
+        "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
     }
 
 
@@ -52,36 +63,45 @@ class IsoResult(Result):
         One row per test and target (``features.iso230.per_target``).
     figures : DataFrame
         One row per test: A, E, M, R, B and their directional parts
-        (``features.iso230.axis_figures``).
+        (``features.iso230.axis_figures``); with a budget also ``UNCERTAINTY_KEYS``, the
+        expanded uncertainties [um] of A, E, M, R and B.
     outliers : DataFrame
         The readings flagged as outliers (``features.iso230.outliers``), whether dropped or
         kept.
     dropped : bool
         Whether the outliers were left out of the figures.
+    budget : features.uncertainty.UncertaintyBudget or None
+        The uncertainty budget the ``U_*_um`` columns come from, if one was given.
     """
 
     targets: object  # pandas.DataFrame
     figures: object
     outliers: object
     dropped: bool = False
+    budget: unc.UncertaintyBudget | None = None
+
+    def _extra(self) -> list[str]:
+        """The uncertainty columns the figures carry (none without a budget)."""
+        return [k for k in UNCERTAINTY_KEYS if k in self.figures.columns]
 
     def to_json(self) -> list[dict]:
-        """One object per test with ``JSON_KEYS`` and its ``per_target`` rows
-        (``PER_TARGET_KEYS``); NaN becomes None."""
+        """One object per test with ``JSON_KEYS`` (and, with a budget, ``UNCERTAINTY_KEYS``)
+        and its ``per_target`` rows (``PER_TARGET_KEYS``); NaN becomes None."""
         from features.readings.fileio import clean_nan
 
         keys = list(schema.TEST_KEYS)
         per_test = {k: g for k, g in self.targets.groupby(keys, sort=False)}
         out = []
-        for row in self.figures[list(JSON_KEYS)].to_dict("records"):
+        for row in self.figures[list(JSON_KEYS) + self._extra()].to_dict("records"):
             rows = per_test[tuple(row[k] for k in keys)].sort_values("target")
             row["per_target"] = rows[list(PER_TARGET_KEYS)].to_dict("records")
             out.append(row)
         return clean_nan(out)
 
     def table(self) -> str:
-        """The axis figures as a text table (three decimals)."""
-        return self.figures[list(TABLE_COLUMNS)].to_string(
+        """The axis figures as a text table (three decimals), with the expanded uncertainties
+        when a budget was given."""
+        return self.figures[list(TABLE_COLUMNS) + self._extra()].to_string(
             index=False, float_format=lambda v: f"{v:.3f}")
 
     def plot(self, path) -> Path:
@@ -120,7 +140,51 @@ class IsoResult(Result):
         return self.files
 
 
-def iso(data, format: str = "auto", drop_outliers: bool = False) -> IsoResult:
+def with_uncertainty(figures, targets, budget: unc.UncertaintyBudget):
+    """``figures`` with the ``UNCERTAINTY_KEYS`` columns [um] of every test.
+
+    A test's measuring length is its largest minus its smallest target [mm]; its runs per
+    direction n are the fewest readings any target has in either direction (dropped outliers
+    lower it, which widens U).
+
+    Raises
+    ------
+    InputError
+        A test on a rotary axis: the budget's contributors are lengths, not angles.
+    """
+    import numpy as np
+    import pandas as pd
+
+    keys = list(schema.TEST_KEYS)
+    rows = []
+    for key, t in targets.groupby(keys, sort=False, dropna=False):
+        row = dict(zip(keys, key))
+        if schema.is_rotary(row["axis"]):
+            raise InputError(f"test {row['test_id']} is on rotary axis {row['axis']}: an "
+                             "uncertainty budget holds lengths, not angles", parameter="uncertainty")
+        length = float(t["target"].max() - t["target"].min())
+        counts = pd.concat([t["n_up"], t["n_down"]])
+        cycles = int(counts[counts > 0].min()) if (counts > 0).any() else 0
+        if length > 0 and cycles > 0:
+            expanded = unc.expanded_at_length_um(budget, length, cycles)
+            row.update({k: expanded[f] for k, f in UNCERTAINTY_KEYS.items()})
+        else:  # one target or no readings: no length to scale the budget to
+            row.update(dict.fromkeys(UNCERTAINTY_KEYS, np.nan))
+        rows.append(row)
+    return figures.merge(pd.DataFrame(rows, columns=keys + list(UNCERTAINTY_KEYS)), on=keys,
+                         how="left")
+
+
+def _budget(source) -> unc.UncertaintyBudget:
+    """The budget from a TOML path, a dict or a budget object (checked like a file's)."""
+    budget = unc.read_budget(source)
+    if source is budget:
+        budget.check()
+    return budget
+
+
+def iso(data, format: str = "auto", drop_outliers: bool = False,
+        uncertainty=None) -> IsoResult:
     """ISO 230-2 figures of every test (ISO 230-2:2014 clause 2; ``features.iso230``).
 
     Parameters
@@ -131,28 +195,47 @@ def iso(data, format: str = "auto", drop_outliers: bool = False) -> IsoResult:
         Input layout of a file, ``"auto"`` to recognise it.
     drop_outliers : bool
         Leave the readings flagged as outliers out of the figures (default: flag, keep).
+    uncertainty : str, path-like, dict or UncertaintyBudget, optional
+        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): adds the expanded
+        uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every test, at its own
+        measuring length and runs per direction (``with_uncertainty``). Linear axes only.
 
     Returns
     -------
     IsoResult
         Figures per target and per test; each outlier is a note.
+
+    Raises
+    ------
+    InputError
+        Unreadable readings or budget, a non-physical budget, a budget for a rotary axis.
     """
     from features import iso230
 
     check_params(_parameters(), {"data": data, "format": format,
-                                 "drop_outliers": drop_outliers}, "iso")
+                                 "drop_outliers": drop_outliers, "uncertainty": uncertainty},
+                 "iso")
+    budget = None if uncertainty is None else _budget(uncertainty)
     readings = readings_of(data, format)
     flagged = iso230.outliers(readings)
     outliers = readings.loc[flagged]
     if drop_outliers:
         readings = readings.loc[~flagged]
     targets = iso230.per_target(readings)
-    result = IsoResult(targets=targets, figures=iso230.axis_figures(readings, targets),
-                       outliers=outliers, dropped=drop_outliers)
+    figures = iso230.axis_figures(readings, targets)
+    if budget is not None:
+        figures = with_uncertainty(figures, targets, budget)
+    result = IsoResult(targets=targets, figures=figures, outliers=outliers,
+                       dropped=drop_outliers, budget=budget)
     action = "dropped" if drop_outliers else "kept; dropping outliers leaves it out"
     for r in outliers.itertuples():
         text = (f"outlier ({action}): test {r.test_id} target {r.target:g} direction "
                 f"{r.direction} cycle {r.cycle}: deviation {r.deviation_um:.3f}")
+        result.notes.append(text)
+        note(text)
+    if budget is not None and budget.arithmetic == "paper":
+        text = ("uncertainty: the budget's [paper] lengths describe its own test; U is "
+                "evaluated in the ISO arithmetic at each test's measuring length")
         result.notes.append(text)
         note(text)
     return result
@@ -161,4 +244,4 @@ def iso(data, format: str = "auto", drop_outliers: bool = False) -> IsoResult:
 WORKFLOW = Workflow(
     name="iso", function=iso,
     summary="ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.",
-    inputs=("data",))
+    inputs=("data", "uncertainty"))
