@@ -309,9 +309,21 @@ def _drop(store, name: str) -> None:
 
 
 def data_hash(frame) -> str:
-    """Content hash of a data frame (sha256 of its canonical CSV bytes), logged with runs."""
-    payload = frame.to_csv(index=False).encode()
-    return hashlib.sha256(payload).hexdigest()
+    """Content hash of a data frame, logged with runs (``data_sha256``).
+
+    The sha256 of the column names, their dtypes and pandas' 64-bit hash of every row's values
+    (``pandas.util.hash_pandas_object``, index left out): equal content gives the same hash,
+    a changed value, column name or dtype another. Hashing the values in place is an order of
+    magnitude faster than writing the frame out as text.
+    """
+    import pandas as pd
+
+    digest = hashlib.sha256()
+    for name, dtype in frame.dtypes.items():
+        digest.update(f"{name!s}\x1f{dtype!s}\x1e".encode())
+    rows = pd.util.hash_pandas_object(frame, index=False).to_numpy(dtype="<u8")
+    digest.update(rows.tobytes())
+    return digest.hexdigest()
 
 
 # --------------------------------------------------------------------------- the one adapter

@@ -88,12 +88,26 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
         check_header([str(c) for c in frame.columns], path)
         row_base = 2
         # Blank lines are skipped, but every reading keeps the row number of its line.
-        blank = frame.fillna("").apply(lambda col: col.str.strip().eq("")).all(axis=1)
+        blank = _blank_rows(frame)
         frame = frame.assign(**{ROW: np.arange(len(frame)) + row_base}).loc[~blank]
     frame.columns = [str(c).strip() for c in frame.columns]
     if frame.empty:
         raise InputError("no readings: the file has a header but no data rows", file=path)
     return frame, row_base
+
+
+def _blank_rows(frame: pd.DataFrame) -> np.ndarray:
+    """Rows whose every cell is empty or spaces; only rows blank in the first column are
+    checked further, so a file without blank lines costs one column's check."""
+    if frame.shape[1] == 0:
+        return np.ones(len(frame), dtype=bool)
+    first = frame.iloc[:, 0].fillna("").str.strip().eq("").to_numpy()
+    blank = np.zeros(len(frame), dtype=bool)
+    candidates = np.flatnonzero(first)
+    if len(candidates):
+        rest = frame.iloc[candidates].fillna("")
+        blank[candidates] = rest.apply(lambda col: col.str.strip().eq("")).all(axis=1)
+    return blank
 
 
 def read_canonical(path: Path) -> pd.DataFrame:

@@ -84,8 +84,12 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
         if col in frame:
             frame[col] = to_datetime(frame[col], path, col, frame[ROW])
 
-    frame["deviation_um"] = _deviation_um(frame, path)
-    _check_structure(frame, path)
+    # Group by one integer code per test: grouping by the four label columns again and again
+    # would hash every label string at every pass.
+    test = pd.Series(frame.groupby(list(schema.TEST_KEYS), sort=False).ngroup().to_numpy(),
+                     index=frame.index)
+    frame["deviation_um"] = _deviation_um(frame, path, test)
+    _check_structure(frame, path, test)
     ordered = [c for c in (*schema.REQUIRED, "deviation_um", "measured", *schema.OPTIONAL)
                if c in frame]
     extra = [c for c in frame.columns if c not in ordered and c != ROW]
@@ -152,19 +156,23 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
         values = series.astype(float)
         bad_text = pd.Series(False, index=series.index)
     else:
-        text = series.astype(str).str.strip()
-        values = pd.to_numeric(text, errors="coerce")
+        # Parse each distinct text once: a column holds far fewer values than rows.
+        codes, distinct = _distinct(series)
+        text = distinct.astype(str).str.strip()
+        parsed = pd.to_numeric(text, errors="coerce")
         empty = text.eq("") | text.str.lower().isin(["nan", "na", "none"])
-        bad_text = values.isna() & ~empty
-        boolean = text.str.lower().isin(["true", "false"])
+        bad_text = (parsed.isna() & ~empty).to_numpy()[codes]
+        boolean = text.str.lower().isin(["true", "false"]).to_numpy()[codes]
         if boolean.any():
             i = _first_bad(boolean)
-            raise InputError(f"{text.iloc[i]!r} is a boolean; expected a number", file=path,
-                             row=row_of(rows, i), column=col)
+            raise InputError(f"{text.iloc[codes[i]]!r} is a boolean; expected a number",
+                             file=path, row=row_of(rows, i), column=col)
         if bad_text.any():
             i = _first_bad(bad_text)
-            raise InputError(f"{text.iloc[i]!r} is not a number", file=path,
+            raise InputError(f"{text.iloc[codes[i]]!r} is not a number", file=path,
                              row=row_of(rows, i), column=col)
+        values = pd.Series(parsed.to_numpy(dtype=float, na_value=np.nan)[codes],
+                           index=series.index, name=series.name)
     if not allow_nan and values.isna().any():
         i = _first_bad(values.isna())
         raise InputError("missing value (NaN); expected a number", file=path,
@@ -175,6 +183,19 @@ def to_float(series: pd.Series, path: Path, col: str, rows, allow_nan: bool = Fa
         raise InputError("infinite value; expected a finite number", file=path,
                          row=row_of(rows, i), column=col)
     return values.astype(float)
+
+
+def _distinct(series: pd.Series) -> tuple[np.ndarray, pd.Series]:
+    """Codes and distinct values of a text column, so that ``distinct.iloc[codes]`` is
+    ``series`` (missing values kept as one distinct value).
+
+    Only string-dtype columns are folded: in an object column ``1``, ``1.0`` and ``True`` would
+    count as one value although their texts differ; there every row is its own value.
+    """
+    if isinstance(series.dtype, pd.StringDtype):
+        codes, uniques = pd.factorize(series, use_na_sentinel=False)
+        return codes, pd.Series(uniques, dtype=series.dtype, name=series.name)
+    return np.arange(len(series)), series.reset_index(drop=True)
 
 
 def _holds_bools(series: pd.Series) -> bool:
@@ -237,8 +258,9 @@ def check_plausible(frame, col, path) -> None:
                          row=row_of(frame[ROW], i), column=col)
 
 
-def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
-    """deviation_um in um (arcsec rotary), from ``measured`` when absent, unit-checked."""
+def _deviation_um(frame: pd.DataFrame, path: Path, test: pd.Series) -> pd.Series:
+    """deviation_um in um (arcsec rotary), from ``measured`` when absent, unit-checked;
+    ``test`` numbers the tests (one code per ``schema.TEST_KEYS``)."""
     scale = np.where(frame["axis"].isin(schema.ROTARY_AXES), 3600.0, 1000.0)
     measured = None
     if schema.MEASURED in frame:
@@ -271,12 +293,11 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
     near_zero = frame["target"].abs() < 1.0
     looks = looks_absolute(deviation, frame["target"]) | (
         near_zero & ((deviation - frame["target"]).abs() < MAX_DEVIATION_POS_UNITS))
-    tests = [frame[k] for k in schema.TEST_KEYS]
-    absolute = (looks.groupby(tests, sort=False).transform("all")
-                & (~near_zero).groupby(tests, sort=False).transform("any"))
+    absolute = (looks.groupby(test, sort=False).transform("all")
+                & (~near_zero).groupby(test, sort=False).transform("any"))
     # Every reading at a target reading like a position while the test is not all positions:
     # deviations and positions are mixed (e.g. um at target 0, mm elsewhere); refuse.
-    whole_target = looks.groupby([*tests, frame["target"]], sort=False).transform("all")
+    whole_target = looks.groupby([test, frame["target"]], sort=False).transform("all")
     mixed = whole_target & ~near_zero & ~absolute
     if mixed.any():
         i = _first_bad(mixed)
@@ -296,11 +317,11 @@ def _deviation_um(frame: pd.DataFrame, path: Path) -> pd.Series:
             f"deviation {deviation.iloc[i]:g} is beyond {MAX_DEVIATION_POS_UNITS:g} mm (deg); "
             "expected a deviation in um (arcsec), positions belong in 'measured'", file=path,
             row=row_of(frame[ROW], i), column="deviation_um")
-    _check_deviation_units(frame.assign(deviation_um=deviation), path, measured, scale)
+    _check_deviation_units(frame.assign(deviation_um=deviation), path, measured, scale, test)
     return deviation
 
 
-def _check_deviation_units(frame, path, measured, scale) -> None:
+def _check_deviation_units(frame, path, measured, scale, test) -> None:
     """Refuse deviations that look like millimetres in a micrometre column."""
     dev = frame["deviation_um"]
     if measured is not None:
@@ -321,8 +342,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
                 f"{expected.iloc[i]:g}; expected the same reading in both columns (or only one "
                 "of them)", file=path, row=row_of(frame[ROW], i), column="deviation_um")
     # A reading 1000x smaller than its siblings at the same target and direction: mm among um.
-    keys = [*schema.TEST_KEYS, "target", "direction"]
-    groups = frame.groupby(keys, sort=False)["deviation_um"]
+    groups = dev.groupby([test, frame["target"], frame["direction"]], sort=False)
     # The median of a pair is its mean, which one mm value drags halfway: use the other one.
     pair = groups.transform("size") == 2
     sibling = groups.transform("median").where(~pair, groups.transform("sum") - dev)
@@ -334,7 +354,7 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
             f"mixed units: {dev.iloc[i]:g} looks like mm while the other readings at this "
             f"target are about {sibling.iloc[i]:.3g} um", file=path,
             row=row_of(frame[ROW], i), column="deviation_um")
-    largest = dev.abs().groupby([frame[k] for k in schema.TEST_KEYS], sort=False).transform("max")
+    largest = dev.abs().groupby(test, sort=False).transform("max")
     tiny = largest < MIN_PLAUSIBLE_MAX_DEVIATION_UM
     if tiny.any() and measured is None:
         i = _first_bad(tiny)
@@ -345,30 +365,31 @@ def _check_deviation_units(frame, path, measured, scale) -> None:
             column="deviation_um")
 
 
-def _check_structure(frame: pd.DataFrame, path: Path) -> None:
+def _check_structure(frame: pd.DataFrame, path: Path, test: pd.Series) -> None:
     """ISO 230-2 structure: one method per test, no duplicate readings, both directions at
-    every target, at least two cycles (s needs n-1 >= 1)."""
-    test = list(schema.TEST_KEYS)
-    methods = frame.groupby(test, sort=False)["method"].transform("nunique")
+    every target, at least two cycles (s needs n-1 >= 1); ``test`` numbers the tests."""
+    methods = frame["method"].groupby(test, sort=False).transform("nunique")
     if (methods > 1).any():
         i = _first_bad(methods > 1)
         raise InputError(f"test {frame['test_id'].iloc[i]!r} mixes linear and pendulum "
                          "readings; expected one method per test_id", file=path,
                          row=row_of(frame[ROW], i), column="method")
-    reading = [*test, "target", "direction", "cycle"]
-    dup = frame.duplicated(reading, keep="first")
+    reading = pd.DataFrame({"test": test, "target": frame["target"],
+                            "direction": frame["direction"], "cycle": frame["cycle"]})
+    dup = reading.duplicated(keep="first")
     if dup.any():
         i = _first_bad(dup)
         raise InputError("duplicate reading: same test, target, direction and cycle as an "
                          "earlier row", file=path, row=row_of(frame[ROW], i), column="cycle")
-    dirs = frame.groupby([*test, "target"], sort=False)["direction"].transform("nunique")
+    dirs = frame["direction"].groupby([test, frame["target"]], sort=False).transform("nunique")
     if (dirs < 2).any():
         i = _first_bad(dirs < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} of test "
                          f"{frame['test_id'].iloc[i]!r} is measured in direction "
                          f"{frame['direction'].iloc[i]!r} only; expected both + and -",
                          file=path, row=row_of(frame[ROW], i), column="direction")
-    cycles = frame.groupby([*test, "target", "direction"], sort=False)["cycle"].transform("size")
+    cycles = frame["cycle"].groupby([test, frame["target"], frame["direction"]],
+                                    sort=False).transform("size")
     if (cycles < 2).any():
         i = _first_bad(cycles < 2)
         raise InputError(f"target {frame['target'].iloc[i]:g} direction "

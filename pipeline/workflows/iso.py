@@ -90,11 +90,16 @@ class IsoResult(Result):
         from features.readings.fileio import clean_nan
 
         keys = list(schema.TEST_KEYS)
-        per_test = {k: g for k, g in self.targets.groupby(keys, sort=False)}
+        # one pass over all targets (a dict per row), grouped by test: per-test frame
+        # lookups cost seconds on a fleet of thousands of tests
+        targets = self.targets.sort_values([*keys, "target"], kind="stable")
+        per_test: dict[tuple, list] = {}
+        for test, row in zip(targets[keys].itertuples(index=False, name=None),
+                             targets[list(PER_TARGET_KEYS)].to_dict("records")):
+            per_test.setdefault(test, []).append(row)
         out = []
         for row in self.figures[list(JSON_KEYS) + self._extra()].to_dict("records"):
-            rows = per_test[tuple(row[k] for k in keys)].sort_values("target")
-            row["per_target"] = rows[list(PER_TARGET_KEYS)].to_dict("records")
+            row["per_target"] = per_test[tuple(row[k] for k in keys)]
             out.append(row)
         return clean_nan(out)
 
