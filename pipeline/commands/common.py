@@ -44,15 +44,14 @@ def data_params(args) -> dict:
 
 def parse_list(text: str | None, parameter: str) -> list[str] | None:
     """A comma-separated option as a list of names (None when not given)."""
+    from pipeline.workflows import each_once
+
     if text is None:
         return None
     names = [p.strip() for p in text.split(",") if p.strip()]
     if not names:
         raise InputError("is empty; give comma-separated names", parameter=parameter)
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise InputError(f"names {duplicated[0]!r} twice", parameter=parameter)
-    return names
+    return each_once(names, parameter)
 
 
 def parse_features(text: str | None) -> list[str] | None:

@@ -80,6 +80,14 @@ class Constraints(Mapping):
         return len(self._built())
 
 
+def each_once(names: list, parameter: str) -> list:
+    """``names`` unchanged when none is given twice; else an InputError naming ``parameter``."""
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise InputError(f"names {duplicated[0]!r} twice", parameter=parameter)
+    return names
+
+
 def readings_of(data, format: str = "auto", parameter: str = "data"):
     """The validated readings frame a workflow works on: ``data`` is a readings file path
     (read in ``format``) or a frame as ``read`` returns it (checked, not re-read)."""

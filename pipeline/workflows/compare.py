@@ -16,7 +16,7 @@ from sklearn.utils._param_validation import StrOptions
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import Workflow, check_params, each_once
 from pipeline.workflows.train import DATA_PARAMETERS, SPLITS, model_data
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
@@ -35,10 +35,7 @@ def model_names(models) -> list[str]:
         raise InputError("expected a non-empty list of predictor names", parameter="models")
     for name in names:
         registry.check_name(name, parameter="models")
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise InputError(f"names {duplicated[0]!r} twice", parameter="models")
-    return names
+    return each_once(names, "models")
 
 
 @dataclass

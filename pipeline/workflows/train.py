@@ -21,7 +21,7 @@ from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows import Workflow, check_params, each_once, readings_of
 
 MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
 TARGETS = ("auto", "paper", "iso")
@@ -83,10 +83,7 @@ def check_feature_names(features) -> list[str] | None:
     if not names or not all(isinstance(n, str) and n.strip() for n in names):
         raise InputError("expected a non-empty list of feature-table column names",
                          parameter="features")
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise InputError(f"names {duplicated[0]!r} twice", parameter="features")
-    return names
+    return each_once(names, "features")
 
 
 @dataclass
