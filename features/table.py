@@ -15,9 +15,10 @@ section 4, Table 2 and Fig. 9):
 ``humidity_pct``    relative humidity, mean at that target [%RH]
 ==================  ====================================================================
 
-The conditions are means over the readings of the tests that show the backlash: for the
-``paper`` target (pendulum minus linear in a direct system, where only the pendulum test
-reverses at interior targets) the pendulum test's readings, for the ``iso`` target both tests.
+The conditions are means over the readings of the tests that show the backlash: for a
+``paper`` point (pendulum minus linear in a direct system, where only the pendulum test
+reverses at interior targets) the pendulum test's readings, for an ``iso`` point both tests;
+each point by its own ``target_kind`` (with ``auto`` a fleet may hold both).
 The two tests of a pair start at different temperatures; averaging them would mix the
 pendulum's screw temperature, which sets the measured lost motion, with the linear test's,
 which does not enter it.
@@ -43,11 +44,15 @@ EXTRA_FEATURES = ("dwell_s", "operating_hours")
 ENVIRONMENT = ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct",
                "operating_hours")
 POINT_KEYS = (*schema.PAIR_KEYS, "target")
+# The tests whose readings give a point's conditions, by its target kind (None: both tests).
+CONDITION_METHODS = {"paper": ("pendulum",), "iso": None}
 
 
 @dataclass
 class FeatureTable:
-    """Inputs ``X``, target ``y`` [um] and ``meta`` (point keys, date) aligned row by row."""
+    """Inputs ``X``, target ``y`` [um] and ``meta`` (point keys, date, the point's
+    ``target_kind``) aligned row by row; ``target_kind`` of the table is 'paper', 'iso' or
+    'mixed' (axes with different definitions)."""
 
     X: pd.DataFrame
     y: pd.Series
@@ -59,16 +64,21 @@ class FeatureTable:
 def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:
     """The paper's eight inputs that the data can supply, plus dwell and operating hours.
 
-    With the ``iso`` target the two deviation inputs are left out: the reversal value is their
-    difference, so they would hand the answer to the model.
+    With the ``iso`` target (and a ``mixed`` table, whose iso points are the same) the two
+    deviation inputs are left out: the reversal value is their difference, so they would hand
+    the answer to the model.
     """
     available = {"target", *readings.columns}
-    if kind != "iso":
+    iso = kind in ("iso", "mixed")
+    if not iso:
         available |= {"deviation_down_um", "deviation_up_um"}
     names = [f for f in (*PAPER_FEATURES, *EXTRA_FEATURES) if f in available]
     missing = [f for f in PAPER_FEATURES if f not in names]
     if missing:
-        why = " (ISO target: the reversal value is their difference)" if kind == "iso" else ""
+        why = ""
+        if iso:
+            some = "" if kind == "iso" else " on some machine axes"
+            why = f" (ISO target{some}: the reversal value is their difference)"
         note(f"inputs without {', '.join(missing)}{why}")
     return names
 
@@ -81,21 +91,21 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
     ----------
     readings : DataFrame
         Validated readings (``features.readings.read_readings``).
-    target : {'paper', 'iso', 'auto'}
-        Backlash definition, see ``features.targets.backlash_targets``.
+    target : {'paper', 'iso', 'auto', 'mixed'}
+        Backlash definition, see ``features.targets.backlash_targets``; 'mixed' (the kind of
+        a table whose axes use different definitions, as a trained model records it) chooses
+        per machine axis like 'auto'.
     features : list of str, optional
         Input columns; default ``default_features(readings)``. Unknown names are an error.
     """
-    from features.targets import backlash_targets
+    from features.targets import MIXED, backlash_targets
 
     source = readings.attrs.get("source", "readings")
     readings = with_pair_keys(readings)
-    points = backlash_targets(readings, kind=target)
+    points = backlash_targets(readings, kind="auto" if target == MIXED else target)
     kind = points.attrs["target_kind"]
     names = list(features) if features else default_features(readings, kind)
-    methods = ("pendulum",) if kind == "paper" else None
-    table = points.merge(point_inputs(readings, methods), on=list(POINT_KEYS), how="left",
-                         validate="many_to_one")
+    table = with_inputs(points, readings)
     unknown = [f for f in names if f not in table.columns]
     if unknown:
         raise InputError(f"unknown feature {unknown[0]!r}; available: "
@@ -107,7 +117,8 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
         if constant:
             note(f"{', '.join(constant)} constant over all points; left out")
             names = [n for n in names if n not in constant]
-    meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction") if c in table]
+    meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction", "target_kind")
+                 if c in table]
     return FeatureTable(table[names].astype(float), table["backlash_um"].astype(float),
                         table[meta_cols], kind, points.attrs.get("target_reason", ""))
 
@@ -131,6 +142,20 @@ def prediction_inputs(readings: pd.DataFrame, features: list[str]) -> pd.DataFra
     table = inputs[list(dict.fromkeys([*POINT_KEYS, *features]))]
     check_features(table[features], source, allow_constant=True, parameter=None)
     return table.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
+
+
+def with_inputs(points: pd.DataFrame, readings: pd.DataFrame) -> pd.DataFrame:
+    """Points joined with their inputs (``point_inputs``), each point's conditions from the
+    tests its ``target_kind`` uses (``CONDITION_METHODS``)."""
+    keys = list(POINT_KEYS)
+    parts = [group.merge(point_inputs(readings, CONDITION_METHODS[kind]), on=keys, how="left",
+                         validate="many_to_one")
+             for kind, group in points.groupby("target_kind", sort=True)]
+    if len(parts) == 1:
+        return parts[0]
+    if not parts:
+        return points.merge(point_inputs(readings), on=keys, how="left", validate="many_to_one")
+    return pd.concat(parts, ignore_index=True)
 
 
 def with_pair_keys(readings: pd.DataFrame) -> pd.DataFrame:

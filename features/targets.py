@@ -1,4 +1,4 @@
-"""Per-point backlash targets (docs/data-contract.md §3) from a readings table.
+"""Per-point backlash targets (docs/data-contract.md §3, docs/backlash.md) from a readings table.
 
 Two definitions, one row per backlash point (``PAIR_KEYS`` + ``target``):
 
@@ -14,9 +14,13 @@ Two definitions, one row per backlash point (``PAIR_KEYS`` + ``target``):
   approach carries the lost motion, so B_i = -b in every test and ``z`` is about 0: the paper's
   target would report no backlash at all.
 
-``auto`` decides from the evidence: when linear tests show almost no reversal at interior targets
-while their paired pendulum tests do, the system is direct and ``paper`` applies; otherwise
-``iso``. The choice and its reason are in ``frame.attrs`` (``target_kind``, ``target_reason``).
+``auto`` decides from the evidence, per machine axis (a fleet file mixes machines with a linear
+scale and machines with a rotary encoder): when an axis's linear tests show almost no reversal at
+interior targets while its pendulum tests do, its measuring system is direct and ``paper``
+applies; otherwise ``iso`` (``choose_kind``). A visit of a direct axis that has only linear or
+only pendulum tests falls back to ``iso`` (``choose_kind``'s rule for one test method). Every
+point carries its ``target_kind``; ``frame.attrs["target_kind"]`` is ``"paper"`` or ``"iso"``
+when all points agree and ``"mixed"`` otherwise, ``frame.attrs["target_reason"]`` says why.
 ``backlash_u_um`` is the standard uncertainty of each point from the tests' repeatability.
 """
 
@@ -27,31 +31,59 @@ import pandas as pd
 
 from features import iso230
 from features.readings import schema
-from features.readings.errors import InputError
+from features.readings.errors import InputError, note
 
 KINDS = ("auto", "paper", "iso")
+# Kind of a frame whose points use both definitions (different measuring systems per axis).
+MIXED = "mixed"
 POINT_KEYS = (*schema.PAIR_KEYS, "target")
+AXIS_KEYS = ("machine_id", "axis")
 # Linear tests whose interior reversal is below this share of the pendulum's: direct system.
 DIRECT_RATIO = 0.5
+# Axes named in a reason before the rest are only counted.
+NAMED_AXES = 4
 
 
 def backlash_targets(readings: pd.DataFrame, kind: str = "auto") -> pd.DataFrame:
-    """Backlash per point: ``POINT_KEYS``, ``backlash_um``, ``backlash_u_um``, ``started_at``,
-    and ``z_up_um``/``z_down_um`` for the paper definition."""
+    """Backlash per point of a readings table.
+
+    Parameters
+    ----------
+    readings : DataFrame
+        Validated readings (``features.readings.read_readings``).
+    kind : {'auto', 'paper', 'iso'}, default 'auto'
+        Definition of a point's backlash; ``auto`` chooses per machine axis.
+
+    Returns
+    -------
+    DataFrame
+        One row per point: ``POINT_KEYS``, ``backlash_um`` [um], ``backlash_u_um`` [um],
+        ``target_kind`` ('paper' or 'iso'), ``interior`` (not a test's first or last target),
+        ``started_at`` (when the readings have it) and, for paper points, ``z_up_um``,
+        ``z_down_um`` [um], ``linear_test_id`` and ``pendulum_test_id``. ``attrs`` hold
+        ``target_kind`` ('paper', 'iso' or 'mixed'), ``target_reason`` and ``source``.
+    """
+    return targets_of(iso230.per_target(readings), kind,
+                      readings.attrs.get("source", "readings"))
+
+
+def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings") -> pd.DataFrame:
+    """``backlash_targets`` from per-target statistics (``features.iso230.per_target``)."""
     if kind not in KINDS:
         raise InputError(f"unknown target {kind!r}; expected one of {', '.join(KINDS)}",
                          parameter="kind")
-    source = readings.attrs.get("source", "readings")
-    stats = _with_pair_keys(iso230.per_target(readings))
-    stats["interior"] = _interior(stats)
-    linear, pendulum = (stats[stats["method"] == m] for m in schema.METHODS)
-    reason = ""
+    stats = _with_pair_keys(stats).assign(interior=lambda s: _interior(s))
     if kind == "auto":
-        kind, reason = choose_kind(linear, pendulum)
-    points = paper_points(linear, pendulum, source) if kind == "paper" else iso_points(stats)
+        points, reason = auto_points(stats, source)
+    else:
+        linear, pendulum = (stats[stats["method"] == m] for m in schema.METHODS)
+        points = (paper_points(linear, pendulum, source) if kind == "paper"
+                  else iso_points(stats)).assign(target_kind=kind)
+        reason = _DEFAULT_REASON[kind]
     points = points.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
-    points.attrs.update(target_kind=kind, target_reason=reason or _DEFAULT_REASON[kind],
-                        source=source)
+    kinds = points["target_kind"].unique()
+    frame_kind = str(kinds[0]) if len(kinds) == 1 else MIXED if len(kinds) else "iso"
+    points.attrs.update(target_kind=frame_kind, target_reason=reason, source=source)
     return points
 
 
@@ -59,15 +91,37 @@ _DEFAULT_REASON = {
     "paper": "paper target: pendulum minus linear per direction, interior targets",
     "iso": "ISO 230-2 reversal value |B_i| per target",
 }
+_KIND_TEXT = {
+    "paper": "direct measuring system (linear scale): pendulum minus linear",
+    "iso": "indirect measuring system (rotary encoder) or one test method: ISO reversal value "
+           "|B_i|",
+}
 
 
 def choose_kind(linear: pd.DataFrame, pendulum: pd.DataFrame) -> tuple[str, str]:
-    """``paper`` for a direct measuring system, ``iso`` otherwise, with the evidence."""
-    if linear.empty or pendulum.empty:
-        have = "pendulum" if linear.empty else "linear"
-        return "iso", f"only {have} tests: ISO reversal value |B_i| per target"
+    """``paper`` for a direct measuring system, ``iso`` otherwise, with the evidence.
+
+    Parameters
+    ----------
+    linear, pendulum : DataFrame
+        Per-target statistics (``B_i`` [um], ``interior``) of the linear and the pendulum tests
+        of one machine axis (or of whatever should share one decision).
+
+    Returns
+    -------
+    (kind, reason) : the definition and the evidence for it, in words.
+    """
     b_linear = float(linear.loc[linear["interior"], "B_i"].abs().median())
     b_pendulum = float(pendulum.loc[pendulum["interior"], "B_i"].abs().median())
+    return _decide(b_linear, b_pendulum, not linear.empty, not pendulum.empty)
+
+
+def _decide(b_linear: float, b_pendulum: float, has_linear: bool,
+            has_pendulum: bool) -> tuple[str, str]:
+    """The evidence rule: direct when |B_i| of linear tests < DIRECT_RATIO x pendulum's."""
+    if not (has_linear and has_pendulum):
+        have = "pendulum" if has_pendulum else "linear"
+        return "iso", f"only {have} tests: ISO reversal value |B_i| per target"
     evidence = (f"median interior |B_i| {b_linear:.2f} in linear tests vs {b_pendulum:.2f} in "
                 "pendulum tests")
     if b_linear < DIRECT_RATIO * b_pendulum:
@@ -75,6 +129,92 @@ def choose_kind(linear: pd.DataFrame, pendulum: pd.DataFrame) -> tuple[str, str]
                          "only after the pendulum's reversals; paper target pendulum minus linear")
     return "iso", (f"{evidence}: indirect measuring system (rotary encoder), every approach carries "
                    "the lost motion; ISO reversal value |B_i|")
+
+
+def axis_kinds(stats: pd.DataFrame) -> pd.DataFrame:
+    """The definition of every machine axis by ``choose_kind``'s evidence rule.
+
+    Parameters
+    ----------
+    stats : DataFrame
+        Per-target statistics of all tests with ``machine_id``, ``axis``, ``method``,
+        ``B_i`` [um] and ``interior``.
+
+    Returns
+    -------
+    DataFrame
+        ``machine_id``, ``axis``, ``target_kind`` and ``target_reason``, one row per axis.
+    """
+    keys = list(AXIS_KEYS)
+    counts = stats.groupby([*keys, "method"], observed=True).size().unstack("method")
+    inner = stats[stats["interior"]]
+    median = (inner.assign(abs_b=inner["B_i"].abs())
+              .groupby([*keys, "method"], observed=True)["abs_b"].median().unstack("method"))
+    methods = list(schema.METHODS)
+    evidence = counts.reindex(columns=methods).fillna(0).join(
+        median.reindex(columns=methods).add_suffix("_b"))
+    rows = [(*axis, *_decide(row.linear_b, row.pendulum_b, row.linear > 0, row.pendulum > 0))
+            for axis, row in zip(evidence.index, evidence.itertuples(index=False), strict=True)]
+    return pd.DataFrame(rows, columns=[*keys, "target_kind", "target_reason"])
+
+
+def auto_points(stats: pd.DataFrame, source: str = "readings") -> tuple[pd.DataFrame, str]:
+    """Points of every machine axis by its own definition (``axis_kinds``), and the reason.
+
+    A visit of a ``paper`` axis without a linear or without a pendulum test has no pair: its
+    points fall back to ``iso``, as ``choose_kind`` does for one test method.
+    """
+    keys, visit_keys = list(AXIS_KEYS), [*AXIS_KEYS, "visit"]
+    kinds = axis_kinds(stats)
+    kind = stats[keys].merge(kinds[[*keys, "target_kind"]], on=keys, how="left")["target_kind"]
+    methods = stats.groupby(visit_keys, dropna=False, observed=True)["method"].transform("nunique")
+    alone = (kind.to_numpy() == "paper") & (methods.to_numpy() < 2)
+    kind = np.where(alone, "iso", kind.to_numpy())
+    parts = []
+    paper = stats[kind == "paper"]
+    if not paper.empty:
+        linear, pendulum = (paper[paper["method"] == m] for m in schema.METHODS)
+        parts.append(paper_points(linear, pendulum, source).assign(target_kind="paper"))
+    if (kind == "iso").any():
+        parts.append(iso_points(stats[kind == "iso"]).assign(target_kind="iso"))
+    fallback = stats[alone].drop_duplicates(visit_keys)
+    _note_hidden(fallback)
+    points = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
+    return points, _reason(kinds, fallback)
+
+
+def _note_hidden(fallback: pd.DataFrame) -> None:
+    """Warn about visits of a direct axis measured with linear tests only."""
+    hidden = fallback[fallback["method"] == "linear"]
+    if not hidden.empty:
+        note(f"{_names(hidden, with_visit=True)}: only linear tests on a direct measuring "
+             "system, which hide lost motion except at the turn-around targets; the ISO reversal "
+             "value |B_i| reads low there (add pendulum tests)")
+
+
+def _reason(kinds: pd.DataFrame, fallback: pd.DataFrame) -> str:
+    """One axis: its evidence; several: the axes per definition, briefly."""
+    if len(kinds) == 1:
+        reason = str(kinds["target_reason"].iloc[0])
+    elif kinds["target_kind"].nunique() == 1:
+        kind = kinds["target_kind"].iloc[0]
+        reason = f"{kind} on every machine axis ({len(kinds)}): {_KIND_TEXT[kind]}"
+    else:
+        reason = "per machine axis: " + "; ".join(
+            f"{kind} on {_names(group)} ({_KIND_TEXT[kind]})"
+            for kind, group in kinds.groupby("target_kind", sort=True))
+    if not fallback.empty:
+        reason += (f"; iso at visits with one test method only ({_names(fallback, True)}): "
+                   "no pendulum-linear pair")
+    return reason
+
+
+def _names(frame: pd.DataFrame, with_visit: bool = False) -> str:
+    """'M01 X, M02 Y and 3 more' (with the visit: 'M01 X visit 03')."""
+    names = [f"{r.machine_id} {r.axis}" + (f" visit {r.visit}" if with_visit else "")
+             for r in frame.itertuples(index=False)]
+    more = len(names) - NAMED_AXES
+    return ", ".join(names[:NAMED_AXES]) + (f" and {more} more" if more > 0 else "")
 
 
 def paper_points(linear: pd.DataFrame, pendulum: pd.DataFrame, source: str) -> pd.DataFrame:
@@ -95,7 +235,7 @@ def paper_points(linear: pd.DataFrame, pendulum: pd.DataFrame, source: str) -> p
     out = both[keys].assign(backlash_um=(z_down - z_up).abs(), backlash_u_um=np.sqrt(var),
                             z_up_um=z_up, z_down_um=z_down,
                             linear_test_id=both["test_id_lin"],
-                            pendulum_test_id=both["test_id_pend"])
+                            pendulum_test_id=both["test_id_pend"], interior=True)
     if "started_at_lin" in both:
         out["started_at"] = both[["started_at_lin", "started_at_pend"]].min(axis=1)
     return out
@@ -109,7 +249,8 @@ def iso_points(stats: pd.DataFrame) -> pd.DataFrame:
                             + stats["s_down"] ** 2 / stats["n_down"])
     grouped = per_test.groupby(keys, dropna=False, sort=False)
     out = pd.DataFrame({"reversal": grouped["reversal"].mean(),
-                        "backlash_u_um": np.sqrt(grouped["var"].sum()) / grouped.size()})
+                        "backlash_u_um": np.sqrt(grouped["var"].sum()) / grouped.size(),
+                        "interior": grouped["interior"].all()})
     if "started_at" in per_test:
         out["started_at"] = grouped["started_at"].min()
     out = out.reset_index()

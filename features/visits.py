@@ -1,12 +1,19 @@
-"""Backlash per maintenance visit: the series that drift monitoring follows.
+"""An axis's backlash at a maintenance visit: the series that drift monitoring follows.
 
-One series per machine and axis, one value per visit:
+One definition (docs/backlash.md), one value per machine, axis and visit:
 
-- ``backlash_um = |mean_tests(B_mean)|`` with ``B_mean`` the mean signed reversal value of a
-  test (ISO 230-2, ``features.iso230.axis_figures``); ``B_um`` (mean of the tests' B = max|B_i|)
-  is carried alongside.
-- ``u_um``: repeatability uncertainty of a reversal value, ``s_B = sqrt(s_up²/n_up +
-  s_down²/n_down)`` per target, averaged over the targets and tests of the visit.
+- ``backlash_um``: the mean over the visit's interior backlash points of the per-point lost
+  motion ``features.targets.backlash_targets(readings, "auto")``, each axis by its own
+  measuring system: pendulum minus linear (``paper``) with a direct system (linear scale), the
+  ISO reversal value |B_i| (``iso``) with an indirect one (rotary encoder) or when the visit
+  has one test method only. ``target_kind`` says which, ``n_points`` how many points.
+- ``backlash_u_um``: its standard uncertainty from the points' repeatability,
+  ``sqrt(sum u_i²) / n``.
+
+Other quantities keep names of their own (``visit_backlash``): the mean signed ISO reversal
+value ``reversal_mean_um`` (a direct system's linear tests hide lost motion, so with linear
+and pendulum tests it reads about half the lost motion) and the mean of the tests' B = max|B_i|
+``reversal_max_um``.
 
 Time is counted in months of 30.4375 days (``DAYS_PER_MONTH``) since the first visit.
 """
@@ -22,40 +29,97 @@ DAYS_PER_MONTH = 30.4375
 # Tests of one visit may span a few days (several shifts); more means two visits share an id.
 MAX_VISIT_SPAN_DAYS = 14.0
 SERIES_KEYS = ("machine_id", "axis")
+VISIT_KEYS = (*SERIES_KEYS, "visit")
+VISIT_COLUMNS = (*VISIT_KEYS, "date", "n_tests", "n_points", "target_kind", "backlash_um",
+                 "backlash_u_um", "reversal_mean_um", "reversal_max_um")
 
 
-def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
-    """Backlash per machine, axis and visit with its repeatability uncertainty.
+def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None) -> pd.DataFrame:
+    """The axis's backlash at each visit, with its standard uncertainty.
+
+    b = (1/n) Σ_i b_i,   u(b) = sqrt(Σ_i u_i²) / n
+
+    over the n interior points i of the visit (all its points when it has no interior one),
+    b_i and u_i the per-point backlash and uncertainty of
+    ``features.targets.backlash_targets(readings, "auto")``.
 
     Parameters
     ----------
-    readings : validated readings table with ``visit`` and ``started_at``
+    readings : DataFrame
+        Validated readings (``features.readings.read_readings``).
+    stats : DataFrame, optional
+        ``features.iso230.per_target(readings)`` when already computed.
 
     Returns
     -------
-    DataFrame, one row per (machine_id, axis, visit) sorted by date: ``date`` (earliest
-    ``started_at``, UTC), ``n_tests``, ``B_um`` (mean of B = max|B_i|) [um],
-    ``B_mean_um`` (mean signed B_i) [um], ``backlash_um = |B_mean_um|`` [um] and
-    ``u_um`` (mean of sqrt(s_up²/n_up + s_down²/n_down)) [um].
+    DataFrame
+        One row per (machine_id, axis, visit): ``backlash_um`` [um], ``backlash_u_um`` [um],
+        ``target_kind`` ('paper', 'iso'; 'mixed' if the visit's points differ) and
+        ``n_points``. ``attrs`` carry the points' ``target_kind`` and ``target_reason``.
+    """
+    from features import iso230
+    from features.targets import targets_of
+
+    stats = iso230.per_target(readings) if stats is None else stats
+    points = targets_of(stats, "auto", readings.attrs.get("source", "readings"))
+    keys = list(VISIT_KEYS)
+    group = points.groupby(keys, sort=False, dropna=False, observed=True)
+    points = points[points["interior"] | ~group["interior"].transform("any")]
+    g = points.assign(u2=points["backlash_u_um"] ** 2).groupby(
+        keys, sort=False, dropna=False, observed=True)
+    n = g.size()
+    kind = g["target_kind"].first().where(g["target_kind"].nunique() < 2, "mixed")
+    table = pd.DataFrame({"backlash_um": g["backlash_um"].mean(),
+                          "backlash_u_um": np.sqrt(g["u2"].sum()) / n,
+                          "target_kind": kind, "n_points": n}).reset_index()
+    table.attrs.update({k: points.attrs[k] for k in ("target_kind", "target_reason")})
+    return table
+
+
+def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
+    """The visit series of every machine axis: its backlash (``axis_backlash``) per visit,
+    dated, with the ISO reversal figures under their own names.
+
+    Parameters
+    ----------
+    readings : DataFrame
+        Validated readings with ``visit`` and ``started_at``.
+
+    Returns
+    -------
+    DataFrame
+        One row per (machine_id, axis, visit) sorted by date, columns ``VISIT_COLUMNS``:
+        ``date`` (earliest ``started_at``, UTC), ``n_tests``, ``n_points``, ``target_kind``,
+        ``backlash_um`` [um] and ``backlash_u_um`` [um] (``axis_backlash``),
+        ``reversal_mean_um`` (mean over the tests of their mean signed B_i) [um] and
+        ``reversal_max_um`` (mean over the tests of B = max|B_i|) [um]. ``attrs`` carry
+        ``target_kind`` and ``target_reason``.
+
+    Raises
+    ------
+    InputError
+        Missing dates, a visit id spanning weeks, two visits at one instant, or no axis with
+        two visits.
     """
     from features import iso230
 
     source = readings.attrs.get("source", "readings")
     check_dates(readings, source)
-    targets = iso230.per_target(readings)
-    figures = iso230.axis_figures(readings, targets)
-    keys = [*SERIES_KEYS, "visit"]
-    s_b = np.sqrt(targets["s_up"] ** 2 / targets["n_up"]
-                  + targets["s_down"] ** 2 / targets["n_down"])
-    u = targets.assign(u_um=s_b).groupby(keys, sort=False)["u_um"].mean()
+    keys = list(VISIT_KEYS)
+    stats = iso230.per_target(readings)
+    figures = iso230.axis_figures(readings, stats)
+    backlash = axis_backlash(readings, stats)
     dates = readings.groupby(keys, sort=False, observed=True)["started_at"].min()
-    per_visit = figures.groupby(keys, sort=False).agg(
-        n_tests=("test_id", "size"), B_um=("B", "mean"), B_mean_um=("B_mean", "mean"))
-    table = per_visit.join(u).join(dates.rename("date")).reset_index()
-    table["backlash_um"] = table["B_mean_um"].abs()
+    reversal = figures.groupby(keys, sort=False).agg(
+        n_tests=("test_id", "size"), reversal_mean_um=("B_mean", "mean"),
+        reversal_max_um=("B", "mean"))
+    table = (reversal.join(dates.rename("date")).reset_index()
+             .merge(backlash, on=keys, how="left", validate="one_to_one"))
     table = table.sort_values([*SERIES_KEYS, "date"], kind="stable").reset_index(drop=True)
     check_visits(table, source)
-    return table[[*keys, "date", "n_tests", "B_um", "B_mean_um", "backlash_um", "u_um"]]
+    table = table[list(VISIT_COLUMNS)]
+    table.attrs.update(backlash.attrs)
+    return table
 
 
 def check_dates(readings: pd.DataFrame, source: str = "readings") -> None:

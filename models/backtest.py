@@ -113,9 +113,11 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
 def _forecast(table, name, train, test, random_state):
     if name == PERSISTENCE:
         return persistence(table, train, test), None, None
+    from models.training import model_inputs
+
     estimator = registry.make(name, random_state)
-    X, y = table.X, table.y
-    estimator.fit(X.iloc[train], y.iloc[train])
+    (X, extra), y = model_inputs(table, name), table.y
+    estimator.fit(X.iloc[train], y.iloc[train], **extra)
     if hasattr(estimator, "predict_interval"):
         return estimator.predict_interval(X.iloc[test])
     return np.asarray(estimator.predict(X.iloc[test]), float), None, None

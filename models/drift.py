@@ -1,14 +1,16 @@
 """Drift of a visit series: change points, robust trend, threshold forecast and alerts.
 
-The series (one value per visit, ``features.visits.visit_backlash``) is analysed on the time
-axis in months of 30.4375 days since the first visit:
+The series is the axis's backlash at each visit (``features.visits.visit_backlash``:
+``backlash_um``, the lost motion by the axis's measuring system, with its standard uncertainty
+``backlash_u_um``; docs/backlash.md), analysed on the time axis in months of 30.4375 days since
+the first visit:
 
 - change points: exact optimal partitioning (dynamic programming) into piecewise linear
   segments, cost = chi-square of a weighted straight-line fit per segment, penalty
   ``6 ln(n)`` per extra segment (twice the BIC of 3 parameters: place, level, slope; doubled
   because sigma is itself estimated from the same short series). A change is kept only when
   its jump exceeds ``min_jump_sigma`` (3) standard errors of the two segment lines there. The sigma
-  is the larger of ``u_um`` and a robust (MAD) estimate of the scatter between visits (from 7
+  is the larger of ``backlash_u_um`` and a robust (MAD) estimate of the scatter between visits (from 7
   visits on), because conditions that change from visit to visit usually scatter more than the
   laser repeats.
 - trend since the last change point: Theil-Sen slope with its confidence interval
@@ -44,6 +46,14 @@ from scipy import stats
 from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between, visit_backlash
 
 MIN_VISITS_FOR_SCATTER = 7
+# Per-visit columns of the series that its JSON carries when present, each a quantity of its own.
+OPTIONAL_JSON = ("target_kind", "n_points", "reversal_mean_um", "reversal_max_um")
+
+
+def uncertainty_column(visits: pd.DataFrame) -> str:
+    """The column with the standard uncertainty of ``backlash_um``: ``backlash_u_um``, or
+    ``u_um`` in a frame built before the name said which quantity it belongs to."""
+    return "backlash_u_um" if "backlash_u_um" in visits or "u_um" not in visits else "u_um"
 
 
 # --------------------------------------------------------------------------- statistics
@@ -235,7 +245,7 @@ class DriftSeries:
 
     machine_id: str
     axis: str
-    visits: pd.DataFrame  # visit_backlash rows of this series plus t_month, sigma_um
+    visits: pd.DataFrame  # visit_backlash rows of this series plus t_month, sigma_um [um]
     change_points: list = field(default_factory=list)
     trend: dict = field(default_factory=dict)
     segment_start: int = 0
@@ -261,9 +271,10 @@ class DriftSeries:
             "visits": v["visit"].astype(str).tolist(),
             "dates": [d.isoformat() for d in v["date"]],
             "backlash_um": v["backlash_um"].round(4).tolist(),
-            "u_um": v["u_um"].round(4).tolist(),
+            "backlash_u_um": v[uncertainty_column(v)].round(4).tolist(),
             "sigma_um": v["sigma_um"].round(4).tolist(),
-            "B_um": v["B_um"].round(4).tolist(),
+            **{k: (v[k].round(4) if v[k].dtype.kind == "f" else v[k]).tolist()
+               for k in OPTIONAL_JSON if k in v},
             "slope_um_per_month": self.trend.get("slope"),
             "slope_interval": [self.trend.get("low"), self.trend.get("high")],
             "mann_kendall_p": self.trend.get("p_value"),
@@ -283,14 +294,15 @@ def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
                    horizon_months: float = 120.0) -> DriftSeries:
     """Change points, trend since the last one, threshold forecast and alerts of one series.
 
-    ``visits`` holds one machine axis: ``visit``, ``date``, ``backlash_um``, ``u_um``.
+    ``visits`` holds one machine axis: ``visit``, ``date``, ``backlash_um`` [um] and its
+    standard uncertainty ``backlash_u_um`` [um] (``u_um``, the name before, is read too).
     """
     v = visits.sort_values("date", kind="stable").reset_index(drop=True).copy()
     v["t_month"] = months_between(v["date"], v["date"].iloc[0])
     t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
     # Below 5 second differences the MAD is dominated by a single step; trust u alone there.
     scatter = scatter_sigma_um(t, y) if len(y) >= MIN_VISITS_FOR_SCATTER else float("nan")
-    u = v["u_um"].fillna(0.0).to_numpy(float)
+    u = v[uncertainty_column(v)].fillna(0.0).to_numpy(float)
     floor = np.nanmax([scatter, np.nanmedian(u) if np.isfinite(u).any() else 0.0, 1e-3])
     v["sigma_um"] = np.fmax(u, floor)
     sigma = v["sigma_um"].to_numpy()

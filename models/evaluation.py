@@ -60,13 +60,23 @@ def visit_order(meta: pd.DataFrame) -> np.ndarray:
     return labels.map({v: i for i, v in enumerate(keys)}).to_numpy()
 
 
-def target_noise_floor(readings: pd.DataFrame, kind: str) -> float:
+def target_noise_floor(readings: pd.DataFrame, kind) -> float:
     """Standard uncertainty [um] of one measured backlash point from the repeatability.
 
     With pooled reading repeatability ``s`` and ``n`` cycles, a direction mean has
     variance s^2/n. The paper target z_down - z_up combines four such means
     (pendulum and linear, both directions): u = 2 s / sqrt(n). The ISO reversal value
-    combines two: u = sqrt(2) s / sqrt(n).
+    combines two: u = sqrt(2) s / sqrt(n). A table of both kinds (``kind`` 'mixed', or the
+    points' kinds one by one) gets the root mean square over its points,
+    u = sqrt(mean_k c_k^2) s / sqrt(n) with c = 2 (paper) or sqrt(2) (iso).
+
+    Parameters
+    ----------
+    readings : DataFrame
+        Validated readings.
+    kind : {'paper', 'iso', 'mixed'} or array-like of 'paper'/'iso'
+        The feature table's ``target_kind``, or the points' ``target_kind`` column. With
+        'mixed' the points' kinds come from ``features.targets.backlash_targets(readings)``.
     """
     from features.readings.schema import TEST_KEYS
 
@@ -74,7 +84,19 @@ def target_noise_floor(readings: pd.DataFrame, kind: str) -> float:
     var, n = groups.var(ddof=1), groups.size()
     s_pooled = float(np.sqrt(np.average(var, weights=n - 1)))
     n_typical = float(np.median(n))
-    return (2.0 if kind == "paper" else np.sqrt(2.0)) * s_pooled / np.sqrt(n_typical)
+    return _kind_factor(readings, kind) * s_pooled / np.sqrt(n_typical)
+
+
+def _kind_factor(readings: pd.DataFrame, kind) -> float:
+    """c = 2 (paper) or sqrt(2) (iso); the root mean square of c over the points otherwise."""
+    if isinstance(kind, str) and kind != "mixed":
+        return 2.0 if kind == "paper" else float(np.sqrt(2.0))
+    if isinstance(kind, str):
+        from features.targets import backlash_targets
+
+        kind = backlash_targets(readings, "auto")["target_kind"]
+    c2 = np.where(np.asarray(kind) == "paper", 4.0, 2.0)
+    return float(np.sqrt(np.mean(c2))) if c2.size else float(np.sqrt(2.0))
 
 
 def scores(y_true, y_pred) -> dict[str, float]:
@@ -95,14 +117,25 @@ def scores(y_true, y_pred) -> dict[str, float]:
 def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame, kind: str | None = None) -> np.ndarray:
     """The twin's true backlash at each feature-table point, mean over the tests that show it.
 
-    ``truth`` needs the point keys present in ``meta`` and ``true_backlash_um``. For the
-    ``paper`` target (``kind``, the feature table's ``target_kind``) that is the pendulum test
-    of the pair, the only one reversing at interior targets of a direct system, at its own
-    temperature; otherwise every test of the point.
+    ``truth`` needs the point keys present in ``meta`` and ``true_backlash_um``. For a
+    ``paper`` point (the point's ``target_kind`` in ``meta``, else ``kind``, the feature
+    table's ``target_kind``) that is the pendulum test of the pair, the only one reversing at
+    interior targets of a direct system, at its own temperature; for an ``iso`` point every
+    test of the point. A ``mixed`` table takes each point by its own kind.
     """
-    if kind == "paper" and "method" in truth and (truth["method"] == "pendulum").any():
-        truth = truth[truth["method"] == "pendulum"]
     keys = [k for k in meta.columns if k in truth.columns and k not in ("started_at",)]
+    out = _truth_at(meta, truth, keys)
+    kinds = (meta["target_kind"].to_numpy() if "target_kind" in meta
+             else np.full(len(meta), kind, dtype=object))
+    paper = kinds == "paper"
+    if paper.any() and "method" in truth and (truth["method"] == "pendulum").any():
+        pendulum = _truth_at(meta, truth[truth["method"] == "pendulum"], keys)
+        out = np.where(paper, pendulum, out)
+    return out
+
+
+def _truth_at(meta: pd.DataFrame, truth: pd.DataFrame, keys: list[str]) -> np.ndarray:
+    """Mean ``true_backlash_um`` of ``truth`` at each row of ``meta`` (NaN where none)."""
     per_point = truth.groupby(keys, dropna=False)["true_backlash_um"].mean()
     found = meta[keys].merge(per_point.reset_index(), on=keys, how="left")
     return found["true_backlash_um"].to_numpy(float)

@@ -43,7 +43,10 @@ def monitor_model(model, readings: pd.DataFrame, *, alpha: float = 0.01) -> pd.D
     features = list(model.feature_names_)
     table = feature_table(readings, target=getattr(model, "target_kind", "auto"),
                           features=features)
-    residual = table.y.to_numpy(float) - np.asarray(model.predict(table.X), float)
+    from models.registry import with_axes
+
+    residual = table.y.to_numpy(float) - np.asarray(
+        model.predict(with_axes(table.X, table.meta)), float)
     keys = [*SERIES_KEYS, "visit"]
     meta = table.meta[keys].reset_index(drop=True)
     frame = meta.assign(r=residual, r2=residual ** 2)

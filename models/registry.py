@@ -28,6 +28,7 @@ MODEL_FILE = "model.json"
 TRAINING_INPUTS = "training_inputs.csv"
 
 RECOMMENDED = "wear-map"
+AXIS_KEYS = ("machine_id", "axis")  # the columns that name a machine axis
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,9 @@ class Predictor:
     forecasts : bool
         Predicts a plan of a visit not measured yet (operating hours and conditions only, no
         linear-test deviations), with a 95 % interval.
+    per_axis : bool
+        Knows every machine axis: fitted on inputs that carry ``machine_id`` and ``axis``
+        (``AXIS_KEYS``), one model per axis pooled across the fleet.
     """
 
     name: str
@@ -64,6 +68,7 @@ class Predictor:
     save_format: str = "json"
     wear_clock: bool = False
     forecasts: bool = False
+    per_axis: bool = False
 
 
 def _network(**params):
@@ -138,7 +143,7 @@ def _ridge(seed: int):
 PREDICTORS = {p.name: p for p in (
     Predictor("wear-map", "level and wear rate along the screw (B-splines, CV) plus feed and "
               "temperature terms; forecasts the next visit with a 95 % interval (recommended)",
-              _wear_map, "json", wear_clock=True, forecasts=True),
+              _wear_map, "json", wear_clock=True, forecasts=True, per_axis=True),
     Predictor("wear-map-hybrid", "wear map plus the paper's 8-8-8-1 network on its residual",
               _wear_map_hybrid, "parts", wear_clock=True),
     Predictor("shallow-lm-ensemble", "five paper networks on bootstrap resamples: mean and a "
@@ -202,6 +207,25 @@ def table() -> list[dict]:
             for p in PREDICTORS.values()]
 
 
+def with_axes(X, meta):
+    """The inputs ``X`` with the machine axis of each row (``AXIS_KEYS`` from ``meta``, as
+    text) in front: what a per-axis predictor is fitted on and predicts from."""
+    import pandas as pd
+
+    keys = [k for k in AXIS_KEYS if k in meta]
+    if len(keys) < len(AXIS_KEYS):
+        return X
+    axes = meta[keys].astype(str).reset_index(drop=True).set_axis(X.index)
+    return pd.concat([axes, X], axis=1)
+
+
+def knows_axes(estimator) -> list[tuple[str, str]]:
+    """The machine axes a per-axis estimator was fitted on (more than one: it needs
+    ``AXIS_KEYS`` to predict); empty for every other estimator."""
+    axes = getattr(estimator, "axes_", None) or []
+    return list(axes) if getattr(estimator, "pooled_", False) else []
+
+
 def required_inputs(estimator) -> tuple[str, ...]:
     """Named inputs without which ``estimator`` is not the model its name promises."""
     needed = getattr(estimator, "required_inputs", None)
@@ -255,8 +279,20 @@ class TrainedModel:
     training_inputs_: object = None  # DataFrame of the training inputs
     meta: dict = field(default_factory=dict)
 
+    def inputs(self, X, source: str = "data"):
+        """The columns of ``X`` the estimator predicts from: the features, and the machine
+        axis of each row when the model knows more than one (missing ones: one error line)."""
+        if not knows_axes(self.estimator):
+            return X[self.feature_names_]
+        missing = [k for k in AXIS_KEYS if k not in X]
+        if missing:
+            raise InputError(f"model {self.name!r} knows {len(knows_axes(self.estimator))} "
+                             f"machine axes: the inputs need the column(s) {', '.join(missing)}"
+                             " to say which axis each row is", file=source, column=missing[0])
+        return X[[*AXIS_KEYS, *self.feature_names_]].astype({k: str for k in AXIS_KEYS})
+
     def predict(self, X):
-        return self.estimator.predict(X[self.feature_names_])
+        return self.estimator.predict(self.inputs(X))
 
 
 def save_model(model: TrainedModel, directory) -> Path:

@@ -26,31 +26,50 @@ class Fit:
     predicted_um: np.ndarray              # for every row of the table
     metrics: dict = field(default_factory=dict)
     truth_um: np.ndarray | None = None
+    inputs: pd.DataFrame | None = None    # what the estimator saw (with the axes, per axis)
 
     def trained_model(self, meta: dict | None = None) -> registry.TrainedModel:
         """The fitted estimator with what monitoring needs (input ranges, training inputs)."""
         X_train = self.table.X.iloc[self.train_index]
         ranges = {c: (float(X_train[c].min()), float(X_train[c].max())) for c in X_train}
+        axes = _known_axes(self.estimator)
         return registry.TrainedModel(
             self.name, self.estimator, list(self.table.X.columns), self.table.target_kind,
             self.metrics["test_rmse_um"], ranges, X_train.reset_index(drop=True),
-            {"metrics": self.metrics, **(meta or {})})
+            {"metrics": self.metrics, **({"axes": axes} if axes else {}), **(meta or {})})
+
+
+def _known_axes(estimator) -> list[dict]:
+    """model.json's list of the machine axes a per-axis model knows: visits since the wear
+    clock restarted, where the hours count from, the axis's noise and how much it borrowed
+    from the fleet."""
+    known = registry.knows_axes(estimator)
+    return [{"machine_id": m, "axis": a, "visits": int(estimator.axis_visits_[i]),
+             "hours_origin": float(estimator.hours_origin_[i]),
+             "noise_um": round(float(estimator.axis_sigma_um_[i]), 4),
+             "borrowed": round(float(estimator.shrinkage_[i]), 3)}
+            for i, (m, a) in enumerate(known)]
 
 
 def fit_model(table: FeatureTable, name: str, split: str = "random", random_state: int = 0,
               truth: pd.DataFrame | None = None, noise_floor_um: float | None = None,
-              source: str = "data") -> Fit:
-    """Fit ``name`` (``models.registry``) on the training part of ``split`` and score it."""
+              source: str = "data", hours_origin: dict | None = None) -> Fit:
+    """Fit ``name`` (``models.registry``) on the training part of ``split`` and score it.
+
+    A per-axis predictor sees each row's machine axis and ``hours_origin`` (from
+    ``since_adjustment``): where each axis's wear clock restarted with its counter running on.
+    """
     check_features(table.X, source)
     train, test = evaluation.holdout(table.meta, split, random_state, source)
     estimator = registry.make(name, random_state)
     registry.check_inputs(name, estimator, table.X.columns, source)
-    estimator.fit(table.X.iloc[train], table.y.iloc[train])
-    predicted = np.asarray(estimator.predict(table.X), float)
+    X, extra = model_inputs(table, name, hours_origin)
+    estimator.fit(X.iloc[train], table.y.iloc[train], **extra)
+    predicted = np.asarray(estimator.predict(X), float)
     y = table.y.to_numpy(float)
     metrics = {f"test_{k}": v for k, v in evaluation.scores(y[test], predicted[test]).items()}
     metrics |= {f"train_{k}": v for k, v in evaluation.scores(y[train], predicted[train]).items()}
-    fit = Fit(name, estimator, table, train, test, predicted, metrics)
+    fit = Fit(name, estimator, table, train, test, predicted, metrics, inputs=X)
     if truth is not None:
         fit.truth_um = evaluation.true_backlash(table.meta, truth, table.target_kind)
         known = test[np.isfinite(fit.truth_um[test])]
@@ -63,6 +82,14 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     if noise_floor_um is not None:
         metrics["noise_floor_um"] = float(noise_floor_um)
     return fit
+
+
+def model_inputs(table: FeatureTable, name: str, hours_origin: dict | None = None):
+    """The inputs predictor ``name`` is fitted on and the keyword arguments of its ``fit``: a
+    per-axis predictor gets each row's machine axis and the axes' wear-clock origins."""
+    if not registry.predictor(name).per_axis:
+        return table.X, {}
+    return registry.with_axes(table.X, table.meta), {"hours_origin": hours_origin or {}}
 
 
 def visit_series(readings: pd.DataFrame) -> tuple[pd.DataFrame | None, str]:
@@ -99,3 +126,23 @@ def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None):
                         table.y[mask].reset_index(drop=True),
                         table.meta[mask].reset_index(drop=True), table.target_kind, table.reason)
     return kept, note
+
+
+def hours_origins(table: FeatureTable, notes: list[dict]) -> dict:
+    """Where each machine axis's wear clock restarted with its hour counter running on:
+    (machine_id, axis) -> the operating hours [h] of its first visit since the adjustment (the
+    adjustment's own hours are not recorded; the level b0 of that axis is then its backlash at
+    that visit). Axes whose hours dropped at the adjustment, or that were never adjusted,
+    count from 0."""
+    hours = table.X.get("operating_hours")
+    if hours is None:
+        return {}
+    origins = {}
+    for note in notes:
+        if not note["dropped"] or "operating hours drop" in note["reason"]:
+            continue
+        rows = ((table.meta["machine_id"].astype(str) == note["machine_id"])
+                & (table.meta["axis"].astype(str) == note["axis"])).to_numpy()
+        if rows.any():
+            origins[(note["machine_id"], note["axis"])] = float(hours[rows].min())
+    return origins

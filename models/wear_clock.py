@@ -88,7 +88,7 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     adjustment).
 
     ``visits``: rows of ``features.visits.visit_backlash`` (``machine_id, axis, visit, date,
-    backlash_um, u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
+    backlash_um, backlash_u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
     """
     from models import drift
 

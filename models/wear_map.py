@@ -19,6 +19,13 @@ that varies along the axis (DESIGN.md, wear). The model, linear in its coefficie
   visits' mean residuals beyond the point noise), gives the 95 % interval of the predicted
   backlash (which also carries the forecast visit's own offset) and of w(x).
 
+On a fleet (inputs with ``machine_id`` and ``axis`` columns naming more than one machine axis)
+every machine axis gets its own maps and condition terms, over its own travel (the position
+mapped to 0..1 between its end targets) and its own wear clock, and the axes share strength by
+partial pooling (``models.pooling``): an axis with few visits borrows from the fleet's
+distribution of maps, an axis with many visits follows its own data. A plan for an axis the model
+does not know is forecast from that fleet distribution, with its wider interval.
+
 A condition the caller cannot give (a plan without machine temperature) may be NaN: the term
 then takes its training mean and the interval widens by the term's training spread. Terms whose
 input is absent or constant in training are left out; without operating hours (or with one
@@ -50,6 +57,8 @@ __all__ = ["CONDITIONS", "FILE_NAME", "HOURS", "POSITION", "WearMap", "epoch_lin
 
 POSITION = "target"
 HOURS = "operating_hours"
+GROUPS = ("machine_id", "axis")  # the columns that name a machine axis on a fleet
+_AXIS = "__axis__"  # row -> machine axis index in the local frame (fleet only)
 # condition input -> the effect whose unit-amplitude contribution is the term's column
 CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
               "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
@@ -121,7 +130,8 @@ class WearMap(RegressorMixin, BaseEstimator):
     def _basis(self, x: np.ndarray, choice) -> np.ndarray:
         if choice == "targets":
             return target_basis(x, self.knots_mm_)
-        return spline_basis(x, *self.range_mm_, int(choice))
+        lo, hi = (0.0, 1.0) if getattr(self, "pooled_", False) else self.range_mm_
+        return spline_basis(x, lo, hi, int(choice))
 
     def _design(self, frame: pd.DataFrame, choice) -> np.ndarray:
         from models.physics import effects
@@ -148,27 +158,30 @@ class WearMap(RegressorMixin, BaseEstimator):
 
     # ---- fit ----------------------------------------------------------------------------
     @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y):
+    def fit(self, X, y, hours_origin: dict | None = None):
+        """Fit on the inputs ``X`` and backlash ``y`` [um].
+
+        ``hours_origin`` maps (machine_id, axis) to the operating hours [h] at which that
+        axis's wear clock restarts (an adjustment that left the hour counter running on);
+        the axis's hours count from there.
+        """
+        labels, X = _split_groups(X)
         names = (self._names(X, X.shape[1])
                  if hasattr(X, "shape") and len(X.shape) == 2 else None)
         values, y = validate_data(self, X, y, reset=True, y_numeric=True)
         frame = pd.DataFrame(values, columns=names or self._names(values, values.shape[1]))
         y = np.asarray(y, float)
-        names = list(frame.columns)
-        self.use_position_ = POSITION in names and np.ptp(frame[POSITION]) > 0
-        self.use_hours_ = HOURS in names and np.ptp(frame[HOURS]) > 0
-        self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0
-                            and not self._confounded_with_wear(frame, c)]
-        self.condition_means_ = {c: float(frame[c].mean()) for c in self.conditions_}
-        self.condition_sd_ = {c: float(frame[c].std(ddof=1)) for c in self.conditions_}
-        self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_)
-                               if c in names and (c != POSITION or self.use_position_)
-                               and (c != HOURS or self.use_hours_)]
-        x = frame[POSITION].to_numpy(float) if self.use_position_ else np.zeros(len(frame))
-        self.range_mm_ = (float(x.min()), float(x.max()))
-        self.knots_mm_ = np.unique(x)
-        self.hours_range_ = ((float(frame[HOURS].min()), float(frame[HOURS].max()))
-                             if HOURS in names else (0.0, 0.0))
+        # the machine axis of each row is its identity, not an input: feature_names_in_ keeps
+        # the numeric inputs only
+        self.axes_ = sorted({tuple(k) for k in labels}) if labels is not None else []
+        self.pooled_ = len(self.axes_) > 1
+        if self.pooled_:
+            return self._fit_fleet(frame, y, labels, hours_origin or {})
+        return self._fit_axis(frame, y)
+
+    def _fit_axis(self, frame: pd.DataFrame, y: np.ndarray):
+        """One machine axis (or data that name none): the single-axis model."""
+        self._learn_inputs(frame)
         self.cv_scores_ = {}
         self.n_control_ = self._choose(frame, y) if self.use_position_ else 1
         A = self._design(frame, self.n_control_)
@@ -184,6 +197,192 @@ class WearMap(RegressorMixin, BaseEstimator):
                             + self.visit_sd_um_ ** 2 * inverse @ visit_sums @ inverse)
         self.can_forecast_ = bool(self.use_hours_)
         return self
+
+    def _learn_inputs(self, frame: pd.DataFrame) -> None:
+        """Which inputs the model uses, their ranges, means and spreads."""
+        names = list(frame.columns)
+        self.use_position_ = POSITION in names and np.ptp(frame[POSITION]) > 0
+        self.use_hours_ = HOURS in names and np.ptp(frame[HOURS]) > 0
+        self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0
+                            and not self._confounded_with_wear(frame, c)]
+        self.condition_means_ = {c: float(frame[c].mean()) for c in self.conditions_}
+        self.condition_sd_ = {c: float(frame[c].std(ddof=1)) for c in self.conditions_}
+        self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_)
+                               if c in names and (c != POSITION or self.use_position_)
+                               and (c != HOURS or self.use_hours_)]
+        x = frame[POSITION].to_numpy(float) if self.use_position_ else np.zeros(len(frame))
+        self.range_mm_ = (float(x.min()), float(x.max()))
+        self.knots_mm_ = np.unique(x)
+        self.hours_range_ = ((float(frame[HOURS].min()), float(frame[HOURS].max()))
+                             if HOURS in names else (0.0, 0.0))
+
+    # ---- fleet: one map per machine axis, pooled -----------------------------------------
+    def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
+                   hours_origin: dict):
+        axis = self._axis_index(labels)
+        x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
+        self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
+                            for a in range(len(self.axes_))]
+        self.hours_origin_ = [float(hours_origin.get(k, 0.0)) for k in self.axes_]
+        self.axis_visits_ = [len(np.unique(frame[HOURS].to_numpy(float)[axis == a]))
+                             if HOURS in frame else 1 for a in range(len(self.axes_))]
+        self.misfit_um_ = 0.0
+        local = self._local(frame, axis)
+        self.axis_knots_ = [np.unique(local[POSITION].to_numpy(float)[axis == a]).tolist()
+                            if POSITION in local else [0.0] for a in range(len(self.axes_))]
+        self._learn_inputs(local.drop(columns=_AXIS))
+        self.range_mm_ = (float(x.min()), float(x.max()))
+        self.cv_scores_ = {}
+        self.n_control_ = self._choose_fleet(local, y, axis) if self.use_position_ else 1
+        A = self._fleet_design(local, self.n_control_)
+        fitted = self._pool(A, y, axis, local)
+        # spread of the axes' own per-target deviations [um per 1000 h, or um without hours]
+        self.deviation_sd_ = float(fitted.deviation_sd[0]) if self.use_position_ else 0.0
+        self.coef_ = fitted.mu
+        self.covariance_ = fitted.mu_covariance
+        self.prior_covariance_ = fitted.prior
+        self.axis_coef_ = fitted.means
+        self.axis_covariance_ = fitted.covariances
+        self.shrinkage_ = self._borrowed(A, axis, fitted)
+        self.axis_sigma_um_ = fitted.sigma.tolist()
+        self.sigma_um_ = float(np.sqrt(np.mean(fitted.sigma ** 2)))
+        self.visit_sd_um_ = fitted.tau
+        self.dof_ = max(len(y) - A.shape[1], 1)
+        self.can_forecast_ = bool(self.use_hours_)
+        return self
+
+    def _borrowed(self, A: np.ndarray, axis: np.ndarray, fitted) -> list[float]:
+        """How much of each axis's mean wear rate rests on the fleet: its posterior variance
+        over the fleet's spread of mean wear rates, 0 (its own visits decide) .. 1 (the fleet
+        alone)."""
+        if not self.use_hours_:
+            return [1.0] * len(self.axes_)
+        out = []
+        for a in range(len(self.axes_)):
+            row = self._rate_rows(np.asarray(self.axis_knots_[a], float), a)[1].mean(axis=0)
+            spread = float(row @ fitted.prior @ row)
+            out.append(float(row @ fitted.covariances[a] @ row / spread) if spread > 0 else 1.0)
+        return out
+
+    def _axis_index(self, labels: np.ndarray) -> np.ndarray:
+        """Row -> index into ``axes_`` (-1 for an axis the model does not know)."""
+        lookup = {k: i for i, k in enumerate(self.axes_)}
+        return np.array([lookup.get(tuple(k), -1) for k in labels], int)
+
+    def _local(self, frame: pd.DataFrame, axis: np.ndarray, labels=None) -> pd.DataFrame:
+        """The inputs in each axis's own frame: position 0..1 between the axis's end targets,
+        operating hours since its wear clock restarted. An axis the model does not know is
+        mapped over its own targets in ``frame`` (grouped by ``labels``)."""
+        local = frame.copy()
+        if POSITION in local:
+            x = local[POSITION].to_numpy(float)
+            lo, hi = np.zeros(len(x)), np.ones(len(x))
+            for a in np.unique(axis):
+                rows = axis == a
+                if a >= 0:
+                    lo[rows], hi[rows] = self.axis_range_[a]
+                else:  # unknown axes: each over its own targets
+                    for key in {tuple(k) for k in labels[rows]}:
+                        own = rows & np.array([tuple(k) == key for k in labels])
+                        lo[own], hi[own] = x[own].min(), x[own].max()
+            local[POSITION] = np.clip((x - lo) / np.maximum(hi - lo, 1e-12), 0.0, 1.0)
+        if HOURS in local:
+            origin = np.array([self.hours_origin_[a] if a >= 0 else 0.0 for a in axis])
+            local[HOURS] = local[HOURS].to_numpy(float) - origin
+        local[_AXIS] = axis
+        return local
+
+    def _fleet_design(self, local: pd.DataFrame, choice) -> np.ndarray:
+        """The shared design (``_design``: maps on the common 0..1 basis and the condition
+        terms) followed by each axis's own per-target deviations of level and wear rate."""
+        return np.hstack([self._design(local, choice), self._deviation_design(local)])
+
+    def _deviation_design(self, local: pd.DataFrame) -> np.ndarray:
+        """Hat functions on each axis's own targets (padded to the fleet's most targets) for
+        the wear rate (for the level when there are no hours): where one screw wears in a
+        shape the common basis cannot follow. The level needs none: every visit measures it
+        again, the wear rate is what a forecast extrapolates. Zero for an axis the model does
+        not know."""
+        if not self.use_position_:
+            return np.zeros((len(local), 0))
+        width = max(len(k) for k in self.axis_knots_)
+        x, axis = local[POSITION].to_numpy(float), local[_AXIS].to_numpy(int)
+        hats = np.zeros((len(local), width))
+        for a in np.unique(axis[axis >= 0]):
+            rows = axis == a
+            knots = np.asarray(self.axis_knots_[a], float)
+            hats[rows, :len(knots)] = (target_basis(x[rows], knots) if len(knots) > 1
+                                       else np.ones((rows.sum(), 1)))
+        if not self.use_hours_:
+            return hats
+        return hats * local[HOURS].to_numpy(float)[:, None] / 1000.0
+
+    def _deviations(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame):
+        """The axes' own coefficients for ``models.pooling.pool``: which columns each axis
+        has and the starting variance (a twentieth of the backlash spread, per the hours
+        span for a rate)."""
+        from models.pooling import Deviations
+
+        if not self.use_position_:
+            return None
+        width = max(len(k) for k in self.axis_knots_)
+        used = np.array([[j < len(k) for j in range(width)] for k in self.axis_knots_])
+        start = (0.05 * max(float(np.std(y)), 1e-6)) ** 2
+        if self.use_hours_:
+            start /= max(float(np.ptp(local[HOURS])) / 1000.0, 1e-6) ** 2
+        return Deviations(np.zeros(width, int), used, np.array([start]))
+
+    def _pool(self, A: np.ndarray, y: np.ndarray, axis: np.ndarray, local: pd.DataFrame,
+              warm=None):
+        from models.pooling import FOLD_ITERATIONS, MAX_ITERATIONS, VisitBlocks, pool
+
+        visit = (local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(y)))
+        blocks = VisitBlocks.of(A, y, axis, visit, len(self.axes_))
+        deviations = self._deviations(A, y, local)
+        shared = A.shape[1] - (deviations.size if deviations else 0)
+        start = self._solve(A[:, :shared], y)[0]
+        column = np.sqrt(np.mean(A[:, :shared] ** 2, axis=0))
+        scale = np.maximum(np.abs(start), np.std(y) / np.maximum(column, 1e-12))
+        return pool(blocks, start, np.maximum(scale, 1e-9), deviations, warm,
+                    MAX_ITERATIONS if warm is None else FOLD_ITERATIONS)
+
+    def _choose_fleet(self, local: pd.DataFrame, y: np.ndarray, axis: np.ndarray):
+        """Control points by cross-validation over the fleet: fold k holds out every axis's
+        visits of rank k (mod the folds), so each fold forecasts visits the pooled fit has not
+        seen, as the model will."""
+        smallest = min(len(np.unique(local[POSITION].to_numpy(float)[axis == a]))
+                       for a in range(len(self.axes_)))
+        if self.n_control == "targets":
+            raise ValueError("n_control='targets' is for one machine axis; on a fleet every "
+                             "axis has per-target deviations from the common B-spline maps")
+        candidates = ([self.n_control] if self.n_control is not None
+                      else list(range(1, min(self.max_control, smallest) + 1)))
+        if len(candidates) == 1:
+            return candidates[0]
+        folds = _visit_folds(local, axis)
+        excess = {}
+        for choice in candidates:
+            scores = list(self.cv_scores_.values())
+            if len(scores) >= 3 and scores[-1] > scores[-2] > scores[-3]:
+                break  # worse twice in a row: more control points only fit noise
+            A = self._fleet_design(local, choice)
+            whole = self._pool(A, y, axis, local)
+            sse, expected = 0.0, 0.0
+            for k in np.unique(folds):
+                train, test = folds != k, folds == k
+                fitted = self._pool(A[train], y[train], axis[train], local[train], whole)
+                a = axis[test]
+                sse += float(np.sum((y[test] - np.sum(A[test] * fitted.means[a], axis=1)) ** 2))
+                expected += float(np.sum(
+                    np.einsum("ij,ijk,ik->i", A[test], fitted.covariances[a], A[test])
+                    + fitted.tau ** 2 + fitted.sigma[a] ** 2))
+            self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
+            excess[str(choice)] = max(0.0, (sse - expected) / len(y))
+        best = min(self.cv_scores_, key=self.cv_scores_.get)
+        # what the held-out visits missed by beyond what the posterior, the visit offset and
+        # the point noise explain: the shape the basis cannot follow; every forecast carries it
+        self.misfit_um_ = float(np.sqrt(excess[best]))
+        return int(best)
 
     def _confounded_with_wear(self, frame: pd.DataFrame, name: str) -> bool:
         """With fewer than four visits (told apart by their hours), a condition that varies
@@ -243,6 +442,8 @@ class WearMap(RegressorMixin, BaseEstimator):
     # ---- predict ------------------------------------------------------------------------
     def _predict_frame(self, X) -> pd.DataFrame:
         check_is_fitted(self, "coef_")
+        if isinstance(X, pd.DataFrame) and set(GROUPS) <= set(map(str, X.columns)):
+            X = X.drop(columns=list(GROUPS))
         if isinstance(X, pd.DataFrame) and not hasattr(self, "feature_names_in_"):
             X = X.to_numpy(float)  # fitted on unnamed columns: take them by position
         if isinstance(X, pd.DataFrame):
@@ -267,45 +468,114 @@ class WearMap(RegressorMixin, BaseEstimator):
         return frame
 
     def predict(self, X) -> np.ndarray:
-        frame = self._predict_frame(X)
-        return self._design(frame, self.n_control_) @ self.coef_
+        return self.predict_interval(X)[0]
 
     def predict_interval(self, X, level: float | None = None):
         """Predicted backlash [um] and its interval (low, high) at ``level`` (default the
-        estimator's): parameter covariance, plus the training spread of every condition term
-        whose input is missing (NaN)."""
+        estimator's): parameter covariance (on a fleet, the axis's posterior; the fleet's
+        distribution for an axis the model does not know), plus the training spread of every
+        condition term whose input is missing (NaN)."""
+        labels, X = _split_groups(X)
         frame = self._predict_frame(X)
+        z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
+        if not getattr(self, "pooled_", False):
+            mean, var = self._moments(frame, self.coef_, self.covariance_)
+            return mean, mean - z * np.sqrt(var), mean + z * np.sqrt(var)
+        if labels is None:
+            raise ValueError(f"the model knows {len(self.axes_)} machine axes: the inputs need "
+                             f"the columns {', '.join(GROUPS)}")
+        axis = self._axis_index(labels)
+        local = self._local(frame, axis, labels)
+        mean, var = np.zeros(len(frame)), np.zeros(len(frame))
+        for a in np.unique(axis):
+            rows = axis == a
+            coef, cov = ((self.axis_coef_[a], self.axis_covariance_[a]) if a >= 0 else
+                         (self.coef_, self.prior_covariance_ + self.covariance_))
+            mean[rows], var[rows] = self._moments(local[rows], coef, cov)
+            if a < 0:  # its own shape: the fleet's spread of per-target deviations
+                var[rows] += self._unknown_shape_var(local[rows])
+        var += getattr(self, "misfit_um_", 0.0) ** 2
+        half = z * np.sqrt(var)
+        return mean, mean - half, mean + half
+
+    def _moments(self, frame: pd.DataFrame, coef: np.ndarray, cov: np.ndarray):
+        """Mean and variance of the backlash at the rows of ``frame`` for coefficients
+        ``coef`` with covariance ``cov``."""
         A = self._design(frame, self.n_control_)
-        mean = A @ self.coef_
-        # the forecast visit carries its own common offset too
-        var = np.einsum("ij,jk,ik->i", A, self.covariance_, A) + self.visit_sd_um_ ** 2
         offset = A.shape[1] - len(self.conditions_)
+        if getattr(self, "pooled_", False):
+            A = np.hstack([A, self._deviation_design(frame)])
+        mean = A @ coef
+        # the forecast visit carries its own common offset too
+        var = np.einsum("ij,jk,ik->i", A, cov, A) + self.visit_sd_um_ ** 2
         for j, name in enumerate(self.conditions_):
             missing = frame[name].isna().to_numpy()
             effect, amplitude = CONDITIONS[name]
             scale = float(np.ptp(_unit_term(effect, amplitude, name, [0.0, 1.0])))
-            var = var + missing * (self.coef_[offset + j] * scale * self.condition_sd_[name]) ** 2
-        z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
-        half = z * np.sqrt(var)
-        return mean, mean - half, mean + half
+            var = var + missing * (coef[offset + j] * scale * self.condition_sd_[name]) ** 2
+        return mean, var
+
+    def _unknown_shape_var(self, local: pd.DataFrame) -> np.ndarray:
+        hours = (local[HOURS].to_numpy(float) / 1000.0 if self.use_hours_
+                 else np.ones(len(local)))
+        return (hours * self.deviation_sd_) ** 2
+
+    def unknown_axes(self, X) -> list[tuple[str, str]]:
+        """The machine axes named in ``X`` that the model was not fitted on (a fleet model
+        forecasts them from the fleet's distribution of maps)."""
+        labels, _ = _split_groups(X)
+        if labels is None or not getattr(self, "pooled_", False):
+            return []
+        return sorted({tuple(k) for k in labels} - set(self.axes_))
 
     def wear_rate_map(self, positions_mm=None, level: float | None = None) -> pd.DataFrame:
         """The wear-rate map w(x) [um per 1000 h] with its interval, and b0(x) [um], at
-        ``positions_mm`` (default 50 points over the training range)."""
+        ``positions_mm`` (default 50 points over the training range); on a fleet one map per
+        machine axis over its own travel (``positions_mm`` then in each axis's travel), with
+        ``machine_id`` and ``axis`` columns."""
         check_is_fitted(self, "coef_")
-        x = (np.linspace(*self.range_mm_, 50) if positions_mm is None
-             else np.asarray(positions_mm, float))
+        if not getattr(self, "pooled_", False):
+            x = (np.linspace(*self.range_mm_, 50) if positions_mm is None
+                 else np.asarray(positions_mm, float))
+            return self._rate_map(x, x, self.coef_, self.covariance_, level)
+        maps = []
+        z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
+        for a, ((machine, axis), (lo, hi)) in enumerate(zip(self.axes_, self.axis_range_)):
+            x = (np.linspace(lo, hi, 50) if positions_mm is None
+                 else np.asarray(positions_mm, float))
+            start, rate = self._rate_rows(np.clip((x - lo) / max(hi - lo, 1e-12), 0, 1), a)
+            coef, cov = self.axis_coef_[a], self.axis_covariance_[a]
+            w = rate @ coef
+            half = z * np.sqrt(np.einsum("ij,jk,ik->i", rate, cov, rate))
+            maps.append(pd.DataFrame({
+                "machine_id": machine, "axis": axis, "position_mm": x,
+                "wear_rate_um_per_1000h": w, "wear_rate_low": w - half,
+                "wear_rate_high": w + half, "b0_um": start @ coef}))
+        return pd.concat(maps, ignore_index=True)
+
+    def _rate_rows(self, position: np.ndarray, a: int):
+        """Design rows of axis ``a`` at ``position`` (0..1) giving its level at 0 h (condition
+        terms left out) and its wear rate per 1000 h."""
+        frame = pd.DataFrame({POSITION: position, HOURS: 0.0, _AXIS: a,
+                              **{c: self.condition_means_[c] for c in self.conditions_}})
+        at_zero = self._fleet_design(frame, self.n_control_)
+        at_1000 = self._fleet_design(frame.assign(**{HOURS: 1000.0}), self.n_control_)
+        k = self._design(frame, self.n_control_).shape[1]
+        at_zero[:, k - len(self.conditions_):k] = 0.0
+        return at_zero, at_1000 - self._fleet_design(frame, self.n_control_)
+
+    def _rate_map(self, x, positions_mm, coef, cov, level) -> pd.DataFrame:
         basis = (self._basis(x, self.n_control_) if self.use_position_
                  else np.ones((len(x), 1)))
         k = basis.shape[1]
-        b0 = basis @ self.coef_[:k]
+        b0 = basis @ coef[:k]
         if self.use_hours_:
-            rate = basis @ self.coef_[k:2 * k]
-            var = np.einsum("ij,jk,ik->i", basis, self.covariance_[k:2 * k, k:2 * k], basis)
+            rate = basis @ coef[k:2 * k]
+            var = np.einsum("ij,jk,ik->i", basis, cov[k:2 * k, k:2 * k], basis)
         else:
             rate, var = np.zeros(len(x)), np.full(len(x), np.nan)
         half = stdtrit(self.dof_, 0.5 + (level or self.level) / 2) * np.sqrt(var)
-        return pd.DataFrame({"position_mm": x, "wear_rate_um_per_1000h": rate,
+        return pd.DataFrame({"position_mm": positions_mm, "wear_rate_um_per_1000h": rate,
                              "wear_rate_low": rate - half, "wear_rate_high": rate + half,
                              "b0_um": b0})
 
@@ -319,7 +589,9 @@ class WearMap(RegressorMixin, BaseEstimator):
         directory.mkdir(parents=True, exist_ok=True)
         params = self.get_params()
         params["features"] = list(params["features"]) if params["features"] else None
-        state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE}}
+        state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE},
+                 **{name: _jsonable(getattr(self, name)) for name in _FLEET_STATE
+                    if hasattr(self, name)}}
         return write_state(directory / FILE_NAME, self, state)
 
     @classmethod
@@ -337,6 +609,9 @@ class WearMap(RegressorMixin, BaseEstimator):
             model = checked_params(cls(**params), path)
             for name in _STATE:
                 setattr(model, name, _restore(name, state[name]))
+            for name in _FLEET_STATE:
+                if name in state:
+                    setattr(model, name, _restore(name, state[name]))
         except (TypeError, ValueError) as err:
             if isinstance(err, InputError):
                 raise
@@ -355,7 +630,13 @@ _STATE = ("use_position_", "use_hours_", "conditions_", "condition_means_", "con
           "used_features_", "range_mm_", "knots_mm_", "hours_range_", "cv_scores_",
           "n_control_", "coef_", "sigma_um_", "dof_", "covariance_", "can_forecast_",
           "visit_sd_um_")
-_ARRAYS = ("knots_mm_", "coef_", "covariance_")
+# a model that knows its machine axes (fitted on inputs with machine_id and axis)
+_FLEET_STATE = ("pooled_", "axes_", "axis_range_", "hours_origin_", "axis_visits_",
+                "axis_sigma_um_", "misfit_um_",
+                "axis_knots_", "deviation_sd_",
+                "axis_coef_", "axis_covariance_", "prior_covariance_", "shrinkage_")
+_ARRAYS = ("knots_mm_", "coef_", "covariance_", "axis_coef_", "axis_covariance_",
+           "prior_covariance_")
 
 
 def _jsonable(value):
@@ -373,6 +654,8 @@ def _restore(name: str, value):
         return np.asarray(value, float)
     if name in ("range_mm_", "hours_range_"):
         return tuple(float(v) for v in value)
+    if name == "axes_":
+        return [tuple(str(v) for v in pair) for pair in value]
     return value
 
 
@@ -382,3 +665,25 @@ def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
     values = np.asarray(values, float)
     return effects.contribution(effect, np.zeros(len(values)), 0, {name: values},
                                 **{amplitude: 1.0})
+
+
+def _split_groups(X):
+    """(labels, X without them): the (machine_id, axis) of every row when a DataFrame ``X``
+    has both columns (labels is then an object array of pairs), else (None, X)."""
+    if not isinstance(X, pd.DataFrame) or not set(GROUPS) <= set(map(str, X.columns)):
+        return None, X
+    labels = X[list(GROUPS)].astype(str).to_numpy(object)
+    return labels, X.drop(columns=list(GROUPS))
+
+
+def _visit_folds(local: pd.DataFrame, axis: np.ndarray, n_folds: int = 5) -> np.ndarray:
+    """Fold of every row: its visit's rank within its axis (by hours) modulo the folds; five
+    folds by row when the axes have fewer than three visits."""
+    hours = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(local))
+    rank = np.zeros(len(local), int)
+    for a in np.unique(axis):
+        rows = axis == a
+        rank[rows] = np.unique(hours[rows], return_inverse=True)[1]
+    if rank.max() < 2:
+        return np.arange(len(local)) % n_folds
+    return rank % min(n_folds, rank.max() + 1)

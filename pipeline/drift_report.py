@@ -2,7 +2,8 @@
 
 Files written to the output folder (the page refers to the image by relative name, so the
 folder can be moved or logged to MLflow as is): ``drift.png``, ``drift.html``, ``drift.json``.
-Each panel shows the visits with their ±2 sigma bars, the Theil-Sen trend since the last change
+Each panel shows the axis's backlash at each visit (``features.visits.visit_backlash``:
+``backlash_um``, its lost motion by the axis's measuring system) with its ±2 sigma bars, the Theil-Sen trend since the last change
 point, the change points (dashed), the threshold and the forecast band of the crossing.
 """
 
@@ -50,7 +51,7 @@ def _panel(ax, s) -> None:
         return to_date + pd.to_timedelta(np.asarray(t_month) * DAYS_PER_MONTH, unit="D")
 
     ax.errorbar(dates(v["t_month"]), v["backlash_um"], yerr=2 * v["sigma_um"], fmt="o",
-                ms=4, capsize=2, color="C0", label="|B_mean| per visit (±2σ)")
+                ms=4, capsize=2, color="C0", label=f"backlash per visit, {_kinds(v)} (±2σ)")
     seg = v.iloc[s.segment_start:]
     tr = s.trend
     t_end = float(v["t_month"].iloc[-1])
@@ -81,12 +82,33 @@ def _panel(ax, s) -> None:
 
 
 TITLE = "Backlash drift across visits"
+KIND_NAMES = {"paper": "pendulum − linear", "iso": "ISO |B_i|", "mixed": "mixed"}
+
+
+def _kinds(visits) -> str:
+    """Which definition the series' values use: 'pendulum − linear', 'ISO |B_i|' or both."""
+    if "target_kind" not in visits:
+        return "lost motion"
+    return " / ".join(KIND_NAMES.get(k, k) for k in dict.fromkeys(visits["target_kind"]))
 
 
 def _fmt(value, fmt=".3g") -> str:
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "–"
     return format(value, fmt) if isinstance(value, (int, float)) else html.escape(str(value))
+
+
+def _visit_row(r: dict) -> str:
+    """One visit of a series as a table row (columns a hand-built series lacks show –)."""
+    def num(key, fmt=".3f"):
+        return _fmt(r.get(key), fmt)
+
+    u = r.get("backlash_u_um", r.get("u_um"))
+    cells = (num("n_tests", "d"), num("n_points", "d"),
+             html.escape(KIND_NAMES.get(r.get("target_kind"), "–")), num("backlash_um"),
+             _fmt(u, ".3f"), num("sigma_um"), num("reversal_mean_um"), num("reversal_max_um"))
+    return (f"<tr><td>{html.escape(str(r['visit']))}</td><td>{r['date'].date().isoformat()}</td>"
+            + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
 
 
 def render_body(series, *, source: str = "", notes=()) -> str:
@@ -106,12 +128,7 @@ def render_body(series, *, source: str = "", notes=()) -> str:
     details = []
     for s in series:
         v = s.visits
-        body = "".join(
-            f"<tr><td>{html.escape(str(r.visit))}</td><td>{r.date.date().isoformat()}</td>"
-            + "".join(f"<td class='num'>{x}</td>" for x in (
-                r.n_tests, f"{r.B_um:.3f}", f"{r.B_mean_um:.3f}", f"{r.backlash_um:.3f}",
-                f"{r.u_um:.3f}", f"{r.sigma_um:.3f}")) + "</tr>"
-            for r in v.itertuples())
+        body = "".join(_visit_row(r) for r in v.to_dict("records"))
         items = "".join(f"<li>{html.escape(a['kind'])}: {html.escape(a['message'])}</li>"
                         for a in s.alerts)
         alerts = f"<div class='alert'><ul>{items}</ul></div>" if items else "<p>No alert.</p>"
@@ -125,19 +142,22 @@ def render_body(series, *, source: str = "", notes=()) -> str:
                      f"(KS): {html.escape(', '.join(m['drifted_inputs']) or 'none')}.</p>")
         details.append(
             f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2>{alerts}"
-            f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>B [µm]</th>"
-            f"<th>B_mean [µm]</th><th>|B_mean| [µm]</th><th>u [µm]</th><th>σ [µm]</th></tr>"
-            f"{body}</table>")
+            f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>points</th>"
+            f"<th>target</th><th>backlash [µm]</th><th>u(backlash) [µm]</th><th>σ [µm]</th>"
+            f"<th>mean reversal B_i [µm]</th><th>B = max|B_i| [µm]</th></tr>{body}</table>")
     note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
     level = f"{100 * (1 - series[0].alpha):g} %" if series else ""
     return f"""<p>Data: {html.escape(source)}</p>
-<p>Series value: |B_mean| (mean signed ISO 230-2 reversal value of the visit's tests); σ is the
-larger of the repeatability uncertainty u = mean sqrt(s↑²/n↑ + s↓²/n↓) and the robust scatter
-between visits. Slope: Theil-Sen since the last change point ({level} interval); change points by
+<p>Series value: the axis's backlash at the visit, the mean lost motion over its interior
+backlash points by the axis's measuring system (target <em>pendulum − linear</em> with a
+direct system, <em>ISO |B_i|</em> with an indirect one or a single test method); u(backlash) is
+its standard uncertainty from the tests' repeatability and σ the larger of u and the robust
+scatter between visits. The mean signed ISO reversal value and B = max|B_i| (means over the
+visit's tests) are shown for reference: with a direct system they are not the lost motion. Slope: Theil-Sen since the last change point ({level} interval); change points by
 optimal partitioning into straight-line segments; crossing: Theil-Sen line, interval from the
 OLS prediction band of a future visit.</p>
 {f'<ul>{note_html}</ul>' if note_html else ''}
-<table><tr><th>machine</th><th>axis</th><th>visits</th><th>last [µm]</th>
+<table><tr><th>machine</th><th>axis</th><th>visits</th><th>last backlash [µm]</th>
 <th>slope [µm/month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
 {''.join(rows)}</table>
 <p><img src="{FILES['png']}" alt="backlash series"></p>

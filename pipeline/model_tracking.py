@@ -26,9 +26,11 @@ def model_record(fit, model_dir: Path) -> dict:
     """What ``pipeline.tracking.log_model`` logs of a fit saved in ``model_dir``, as plain JSON
     data: another process that has neither the fit nor its libraries may log it
     (``pipeline.background_run``)."""
+    from models.registry import knows_axes
     from pipeline.model_report import training_history
 
-    example = fit.table.X.iloc[:5]
+    # a model that knows several machine axes needs each row's machine_id and axis
+    example = (fit.inputs if knows_axes(fit.estimator) else fit.table.X).iloc[:5]
     info = training_history(fit.estimator)
     return {
         "estimator_params": {f"est_{k}": str(v)[:250]

@@ -200,7 +200,7 @@ def test_predictor_source(tmp_path, capsys):
     assert main(["compensate", str(tmp_path / "model"), "--controller", "linuxcnc", "--out",
                  str(tmp_path / "out"), "--conditions", "feed_mm_min=800", "--json"]) == 0
     axis = json.loads(capsys.readouterr().out)["axes"][0]
-    assert axis["source"] == "predicted" and axis["backlash_um"] == pytest.approx(3.0)
+    assert axis["source"] == "predicted" and axis["reversal_compensation_um"] == pytest.approx(3.0)
     assert np.allclose(axis["reversal_um"], -3.0)
     comp = ctl.linuxcnc(next((tmp_path / "out").glob("*.comp")))
     assert comp.offset_mm(150.0, 1) - comp.offset_mm(150.0, -1) == pytest.approx(0.003)

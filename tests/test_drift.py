@@ -116,11 +116,16 @@ def test_visit_backlash_recovers_known_backlash(tmp_path):
     visit_readings(b, noise_um=0.2).to_csv(path, index=False)
     table = visits.visit_backlash(read_readings(path))
     assert table["visit"].tolist() == ["v01", "v02", "v03", "v04"]
-    # mean of 5 targets of B_i with s_B = 0.2 sqrt(2/5) -> error of the mean about 0.06 um
-    np.testing.assert_allclose(table["backlash_um"], b, atol=0.25)
-    np.testing.assert_allclose(table["B_mean_um"], -b, atol=0.25)
-    # u = sqrt(s_up²/n + s_down²/n) with s = 0.2, n = 5
-    np.testing.assert_allclose(table["u_um"], 0.2 * np.sqrt(2 / 5), rtol=0.35)
+    # linear tests only: the ISO reversal value |B_i| at the 3 interior targets
+    assert (table["target_kind"] == "iso").all() and (table["n_points"] == 3).all()
+    # per point u_i = sqrt(s_up²/n + s_down²/n) with s = 0.2, n = 5; the visit's mean of 3
+    # points has u = u_i / sqrt(3), about 0.07 um
+    u = 0.2 * np.sqrt(2 / 5) / np.sqrt(3)
+    np.testing.assert_allclose(table["backlash_u_um"], u, rtol=0.35)
+    np.testing.assert_allclose(table["backlash_um"], b, atol=4 * u)
+    # the mean signed ISO reversal value over all 5 targets keeps its own name and sign
+    np.testing.assert_allclose(table["reversal_mean_um"], -b, atol=0.25)
+    np.testing.assert_allclose(table["reversal_max_um"], b, atol=0.5)
 
 
 def _args(data, out, *extra):

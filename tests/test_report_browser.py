@@ -30,9 +30,10 @@ def drift_page(tmp_path_factory) -> Path:
     visits = pd.DataFrame({
         "machine_id": "M1", "axis": "X", "visit": [f"v{i:02d}" for i in range(12)],
         "date": pd.Timestamp("2025-01-10", tz="UTC") + pd.to_timedelta(months * DAYS_PER_MONTH, "D"),
-        "n_tests": 1, "B_um": 2 + 0.3 * months, "B_mean_um": -(2 + 0.3 * months),
+        "n_tests": 1, "n_points": 6, "target_kind": "iso",
         "backlash_um": 2 + 0.3 * months + np.random.default_rng(0).normal(0, 0.05, 12),
-        "u_um": 0.1})
+        "backlash_u_um": 0.1, "reversal_mean_um": -(2 + 0.3 * months),
+        "reversal_max_um": 2 + 0.3 * months})
     series = [analyse_series(visits, threshold_um=6.0)]  # crossing within months: alert
     assert [a["kind"] for a in series[0].alerts] == ["crossing_soon"]
     out = tmp_path_factory.mktemp("drift_report")

@@ -453,6 +453,11 @@ def check_readings(frame, parameter: str = "readings",
         if col in columns and pd.api.types.infer_dtype(frame[col], skipna=False) != "string":
             raise InputError(f"not a validated readings frame: column {col!r} holds values "
                              f"that are not text; {hint}", parameter=parameter)
+    for col in schema.DATETIME_OPTIONAL:
+        if col in frame.columns and not pd.api.types.is_datetime64_any_dtype(frame[col]):
+            raise InputError(f"not a validated readings frame: column {col!r} holds "
+                             f"{frame[col].dtype} values, not dates; {hint}",
+                             parameter=parameter)
     checks = {}
     for col, allowed in (("method", schema.METHODS), ("direction", schema.DIRECTIONS)):
         if col in columns:

@@ -53,12 +53,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(series, html_path, file) -> None:
-    print(f"{'machine':<12} {'axis':<4} {'visits':>6} {'last um':>8} {'slope um/mo':>12} "
-          f"{'changes':>7}  crossing", file=file)
+    print(f"{'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} {'target':>6} "
+          f"{'slope um/mo':>12} {'changes':>7}  crossing", file=file)
     for s in series:
         j = s.to_json()
         slope = j["slope_um_per_month"]
-        print(f"{s.machine_id:<12} {s.axis:<4} {len(j['visits']):>6} {j['backlash_um'][-1]:>8.3f} "
+        kind = (j.get("target_kind") or ["-"])[-1]
+        print(f"{s.machine_id:<12} {s.axis:<4} {len(j['visits']):>6} "
+              f"{j['backlash_um'][-1]:>11.3f} {kind:>6} "
               f"{slope if slope is not None else float('nan'):>12.4f} "
               f"{len(j['change_points']):>7}  {j['threshold_crossing'] or '-'}", file=file)
         for a in s.alerts:

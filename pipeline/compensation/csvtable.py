@@ -3,7 +3,8 @@
 ``deviation_*_um_measured_minus_target``: the ISO deviation means; ``correction_*_um`` = minus
 that, what a controller must add to the commanded position; ``actual_*_mm`` = target +
 deviation (LinuxCNC's type-0 columns); ``reversal_um_up_minus_down`` = B_i (negative for lost
-motion); ``position_error_um_bidirectional`` = (up + down) / 2; ``backlash_um`` the scalar.
+motion); ``position_error_um_bidirectional`` = (up + down) / 2; ``reversal_compensation_um`` the scalar a controller adds at each reversal (not the axis's
+backlash, docs/backlash.md).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ def write(profile, out_dir, options) -> dict:
         "correction_plus_um": -profile.mean_up, "correction_minus_um": -profile.mean_down,
         "actual_plus_mm": profile.target + profile.mean_up / profile.scale,
         "actual_minus_mm": profile.target + profile.mean_down / profile.scale,
-        "backlash_um": profile.backlash,
+        "reversal_compensation_um": profile.backlash,
     })
     path = out_dir / f"{profile.stem}_compensation.csv"
     with atomic_path(path) as tmp:

@@ -258,13 +258,15 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
 def wear_rates(table, readings=None) -> pd.DataFrame | None:
     """The wear map fitted on the visits since the last adjustment: w(x) with its interval;
     None when the data cannot give a wear rate (one visit)."""
-    from models.training import since_adjustment
+    from models.registry import with_axes
+    from models.training import hours_origins, since_adjustment
     from models.wear_map import WearMap, epoch_lines
 
     kept, clock = since_adjustment(table, readings)
     for line in epoch_lines(clock["series"]):
         note(line)
-    model = WearMap().fit(kept.X, kept.y)
+    model = WearMap().fit(with_axes(kept.X, kept.meta), kept.y,
+                          hours_origin=hours_origins(kept, clock["series"]))
     return model.wear_rate_map() if model.can_forecast_ else None
 
 

@@ -253,7 +253,7 @@ def _verify(data, profiles, names, written, folder: Path, progress) -> dict[str,
 
 def _profile_json(p) -> dict:
     return {"machine_id": p.machine_id, "axis": p.axis, "source": p.source,
-            "backlash_um": p.backlash, "targets_mm": p.target.tolist(),
+            "reversal_compensation_um": p.backlash, "targets_mm": p.target.tolist(),
             "mean_up_um": p.mean_up.tolist(), "mean_down_um": p.mean_down.tolist(),
             "reversal_um": p.reversal.tolist(), "notes": p.notes}
 

@@ -44,8 +44,10 @@ class DriftResult(Result):
     Attributes
     ----------
     series : list of models.drift.DriftSeries
-        One per machine axis: the visits (|B_mean| [um] and sigma [um]), change points,
-        Theil-Sen trend [um/month] since the last change point, threshold crossing and alerts.
+        One per machine axis: the visits (the axis's backlash ``backlash_um`` [um] by its
+        measuring system, ``backlash_u_um`` and sigma [um], ``target_kind``; see
+        ``features.visits.visit_backlash``), change points, Theil-Sen trend [um/month] since the
+        last change point, threshold crossing and alerts.
     source : str
         Where the readings came from.
     readings : DataFrame
@@ -104,6 +106,10 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
           warn_months: float = 6.0, alpha: float = 0.05,
           min_jump_sigma: float = 3.0) -> DriftResult:
     """Follow backlash across maintenance visits.
+
+    The series of each machine axis is its backlash at each visit
+    (``features.visits.visit_backlash``): the lost motion from pendulum minus linear tests with a
+    direct measuring system, from the ISO reversal value |B_i| with an indirect one.
 
     Parameters
     ----------

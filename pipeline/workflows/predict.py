@@ -129,7 +129,14 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
         inputs = prediction_inputs(readings_of(data, format), trained.feature_names_)
         keys = list(KEYS)
         check_forecast(trained, inputs, str(data), plan=False)
-    X = inputs[trained.feature_names_]
+    X = trained.inputs(inputs, source if plan is not None else (
+        str(data) if isinstance(data, (str, os.PathLike)) else "data"))
+    unknown = getattr(trained.estimator, "unknown_axes", lambda X: [])(X)
+    if unknown:
+        names = ", ".join(f"{m} {a}" for m, a in unknown[:4]) + (" ..." if len(unknown) > 4
+                                                                  else "")
+        note(f"{names}: not in the model's fleet; forecast from the fleet's distribution of "
+             "wear maps (a wider interval)")
     estimator = trained.estimator
     if hasattr(estimator, "predict_interval"):
         mean, low, high = estimator.predict_interval(X)
@@ -137,7 +144,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
                                   backlash_low_um=np.maximum(low, 0.0),
                                   backlash_high_um=np.maximum(high, 0.0))
     else:
-        out = inputs[keys].assign(backlash_um=np.maximum(trained.predict(inputs), 0.0))
+        out = inputs[keys].assign(backlash_um=np.maximum(estimator.predict(X), 0.0))
     return PredictionResult(predictions=out, model=trained.name)
 
 

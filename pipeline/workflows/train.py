@@ -186,16 +186,20 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     name = model or registry.RECOMMENDED
     registry.check_name(name)
     loaded = model_data(data, format, target, features, truth)
-    table, clock = loaded.table, None
+    table, clock, origins = loaded.table, None, {}
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
+        from models.training import hours_origins
         from models.wear_map import epoch_lines
 
         table, clock = since_adjustment(table, loaded.readings)
+        origins = hours_origins(table, clock["series"])
         for line in [*epoch_lines(clock["series"]), clock["change_points"]]:
             if line and line != "searched":
                 note(line)
     fit = fit_model(table, name, split, seed, loaded.truth, loaded.noise_floor_um,
-                    loaded.source)
+                    loaded.source, hours_origin=origins)
+    for line in borrowing_lines(fit.trained_model().meta.get("axes", [])):
+        note(line)
     digest = loaded.digest
     meta = {"split": split, "data_sha256": digest, "data": loaded.source,
             "noise_floor_um": loaded.noise_floor_um, "target_reason": table.reason,
@@ -207,6 +211,13 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     return TrainResult(model=name, fit=fit, trained=fit.trained_model(meta),
                        metrics=fit.metrics, params=params, n_points=len(loaded.table.y),
                        target_kind=table.target_kind, target_reason=table.reason)
+
+
+def borrowing_lines(axes: list[dict]) -> list[str]:
+    """A note per machine axis whose wear rate rests mostly on the fleet: one visit since its
+    wear clock restarted (its rate comes from the fleet alone)."""
+    return [f"{a['machine_id']} {a['axis']}: one visit since its wear clock restarted; its wear "
+            "rate comes from the fleet's (a wider interval)" for a in axes if a["visits"] < 2]
 
 
 def load_model(path):

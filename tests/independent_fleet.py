@@ -1,0 +1,182 @@
+"""A fleet generator written independently of the twin (it never imports ``models.physics``):
+its own machines, usage, measuring systems, wear forms and noise, so the fleet models are not
+graded on the twin's own equations.
+
+Five machines with two linear axes each, a maintenance visit every quarter:
+
+- every axis has its own travel, targets (irregular ISO-style spacing), level and wear-rate
+  map: the level rises linearly along the screw, the wear rate is a raised-cosine working
+  zone on top of a small base rate (not the twin's Gaussian bump);
+- usage differs by machine (hours per month), so the hour counters run at different speeds;
+- two machines get a mechanical adjustment (new preload) with their hour counter running on:
+  the lost motion drops to a new level and wear restarts there, nothing in the file says so;
+- one machine joins the fleet late (two visits before the last);
+- one machine measures through its rotary encoder (indirect: every reading carries the lost
+  motion), the others through a linear scale (direct: only readings right after a reversal do);
+- every visit runs a linear and a pendulum test (paired), five cycles each.
+
+``fleet()`` returns the readings (docs/data-contract.md columns), the true lost motion per
+machine, axis, visit and target (``truth``), and what each axis is (``axes``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+START = pd.Timestamp("2025-01-06 07:30")
+VISIT_DAYS = 91.0
+CYCLES = 5
+READING_SD_UM = 0.25       # laser reading noise
+VISIT_SD_UM = 0.06         # day-to-day variation of the lost motion itself
+N_TARGETS = 11
+
+
+@dataclass(frozen=True)
+class Machine:
+    machine_id: str
+    hours_per_month: float
+    direct: bool
+    first_visit: int = 1
+    adjusted_at: int | None = None   # visit whose measurement follows the adjustment
+
+
+MACHINES = (
+    Machine("M1", 310.0, direct=True),
+    Machine("M2", 420.0, direct=True, adjusted_at=5),
+    Machine("M3", 180.0, direct=False),
+    Machine("M4", 260.0, direct=True, adjusted_at=4),
+    Machine("M5", 350.0, direct=True, first_visit=6),
+)
+
+
+def raised_cosine(x, centre, half_width):
+    """1 at ``centre``, falling as cos^2 to 0 at ``half_width`` away, 0 beyond."""
+    u = np.clip(np.abs(np.asarray(x, float) - centre) / half_width, 0.0, 1.0)
+    return np.cos(0.5 * np.pi * u) ** 2
+
+
+@dataclass(frozen=True)
+class Axis:
+    machine: Machine
+    axis: str
+    targets: np.ndarray
+    level_um: float          # lost motion at the home end after assembly or adjustment
+    level_slope_um: float    # rise of the level from home to far end
+    base_rate: float         # um per 1000 h everywhere
+    zone_rate: float         # um per 1000 h extra at the centre of the working zone
+    zone_centre: float
+    zone_half_width: float
+    level_after_adjust_um: float
+
+    def rate(self, x):
+        """Wear rate [um per 1000 h] along the axis."""
+        return self.base_rate + self.zone_rate * raised_cosine(x, self.zone_centre,
+                                                               self.zone_half_width)
+
+    def level(self, x, adjusted: bool):
+        length = self.targets[-1] - self.targets[0]
+        start = self.level_after_adjust_um if adjusted else self.level_um
+        return start + self.level_slope_um * (np.asarray(x, float) - self.targets[0]) / length
+
+    def lost_motion(self, x, hours_since: float, adjusted: bool):
+        return self.level(x, adjusted) + self.rate(x) * hours_since / 1000.0
+
+
+def make_axes(rng: np.random.Generator) -> list[Axis]:
+    axes = []
+    for machine in MACHINES:
+        for name in ("X", "Y"):
+            travel = float(rng.choice([400.0, 500.0, 630.0, 800.0]))
+            t = np.linspace(0.0, travel, N_TARGETS)
+            t[1:-1] += rng.uniform(-0.25, 0.25, N_TARGETS - 2) * travel / (N_TARGETS - 1)
+            level = rng.uniform(1.2, 3.5)
+            axes.append(Axis(
+                machine, name, np.round(t, 2), level, rng.uniform(-0.4, 0.6),
+                base_rate=rng.uniform(0.15, 0.4), zone_rate=rng.uniform(0.5, 1.4),
+                zone_centre=rng.uniform(0.3, 0.7) * travel,
+                zone_half_width=rng.uniform(0.2, 0.35) * travel,
+                level_after_adjust_um=level * rng.uniform(0.5, 0.8)))
+    return axes
+
+
+def _cycle(method: str, n: int):
+    """(target index, direction sign, cycle, follows a reversal) in reading order."""
+    for c in range(1, CYCLES + 1):
+        if method == "linear":
+            yield from ((i, 1, c, i == 0) for i in range(n))
+            yield from ((i, -1, c, i == n - 1) for i in reversed(range(n)))
+        else:
+            for i in range(n):
+                yield (i, 1, c, True)
+                yield (i, -1, c, True)
+
+
+def fleet(seed: int = 0, visits: int = 8):
+    """Readings, truth and axes of the fleet (module docstring)."""
+    rng = np.random.default_rng(70_000 + seed)
+    axes = make_axes(rng)
+    rows, truth = [], []
+    for ax in axes:
+        m = ax.machine
+        hours_at_adjust = None
+        for visit in range(m.first_visit, visits + 1):
+            date = START + pd.Timedelta(days=VISIT_DAYS * (visit - 1) + rng.uniform(-5, 5))
+            hours = m.hours_per_month * (visit - 1) * VISIT_DAYS / 30.4375 + rng.uniform(0, 20)
+            adjusted = m.adjusted_at is not None and visit >= m.adjusted_at
+            if adjusted and hours_at_adjust is None:  # adjusted a few weeks before the visit
+                hours_at_adjust = hours - m.hours_per_month * rng.uniform(0.5, 1.5)
+            since = hours - hours_at_adjust if adjusted else hours
+            true = ax.lost_motion(ax.targets, since, adjusted) + rng.normal(0, VISIT_SD_UM)
+            truth += [{"machine_id": m.machine_id, "axis": ax.axis, "visit": str(visit),
+                       "target": float(x), "backlash_true_um": float(b),
+                       "operating_hours": hours, "hours_since_adjustment": since}
+                      for x, b in zip(ax.targets, true)]
+            feed = 1000.0 + 500.0 * (int(m.machine_id[1]) % 3)
+            temp = 21.0 + rng.normal(0, 0.6)
+            for k, method in enumerate(("linear", "pendulum")):
+                rows += _test(rng, ax, visit, method, true, date + pd.Timedelta(minutes=40 * k),
+                              hours, feed, temp + 0.3 * k)
+    readings = pd.DataFrame(rows)
+    return readings, pd.DataFrame(truth), axes
+
+
+def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start, hours,
+          feed, temp) -> list[dict]:
+    m = ax.machine
+    t = ax.targets
+    length = t[-1] - t[0]
+    # geometric error common to both directions: a lead error and thermal growth of the screw
+    geometric = 9.0 * (t - t[0]) / 1000.0 + 11.0 * (temp - 20.0) * (t - t[0]) / 1000.0 \
+        + 0.8 * np.sin(2 * np.pi * (t - t[0]) / (0.37 * length))
+    offset = rng.normal(0, 0.3)  # setup offset of the laser per test
+    test_id = f"{m.machine_id}{ax.axis}-v{visit}-{method[:3]}"
+    out = []
+    for i, sign, cycle, after_reversal in _cycle(method, len(t)):
+        shows = (not m.direct) or after_reversal
+        play = -sign * lost_motion[i] / 2.0 if shows else 0.0
+        out.append({
+            "machine_id": m.machine_id, "axis": ax.axis, "test_id": test_id, "method": method,
+            "target": float(t[i]), "direction": "+" if sign > 0 else "-", "cycle": cycle,
+            "deviation_um": geometric[i] + offset + play + rng.normal(0, READING_SD_UM),
+            "visit": str(visit), "repeat": 1, "started_at": start.isoformat(),
+            "feed_mm_min": feed, "dwell_s": 2.0, "machine_temp_c": temp,
+            "ambient_temp_c": 20.4 + rng.normal(0, 0.1), "pressure_hpa": 1012.0,
+            "humidity_pct": 45.0, "operating_hours": round(hours, 1)})
+    return out
+
+
+def plan_and_truth(seed: int = 0, visits: int = 8):
+    """Training readings (every visit but the last), the plan of the last visit (targets and
+    conditions, no deviations) and its true lost motion."""
+    readings, truth, axes = fleet(seed, visits)
+    last = readings["visit"] == str(visits)
+    keys = ["machine_id", "axis", "target", "operating_hours", "feed_mm_min", "dwell_s",
+            "machine_temp_c"]
+    plan = (readings[last & (readings["method"] == "pendulum")]
+            .groupby(["machine_id", "axis", "target"], as_index=False)[keys[3:]].mean())
+    plan["visit"] = str(visits)
+    expected = truth[truth["visit"] == str(visits)]
+    return readings[~last].reset_index(drop=True), plan, expected, axes
