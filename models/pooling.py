@@ -47,60 +47,63 @@ TOLERANCE = 1e-3
 
 @dataclass
 class VisitBlocks:
-    """Sufficient statistics of the fleet's rows, one entry per visit of an axis (a block):
-    A_g'A_g, A_g'1, A_g'y_g, 1'y_g, y_g'y_g, the block size n_g and the block's axis."""
+    """Sufficient statistics of the fleet's rows, per visit of each axis (a block), laid out
+    (n_axes, most visits of an axis, ...) so that every EM step is a batched matrix product:
+    A_g'A_g, A_g'1, A_g'y_g, 1'y_g, y_g'y_g and the block size n_g (0 for padding and for
+    blocks a cross-validation fold holds out)."""
 
-    gram: np.ndarray      # (G, p, p)
-    ones: np.ndarray      # (G, p)
-    cross: np.ndarray     # (G, p)
-    total: np.ndarray     # (G,)
-    squares: np.ndarray   # (G,)
-    size: np.ndarray      # (G,)
-    axis: np.ndarray      # (G,) index of the block's axis
-    n_axes: int
+    gram: np.ndarray      # (n_axes, V, p, p)
+    ones: np.ndarray      # (n_axes, V, p)
+    cross: np.ndarray     # (n_axes, V, p)
+    total: np.ndarray     # (n_axes, V)
+    squares: np.ndarray   # (n_axes, V)
+    size: np.ndarray      # (n_axes, V)
 
     @classmethod
     def of(cls, A: np.ndarray, y: np.ndarray, axis: np.ndarray, visit: np.ndarray,
            n_axes: int) -> VisitBlocks:
-        """Blocks of the rows of ``A``, ``y`` grouped by (``axis``, ``visit``)."""
-        keys, codes = np.unique(np.column_stack([axis, visit]), axis=0, return_inverse=True)
-        codes = codes.ravel()
-        n_blocks, p = len(keys), A.shape[1]
-        gram = np.zeros((n_blocks, p, p))
-        np.add.at(gram, codes, A[:, :, None] * A[:, None, :])
-        return cls(gram, _sums(A, codes, n_blocks), _sums(A * y[:, None], codes, n_blocks),
-                   np.bincount(codes, y, n_blocks), np.bincount(codes, y * y, n_blocks),
-                   np.bincount(codes, minlength=n_blocks).astype(float),
-                   keys[:, 0].astype(int), n_axes)
+        """Blocks of the rows of ``A``, ``y`` grouped by ``axis`` (0 .. n_axes - 1) and
+        ``visit`` (any label; the blocks of an axis in the label's order)."""
+        order = np.lexsort((visit, axis))
+        A, y, axis, visit = A[order], y[order], axis[order], visit[order]
+        starts = np.flatnonzero(np.r_[True, (axis[1:] != axis[:-1])
+                                      | (visit[1:] != visit[:-1])])
+        ends = np.r_[starts[1:], len(y)]
+        block_axis = axis[starts]
+        rank = np.arange(len(starts)) - np.searchsorted(block_axis, block_axis)
+        p, width = A.shape[1], int(rank.max()) + 1
+        where = (block_axis, rank)
+        blocks = cls(np.zeros((n_axes, width, p, p)), np.zeros((n_axes, width, p)),
+                     np.zeros((n_axes, width, p)), np.zeros((n_axes, width)),
+                     np.zeros((n_axes, width)), np.zeros((n_axes, width)))
+        blocks.gram[where] = np.stack([A[a:b].T @ A[a:b] for a, b in zip(starts, ends)])
+        blocks.ones[where] = np.add.reduceat(A, starts, axis=0)
+        blocks.cross[where] = np.add.reduceat(A * y[:, None], starts, axis=0)
+        blocks.total[where] = np.add.reduceat(y, starts)
+        blocks.squares[where] = np.add.reduceat(y * y, starts)
+        blocks.size[where] = ends - starts
+        return blocks
 
-    def __post_init__(self):
-        # (n_axes, G) one-hot: sums over an axis's blocks are one matrix product
-        self.member = (np.arange(self.n_axes)[:, None] == self.axis[None, :]).astype(float)
-        self.axis_gram = self.per_axis(self.gram)
-        self.axis_cross = self.per_axis(self.cross)
+    @property
+    def n_axes(self) -> int:
+        return len(self.size)
 
-    def per_axis(self, values: np.ndarray) -> np.ndarray:
-        """Sum of per-block ``values`` over the blocks of each axis."""
-        flat = self.member @ values.reshape(len(values), -1)
-        return flat.reshape((self.n_axes, *values.shape[1:]))
+    def subset(self, keep: np.ndarray) -> VisitBlocks:
+        """The blocks where ``keep`` (n_axes, V) is true; the others empty."""
+        k = keep.astype(float)
+        return VisitBlocks(self.gram * k[..., None, None], self.ones * k[..., None],
+                           self.cross * k[..., None], self.total * k, self.squares * k,
+                           self.size * k)
 
     def information(self, sigma2: np.ndarray, tau2: float):
         """A_a'V_a^-1 A_a and A_a'V_a^-1 y_a per axis, V = sigma_a^2 I + tau^2 11' per block
         (``sigma2`` per axis): V_g^-1 = (I - c_g 11') / sigma^2, c_g = tau^2 /
         (sigma^2 + n_g tau^2)."""
-        s2 = sigma2[self.axis]
-        weight = self.member * (tau2 / (s2 + self.size * tau2) / s2)
-        info = (self.axis_gram / sigma2[:, None, None]
-                - np.einsum("ag,gi,gj->aij", weight, self.ones, self.ones))
-        score = (self.axis_cross / sigma2[:, None]
-                 - (weight * self.total) @ self.ones)
-        return info, score
-
-
-def _sums(values: np.ndarray, codes: np.ndarray, n: int) -> np.ndarray:
-    out = np.zeros((n, values.shape[1]))
-    np.add.at(out, codes, values)
-    return out
+        c = tau2 / (sigma2[:, None] + self.size * tau2)            # (n_axes, V)
+        weighted = self.ones * c[..., None]
+        info = self.gram.sum(axis=1) - np.swapaxes(weighted, 1, 2) @ self.ones
+        score = self.cross.sum(axis=1) - np.einsum("avi,av->ai", weighted, self.total)
+        return info / sigma2[:, None, None], score / sigma2[:, None]
 
 
 @dataclass
@@ -146,12 +149,12 @@ def pool(blocks: VisitBlocks, start: np.ndarray, scale: np.ndarray,
     n_axes, n_shared = blocks.n_axes, len(start)
     local = local or Deviations.none(n_axes)
     n_shared + local.size
-    n_rows, n_blocks = float(blocks.size.sum()), len(blocks.size)
+    n_rows, n_blocks = float(blocks.size.sum()), int(np.count_nonzero(blocks.size))
     floor = PRIOR_FLOOR * np.diag(scale ** 2)
     mu = np.concatenate([start, np.zeros(local.size)])
     shared = np.diag(scale ** 2)
     spread2 = local.start.copy()
-    gram, cross = blocks.gram.sum(axis=0), blocks.cross.sum(axis=0)
+    gram, cross = blocks.gram.sum(axis=(0, 1)), blocks.cross.sum(axis=(0, 1))
     sse = blocks.squares.sum() - 2 * mu @ cross + mu @ gram @ mu
     sigma2 = np.full(n_axes, max(float(sse) / max(n_rows - n_shared, 1.0), 1e-12))
     tau2 = 0.1 * float(sigma2[0])  # EM cannot leave an offset variance of exactly zero
@@ -230,22 +233,22 @@ def _noise(blocks: VisitBlocks, means, covs, sigma2, tau2, n_rows, n_blocks):
     M-step of the variance components; each visit's offset u_g has the posterior
     u_g | beta ~ N(k_g 1'(y_g - A_g beta), tau^2 sigma^2 / (sigma^2 + n_g tau^2)),
     k_g = tau^2 / (sigma^2 + n_g tau^2), and beta ~ N(m_a, C_a))."""
-    m, c, n, s2 = means[blocks.axis], covs[blocks.axis], blocks.size, sigma2[blocks.axis]
-    # E||y_g - A_g beta||^2 and E(1'(y_g - A_g beta))^2 over the posterior of beta
-    sse = (blocks.squares - 2 * np.einsum("gi,gi->g", blocks.cross, m)
-           + np.einsum("gi,gij,gj->g", m, blocks.gram, m)
-           + np.einsum("gij,gji->g", blocks.gram, c))
-    total = blocks.total - np.einsum("gi,gi->g", blocks.ones, m)
-    total2 = total ** 2 + np.einsum("gi,gij,gj->g", blocks.ones, c, blocks.ones)
+    n, s2 = blocks.size, sigma2[:, None]
+    gram = blocks.gram.sum(axis=1)
+    # E||y_a - A_a beta||^2 per axis and E(1'(y_g - A_g beta))^2 per block, over the
+    # posterior of beta
+    sse = (blocks.squares.sum(axis=1)
+           - 2 * np.einsum("ai,ai->a", blocks.cross.sum(axis=1), means)
+           + np.einsum("ai,ai->a", (gram @ means[:, :, None])[..., 0], means)
+           + np.einsum("aij,aji->a", gram, covs))
+    total = blocks.total - (blocks.ones @ means[:, :, None])[..., 0]
+    total2 = total ** 2 + np.einsum("avi,avi->av", blocks.ones @ covs, blocks.ones)
     k = tau2 / (s2 + n * tau2)
-    u2 = k ** 2 * total2 + tau2 * s2 / (s2 + n * tau2)      # E u_g^2
-    within = blocks.per_axis(sse - 2 * k * total2 + n * u2)
-    rows = blocks.per_axis(n)
+    u2 = (k ** 2 * total2 + tau2 * s2 / (s2 + n * tau2)) * (n > 0)      # E u_g^2
+    within = sse + np.sum(-2 * k * total2 + n * u2, axis=1)
     # each axis's own noise (its target definition and instrument set it), shrunk toward the
     # fleet's with the weight of NOISE_PRIOR_ROWS rows: an axis with two visits cannot
     # estimate it alone
     fleet = float(within.sum()) / n_rows
-    sigma2 = (within + NOISE_PRIOR_ROWS * fleet) / (rows + NOISE_PRIOR_ROWS)
+    sigma2 = (within + NOISE_PRIOR_ROWS * fleet) / (n.sum(axis=1) + NOISE_PRIOR_ROWS)
     return np.maximum(sigma2, 1e-12), float(np.sum(u2)) / n_blocks
-
-

@@ -48,39 +48,23 @@ from sklearn.base import BaseEstimator, RegressorMixin, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from features.statistics import bspline_basis, grouped_cv_sse, varies_only_between
+from features.statistics import grouped_cv_sse, varies_only_between
+from models.wear_basis import GROUPS, HOURS, POSITION, spline_basis, split_groups, target_basis
 from models.wear_clock import epoch_lines, found_adjustments, latest_epoch, wear_epochs
+from models.wear_fleet import FLEET_ARRAYS, FLEET_STATE, FleetWearMap
 
 # the wear clock (``models.wear_clock``) is importable from here too
 __all__ = ["CONDITIONS", "FILE_NAME", "HOURS", "POSITION", "WearMap", "epoch_lines",
            "found_adjustments", "latest_epoch", "spline_basis", "target_basis", "wear_epochs"]
 
-POSITION = "target"
-HOURS = "operating_hours"
-GROUPS = ("machine_id", "axis")  # the columns that name a machine axis on a fleet
-_AXIS = "__axis__"  # row -> machine axis index in the local frame (fleet only)
-# condition input -> the effect whose unit-amplitude contribution is the term's column
+# the wear map's own record of the condition terms: input -> the effect whose unit-amplitude
+# contribution is the term's column
 CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
               "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
 FILE_NAME = "wear_map.json"
 
 
-def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np.ndarray:
-    """Uniform clamped B-spline basis over [lo, hi] ([Mechta2022], eq. 4), shape (len(x),
-    n_control); degree min(degree, n_control - 1); outside the range the end values hold."""
-    t = np.clip((np.asarray(x, float) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
-    return bspline_basis(t, n_control, degree)
-
-
-def target_basis(x, knots_mm) -> np.ndarray:
-    """One value per target: hat functions on the training targets (piecewise linear between
-    them, the end values held beyond), shape (len(x), len(knots))."""
-    x = np.clip(np.asarray(x, float), knots_mm[0], knots_mm[-1])
-    return np.column_stack([np.interp(x, knots_mm, np.eye(len(knots_mm))[j])
-                            for j in range(len(knots_mm))])
-
-
-class WearMap(RegressorMixin, BaseEstimator):
+class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
     """Backlash b0(x) + w(x) h + condition terms, smooth along the axis (module docstring).
 
     Parameters
@@ -165,7 +149,7 @@ class WearMap(RegressorMixin, BaseEstimator):
         axis's wear clock restarts (an adjustment that left the hour counter running on);
         the axis's hours count from there.
         """
-        labels, X = _split_groups(X)
+        labels, X = split_groups(X)
         names = (self._names(X, X.shape[1])
                  if hasattr(X, "shape") and len(X.shape) == 2 else None)
         values, y = validate_data(self, X, y, reset=True, y_numeric=True)
@@ -215,174 +199,6 @@ class WearMap(RegressorMixin, BaseEstimator):
         self.knots_mm_ = np.unique(x)
         self.hours_range_ = ((float(frame[HOURS].min()), float(frame[HOURS].max()))
                              if HOURS in names else (0.0, 0.0))
-
-    # ---- fleet: one map per machine axis, pooled -----------------------------------------
-    def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
-                   hours_origin: dict):
-        axis = self._axis_index(labels)
-        x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
-        self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
-                            for a in range(len(self.axes_))]
-        self.hours_origin_ = [float(hours_origin.get(k, 0.0)) for k in self.axes_]
-        self.axis_visits_ = [len(np.unique(frame[HOURS].to_numpy(float)[axis == a]))
-                             if HOURS in frame else 1 for a in range(len(self.axes_))]
-        self.misfit_um_ = 0.0
-        local = self._local(frame, axis)
-        self.axis_knots_ = [np.unique(local[POSITION].to_numpy(float)[axis == a]).tolist()
-                            if POSITION in local else [0.0] for a in range(len(self.axes_))]
-        self._learn_inputs(local.drop(columns=_AXIS))
-        self.range_mm_ = (float(x.min()), float(x.max()))
-        self.cv_scores_ = {}
-        self.n_control_ = self._choose_fleet(local, y, axis) if self.use_position_ else 1
-        A = self._fleet_design(local, self.n_control_)
-        fitted = self._pool(A, y, axis, local)
-        # spread of the axes' own per-target deviations [um per 1000 h, or um without hours]
-        self.deviation_sd_ = float(fitted.deviation_sd[0]) if self.use_position_ else 0.0
-        self.coef_ = fitted.mu
-        self.covariance_ = fitted.mu_covariance
-        self.prior_covariance_ = fitted.prior
-        self.axis_coef_ = fitted.means
-        self.axis_covariance_ = fitted.covariances
-        self.shrinkage_ = self._borrowed(A, axis, fitted)
-        self.axis_sigma_um_ = fitted.sigma.tolist()
-        self.sigma_um_ = float(np.sqrt(np.mean(fitted.sigma ** 2)))
-        self.visit_sd_um_ = fitted.tau
-        self.dof_ = max(len(y) - A.shape[1], 1)
-        self.can_forecast_ = bool(self.use_hours_)
-        return self
-
-    def _borrowed(self, A: np.ndarray, axis: np.ndarray, fitted) -> list[float]:
-        """How much of each axis's mean wear rate rests on the fleet: its posterior variance
-        over the fleet's spread of mean wear rates, 0 (its own visits decide) .. 1 (the fleet
-        alone)."""
-        if not self.use_hours_:
-            return [1.0] * len(self.axes_)
-        out = []
-        for a in range(len(self.axes_)):
-            row = self._rate_rows(np.asarray(self.axis_knots_[a], float), a)[1].mean(axis=0)
-            spread = float(row @ fitted.prior @ row)
-            out.append(float(row @ fitted.covariances[a] @ row / spread) if spread > 0 else 1.0)
-        return out
-
-    def _axis_index(self, labels: np.ndarray) -> np.ndarray:
-        """Row -> index into ``axes_`` (-1 for an axis the model does not know)."""
-        lookup = {k: i for i, k in enumerate(self.axes_)}
-        return np.array([lookup.get(tuple(k), -1) for k in labels], int)
-
-    def _local(self, frame: pd.DataFrame, axis: np.ndarray, labels=None) -> pd.DataFrame:
-        """The inputs in each axis's own frame: position 0..1 between the axis's end targets,
-        operating hours since its wear clock restarted. An axis the model does not know is
-        mapped over its own targets in ``frame`` (grouped by ``labels``)."""
-        local = frame.copy()
-        if POSITION in local:
-            x = local[POSITION].to_numpy(float)
-            lo, hi = np.zeros(len(x)), np.ones(len(x))
-            for a in np.unique(axis):
-                rows = axis == a
-                if a >= 0:
-                    lo[rows], hi[rows] = self.axis_range_[a]
-                else:  # unknown axes: each over its own targets
-                    for key in {tuple(k) for k in labels[rows]}:
-                        own = rows & np.array([tuple(k) == key for k in labels])
-                        lo[own], hi[own] = x[own].min(), x[own].max()
-            local[POSITION] = np.clip((x - lo) / np.maximum(hi - lo, 1e-12), 0.0, 1.0)
-        if HOURS in local:
-            origin = np.array([self.hours_origin_[a] if a >= 0 else 0.0 for a in axis])
-            local[HOURS] = local[HOURS].to_numpy(float) - origin
-        local[_AXIS] = axis
-        return local
-
-    def _fleet_design(self, local: pd.DataFrame, choice) -> np.ndarray:
-        """The shared design (``_design``: maps on the common 0..1 basis and the condition
-        terms) followed by each axis's own per-target deviations of level and wear rate."""
-        return np.hstack([self._design(local, choice), self._deviation_design(local)])
-
-    def _deviation_design(self, local: pd.DataFrame) -> np.ndarray:
-        """Hat functions on each axis's own targets (padded to the fleet's most targets) for
-        the wear rate (for the level when there are no hours): where one screw wears in a
-        shape the common basis cannot follow. The level needs none: every visit measures it
-        again, the wear rate is what a forecast extrapolates. Zero for an axis the model does
-        not know."""
-        if not self.use_position_:
-            return np.zeros((len(local), 0))
-        width = max(len(k) for k in self.axis_knots_)
-        x, axis = local[POSITION].to_numpy(float), local[_AXIS].to_numpy(int)
-        hats = np.zeros((len(local), width))
-        for a in np.unique(axis[axis >= 0]):
-            rows = axis == a
-            knots = np.asarray(self.axis_knots_[a], float)
-            hats[rows, :len(knots)] = (target_basis(x[rows], knots) if len(knots) > 1
-                                       else np.ones((rows.sum(), 1)))
-        if not self.use_hours_:
-            return hats
-        return hats * local[HOURS].to_numpy(float)[:, None] / 1000.0
-
-    def _deviations(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame):
-        """The axes' own coefficients for ``models.pooling.pool``: which columns each axis
-        has and the starting variance (a twentieth of the backlash spread, per the hours
-        span for a rate)."""
-        from models.pooling import Deviations
-
-        if not self.use_position_:
-            return None
-        width = max(len(k) for k in self.axis_knots_)
-        used = np.array([[j < len(k) for j in range(width)] for k in self.axis_knots_])
-        start = (0.05 * max(float(np.std(y)), 1e-6)) ** 2
-        if self.use_hours_:
-            start /= max(float(np.ptp(local[HOURS])) / 1000.0, 1e-6) ** 2
-        return Deviations(np.zeros(width, int), used, np.array([start]))
-
-    def _pool(self, A: np.ndarray, y: np.ndarray, axis: np.ndarray, local: pd.DataFrame,
-              warm=None):
-        from models.pooling import FOLD_ITERATIONS, MAX_ITERATIONS, VisitBlocks, pool
-
-        visit = (local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(y)))
-        blocks = VisitBlocks.of(A, y, axis, visit, len(self.axes_))
-        deviations = self._deviations(A, y, local)
-        shared = A.shape[1] - (deviations.size if deviations else 0)
-        start = self._solve(A[:, :shared], y)[0]
-        column = np.sqrt(np.mean(A[:, :shared] ** 2, axis=0))
-        scale = np.maximum(np.abs(start), np.std(y) / np.maximum(column, 1e-12))
-        return pool(blocks, start, np.maximum(scale, 1e-9), deviations, warm,
-                    MAX_ITERATIONS if warm is None else FOLD_ITERATIONS)
-
-    def _choose_fleet(self, local: pd.DataFrame, y: np.ndarray, axis: np.ndarray):
-        """Control points by cross-validation over the fleet: fold k holds out every axis's
-        visits of rank k (mod the folds), so each fold forecasts visits the pooled fit has not
-        seen, as the model will."""
-        smallest = min(len(np.unique(local[POSITION].to_numpy(float)[axis == a]))
-                       for a in range(len(self.axes_)))
-        if self.n_control == "targets":
-            raise ValueError("n_control='targets' is for one machine axis; on a fleet every "
-                             "axis has per-target deviations from the common B-spline maps")
-        candidates = ([self.n_control] if self.n_control is not None
-                      else list(range(1, min(self.max_control, smallest) + 1)))
-        if len(candidates) == 1:
-            return candidates[0]
-        folds = _visit_folds(local, axis)
-        excess = {}
-        for choice in candidates:
-            scores = list(self.cv_scores_.values())
-            if len(scores) >= 3 and scores[-1] > scores[-2] > scores[-3]:
-                break  # worse twice in a row: more control points only fit noise
-            A = self._fleet_design(local, choice)
-            whole = self._pool(A, y, axis, local)
-            sse, expected = 0.0, 0.0
-            for k in np.unique(folds):
-                train, test = folds != k, folds == k
-                fitted = self._pool(A[train], y[train], axis[train], local[train], whole)
-                a = axis[test]
-                sse += float(np.sum((y[test] - np.sum(A[test] * fitted.means[a], axis=1)) ** 2))
-                expected += float(np.sum(
-                    np.einsum("ij,ijk,ik->i", A[test], fitted.covariances[a], A[test])
-                    + fitted.tau ** 2 + fitted.sigma[a] ** 2))
-            self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
-            excess[str(choice)] = max(0.0, (sse - expected) / len(y))
-        best = min(self.cv_scores_, key=self.cv_scores_.get)
-        # what the held-out visits missed by beyond what the posterior, the visit offset and
-        # the point noise explain: the shape the basis cannot follow; every forecast carries it
-        self.misfit_um_ = float(np.sqrt(excess[best]))
-        return int(best)
 
     def _confounded_with_wear(self, frame: pd.DataFrame, name: str) -> bool:
         """With fewer than four visits (told apart by their hours), a condition that varies
@@ -475,7 +291,7 @@ class WearMap(RegressorMixin, BaseEstimator):
         estimator's): parameter covariance (on a fleet, the axis's posterior; the fleet's
         distribution for an axis the model does not know), plus the training spread of every
         condition term whose input is missing (NaN)."""
-        labels, X = _split_groups(X)
+        labels, X = split_groups(X)
         frame = self._predict_frame(X)
         z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
         if not getattr(self, "pooled_", False):
@@ -515,19 +331,6 @@ class WearMap(RegressorMixin, BaseEstimator):
             var = var + missing * (coef[offset + j] * scale * self.condition_sd_[name]) ** 2
         return mean, var
 
-    def _unknown_shape_var(self, local: pd.DataFrame) -> np.ndarray:
-        hours = (local[HOURS].to_numpy(float) / 1000.0 if self.use_hours_
-                 else np.ones(len(local)))
-        return (hours * self.deviation_sd_) ** 2
-
-    def unknown_axes(self, X) -> list[tuple[str, str]]:
-        """The machine axes named in ``X`` that the model was not fitted on (a fleet model
-        forecasts them from the fleet's distribution of maps)."""
-        labels, _ = _split_groups(X)
-        if labels is None or not getattr(self, "pooled_", False):
-            return []
-        return sorted({tuple(k) for k in labels} - set(self.axes_))
-
     def wear_rate_map(self, positions_mm=None, level: float | None = None) -> pd.DataFrame:
         """The wear-rate map w(x) [um per 1000 h] with its interval, and b0(x) [um], at
         ``positions_mm`` (default 50 points over the training range); on a fleet one map per
@@ -538,31 +341,7 @@ class WearMap(RegressorMixin, BaseEstimator):
             x = (np.linspace(*self.range_mm_, 50) if positions_mm is None
                  else np.asarray(positions_mm, float))
             return self._rate_map(x, x, self.coef_, self.covariance_, level)
-        maps = []
-        z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
-        for a, ((machine, axis), (lo, hi)) in enumerate(zip(self.axes_, self.axis_range_)):
-            x = (np.linspace(lo, hi, 50) if positions_mm is None
-                 else np.asarray(positions_mm, float))
-            start, rate = self._rate_rows(np.clip((x - lo) / max(hi - lo, 1e-12), 0, 1), a)
-            coef, cov = self.axis_coef_[a], self.axis_covariance_[a]
-            w = rate @ coef
-            half = z * np.sqrt(np.einsum("ij,jk,ik->i", rate, cov, rate))
-            maps.append(pd.DataFrame({
-                "machine_id": machine, "axis": axis, "position_mm": x,
-                "wear_rate_um_per_1000h": w, "wear_rate_low": w - half,
-                "wear_rate_high": w + half, "b0_um": start @ coef}))
-        return pd.concat(maps, ignore_index=True)
-
-    def _rate_rows(self, position: np.ndarray, a: int):
-        """Design rows of axis ``a`` at ``position`` (0..1) giving its level at 0 h (condition
-        terms left out) and its wear rate per 1000 h."""
-        frame = pd.DataFrame({POSITION: position, HOURS: 0.0, _AXIS: a,
-                              **{c: self.condition_means_[c] for c in self.conditions_}})
-        at_zero = self._fleet_design(frame, self.n_control_)
-        at_1000 = self._fleet_design(frame.assign(**{HOURS: 1000.0}), self.n_control_)
-        k = self._design(frame, self.n_control_).shape[1]
-        at_zero[:, k - len(self.conditions_):k] = 0.0
-        return at_zero, at_1000 - self._fleet_design(frame, self.n_control_)
+        return self._fleet_rate_map(positions_mm, level)
 
     def _rate_map(self, x, positions_mm, coef, cov, level) -> pd.DataFrame:
         basis = (self._basis(x, self.n_control_) if self.use_position_
@@ -590,7 +369,7 @@ class WearMap(RegressorMixin, BaseEstimator):
         params = self.get_params()
         params["features"] = list(params["features"]) if params["features"] else None
         state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE},
-                 **{name: _jsonable(getattr(self, name)) for name in _FLEET_STATE
+                 **{name: _jsonable(getattr(self, name)) for name in FLEET_STATE
                     if hasattr(self, name)}}
         return write_state(directory / FILE_NAME, self, state)
 
@@ -609,7 +388,7 @@ class WearMap(RegressorMixin, BaseEstimator):
             model = checked_params(cls(**params), path)
             for name in _STATE:
                 setattr(model, name, _restore(name, state[name]))
-            for name in _FLEET_STATE:
+            for name in FLEET_STATE:
                 if name in state:
                     setattr(model, name, _restore(name, state[name]))
         except (TypeError, ValueError) as err:
@@ -630,13 +409,7 @@ _STATE = ("use_position_", "use_hours_", "conditions_", "condition_means_", "con
           "used_features_", "range_mm_", "knots_mm_", "hours_range_", "cv_scores_",
           "n_control_", "coef_", "sigma_um_", "dof_", "covariance_", "can_forecast_",
           "visit_sd_um_")
-# a model that knows its machine axes (fitted on inputs with machine_id and axis)
-_FLEET_STATE = ("pooled_", "axes_", "axis_range_", "hours_origin_", "axis_visits_",
-                "axis_sigma_um_", "misfit_um_",
-                "axis_knots_", "deviation_sd_",
-                "axis_coef_", "axis_covariance_", "prior_covariance_", "shrinkage_")
-_ARRAYS = ("knots_mm_", "coef_", "covariance_", "axis_coef_", "axis_covariance_",
-           "prior_covariance_")
+_ARRAYS = ("knots_mm_", "coef_", "covariance_", *FLEET_ARRAYS)
 
 
 def _jsonable(value):
@@ -665,25 +438,3 @@ def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
     values = np.asarray(values, float)
     return effects.contribution(effect, np.zeros(len(values)), 0, {name: values},
                                 **{amplitude: 1.0})
-
-
-def _split_groups(X):
-    """(labels, X without them): the (machine_id, axis) of every row when a DataFrame ``X``
-    has both columns (labels is then an object array of pairs), else (None, X)."""
-    if not isinstance(X, pd.DataFrame) or not set(GROUPS) <= set(map(str, X.columns)):
-        return None, X
-    labels = X[list(GROUPS)].astype(str).to_numpy(object)
-    return labels, X.drop(columns=list(GROUPS))
-
-
-def _visit_folds(local: pd.DataFrame, axis: np.ndarray, n_folds: int = 5) -> np.ndarray:
-    """Fold of every row: its visit's rank within its axis (by hours) modulo the folds; five
-    folds by row when the axes have fewer than three visits."""
-    hours = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(local))
-    rank = np.zeros(len(local), int)
-    for a in np.unique(axis):
-        rows = axis == a
-        rank[rows] = np.unique(hours[rows], return_inverse=True)[1]
-    if rank.max() < 2:
-        return np.arange(len(local)) % n_folds
-    return rank % min(n_folds, rank.max() + 1)

@@ -8,7 +8,10 @@ applies this once per store; every other function here calls it, so commands nev
 
 ``log_result(result)`` is the one adapter from a workflow's result to MLflow: it logs the result's
 ``tracking_record()`` (params, metrics, artifacts, tags, a model to register, nested runs) and
-gives the champion alias to the best model it registered.
+gives the champion alias to the best model it registered. Registry convention: one registered
+model, ``backlash-predictor``, whose versions carry tags (``data_sha256``, ``predictor``,
+``target_kind``, the machine axes, ``backtest_skill``); the ``champion`` alias moves only
+between versions with the same ``data_sha256`` (``promote_if_best``).
 
 Concurrency: the first use of a fresh store (schema creation and migration) happens under a
 file lock (in the temporary folder, keyed by the database's path, so no lock file is left
@@ -341,7 +344,8 @@ class RunRecord(TrackingRecord):
         Runs nested under this one (one per compared model, one per tuning trial).
     promote : bool
         Give the champion alias to the best registered model of this record and its children
-        (lowest ``test_rmse_um``) when it beats the champion on the same data (``data_sha256``).
+        (``standing``: highest backtest skill against persistence, else lowest
+        ``test_rmse_um``) when it beats the champion on the same data (``data_sha256``).
     status : str
         How the run ends: ``FINISHED``, or ``FAILED`` for a trial that failed.
     """
@@ -410,20 +414,23 @@ def log_into(data: dict) -> dict:
 
 
 def _promote_best(data: dict, logged: dict) -> bool:
-    """Champion alias for the best registered model among the record and its children."""
+    """Champion alias for the best registered model among the record and its children
+    (``standing``: forecasting skill first, then the held-out RMSE)."""
     import math
 
     candidates = []
-    if "version" in logged:
-        candidates.append((data["metrics"].get("test_rmse_um", math.inf), logged["version"]))
-    for child in data.get("children", []):
-        version = logged.get("children", {}).get(child["run_name"], {}).get("version")
+    records = [(data, logged.get("version"))] + [
+        (child, logged.get("children", {}).get(child["run_name"], {}).get("version"))
+        for child in data.get("children", [])]
+    for record, version in records:
         if version is not None:
-            candidates.append((child["metrics"].get("test_rmse_um", math.inf), version))
+            skill = (record.get("model") or {}).get("backtest", {}).get("skill")
+            rmse = record["metrics"].get("test_rmse_um", math.inf)
+            candidates.append((standing(skill, rmse), skill, rmse, version))
     if not candidates:
         return False
-    rmse, version = min(candidates, key=lambda c: float(c[0]))
-    return promote_if_best(version, str(data["params"]["data_sha256"]), float(rmse))
+    _, skill, rmse, version = max(candidates, key=lambda c: c[0])
+    return promote_if_best(version, str(data["params"]["data_sha256"]), float(rmse), skill)
 
 
 def log_child(experiment_id: str, parent_run_id: str, record) -> str:
@@ -453,14 +460,17 @@ REGISTERED_NAME = "backlash-predictor"
 CHAMPION = "champion"
 CHAMPION_LOCK = f"{REGISTERED_NAME}.champion-lock"
 MODEL_FIGURES = "figures"  # the folder of a model directory holding its figures
+BACKTEST_METRICS = ("skill", "rmse_um", "persistence_rmse_um")  # logged as backtest_*
 REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "scikit-learn",
                 "skops", "pandas", "numpy", "scipy"]
 
 
 def log_model(model: dict) -> str:
     """Log a trained model (``pipeline.model_tracking.model_record``) into the active run:
-    its estimator parameters, per-epoch history, the model directory and the model from code,
-    registered as ``backlash-predictor``; returns the registered version."""
+    its estimator parameters, per-epoch history, backtest scores (``backtest_skill``,
+    ``backtest_rmse_um``, ``backtest_persistence_rmse_um``), the model directory and the model
+    from code, registered as ``backlash-predictor`` with the record's version tags; returns the
+    registered version."""
     import shutil
 
     mlflow = mlflow_module()
@@ -469,6 +479,9 @@ def log_model(model: dict) -> str:
         for epoch, value in enumerate(values):
             if value is not None:
                 mlflow.log_metric(key(f"epoch_{name}"), value, step=epoch)
+    scores = model.get("backtest", {})
+    mlflow.log_metrics(metrics({f"backtest_{k}": scores[k] for k in BACKTEST_METRICS
+                                if scores.get(k) is not None}))
     with tempfile.TemporaryDirectory() as tmp:
         # a copy without figures/: they are logged apart, under their own artifact path
         model_dir = shutil.copytree(model["model_dir"], Path(tmp) / "model_dir",
@@ -478,23 +491,34 @@ def log_model(model: dict) -> str:
     return str(version)
 
 
+def signature(spec: dict):
+    """The MLflow ``ModelSignature`` of a record's ``signature`` (plain data): one column per
+    input (conditions a plan may omit optional) and one ``double`` column per output."""
+    from mlflow.models import ModelSignature
+    from mlflow.types.schema import ColSpec, Schema
+
+    inputs = Schema([ColSpec(c["type"], c["name"], required=c["required"])
+                     for c in spec["inputs"]])
+    return ModelSignature(inputs=inputs, outputs=Schema([ColSpec("double", name)
+                                                         for name in spec["outputs"]]))
+
+
 def _log_pyfunc(model: dict, model_dir: Path):
-    """The model from code, registered, with signature and input example.
+    """The model from code, registered, with signature, input example and version tags.
 
     MLflow would also check that the example serves by loading the model into this process;
     that imports the predictor's libraries into a logging process that needs none of them
     (seconds per training), and the test suite checks the served model instead."""
-    import numpy as np
     import pandas as pd
-    from mlflow.models import Model, infer_signature
+    from mlflow.models import Model
 
     example = pd.DataFrame(**model["example"])
     return Model.log(
         artifact_path=None, name="model", flavor=_PyfuncFlavor, flavor_name="pyfunc.ModelFromCode",
         python_model=str(Path(__file__).parents[1] / "models" / "pyfunc_model.py"),
-        artifacts={"model_dir": str(model_dir)},
-        signature=infer_signature(example, np.asarray(model["example_prediction"])),
+        artifacts={"model_dir": str(model_dir)}, signature=signature(model["signature"]),
         input_example=example, registered_model_name=REGISTERED_NAME,
+        tags=model.get("tags") or None,
         pip_requirements=REQUIREMENTS,  # explicit: inferring them costs seconds per model
         validate_serving_input=False)
 
@@ -510,18 +534,40 @@ class _PyfuncFlavor:
         return mlflow.pyfunc.save_model(**kwargs)
 
 
-def promote_if_best(version: str, data_hash: str, rmse_um: float) -> bool:
+def promote_if_best(version: str, data_hash: str, rmse_um: float,
+                    skill: float | None = None) -> bool:
     """Give ``version`` the champion alias when it beats the champion on the same data set
     (or there is none yet). A champion trained on other data is left alone.
+
+    Better means (``standing``): a forecasting skill against persistence (version tag
+    ``backtest_skill``) beats none; between two skills the higher wins; between two versions
+    without one the lower held-out RMSE (run metric ``test_rmse_um``). Ties keep the champion.
 
     Compare-and-set under a registry-wide lock, so two trainings finishing at once cannot
     both read the old champion and both claim the alias.
     """
     with exclusive(CHAMPION_LOCK):
-        return _promote(client(), version, data_hash, rmse_um)
+        return _promote(client(), version, data_hash, standing(skill, rmse_um))
 
 
-def _promote(store, version: str, data_hash: str, rmse_um: float) -> bool:
+def standing(skill: float | None, rmse_um: float) -> tuple:
+    """Sort key of a registered version for the champion (higher is better): has a skill,
+    the skill, minus the held-out RMSE."""
+    return (skill is not None, skill if skill is not None else 0.0, -float(rmse_um))
+
+
+def version_skill(tags: dict) -> float | None:
+    """The ``backtest_skill`` version tag as a number; None for ``n/a: ...`` or no tag."""
+    import math
+
+    try:
+        value = float(tags.get("backtest_skill", "n/a"))
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _promote(store, version: str, data_hash: str, candidate: tuple) -> bool:
     import math
 
     from mlflow.exceptions import MlflowException
@@ -532,9 +578,12 @@ def _promote(store, version: str, data_hash: str, rmse_um: float) -> bool:
         current = None
     if current is not None:
         found = store.get_run(current.run_id)
-        if found.data.params.get("data_sha256") != data_hash:
+        tags = current.tags or {}
+        if tags.get("data_sha256", found.data.params.get("data_sha256")) != data_hash:
             return False
-        if float(found.data.metrics.get("test_rmse_um", math.inf)) <= rmse_um:
+        held = standing(version_skill(tags),
+                        float(found.data.metrics.get("test_rmse_um", math.inf)))
+        if held >= candidate:
             return False
     store.set_registered_model_alias(REGISTERED_NAME, CHAMPION, version)
     return True

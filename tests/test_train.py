@@ -44,7 +44,11 @@ def test_train_saves_model_figures_and_registers_champion(readings_csv, tmp_path
     inputs = pd.read_csv(out / "training_inputs.csv").iloc[:4]
     from models.registry import load_model
 
-    assert served.predict(inputs) == pytest.approx(list(load_model(out).predict(inputs)))
+    # a frame of backlash_um (no interval for bspline), clipped at 0 like `predict`
+    answer = served.predict(inputs)
+    assert list(answer.columns) == ["backlash_um"]
+    assert list(answer["backlash_um"]) == pytest.approx(
+        [max(v, 0.0) for v in load_model(out).predict(inputs)])
 
     pred = tmp_path / "pred.csv"
     assert main(["predict", str(out), str(readings_csv), "--out", str(pred)]) == 0

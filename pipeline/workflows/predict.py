@@ -12,7 +12,6 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from sklearn.utils._param_validation import StrOptions
 
@@ -111,6 +110,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
     from features.readings.plan import is_plan, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
+    from models.serving import prediction_frame
 
     check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
                  "predict")
@@ -129,45 +129,27 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
         inputs = prediction_inputs(readings_of(data, format), trained.feature_names_)
         keys = list(KEYS)
         check_forecast(trained, inputs, str(data), plan=False)
-    X = trained.inputs(inputs, source if plan is not None else (
-        str(data) if isinstance(data, (str, os.PathLike)) else "data"))
-    unknown = getattr(trained.estimator, "unknown_axes", lambda X: [])(X)
+    if plan is None:
+        source = str(data) if isinstance(data, (str, os.PathLike)) else "data"
+    unknown = getattr(trained.estimator, "unknown_axes", lambda X: [])(
+        trained.inputs(inputs, source))
     if unknown:
         names = ", ".join(f"{m} {a}" for m, a in unknown[:4]) + (" ..." if len(unknown) > 4
                                                                   else "")
         note(f"{names}: not in the model's fleet; forecast from the fleet's distribution of "
              "wear maps (a wider interval)")
-    estimator = trained.estimator
-    if hasattr(estimator, "predict_interval"):
-        mean, low, high = estimator.predict_interval(X)
-        out = inputs[keys].assign(backlash_um=np.maximum(mean, 0.0),
-                                  backlash_low_um=np.maximum(low, 0.0),
-                                  backlash_high_um=np.maximum(high, 0.0))
-    else:
-        out = inputs[keys].assign(backlash_um=np.maximum(estimator.predict(X), 0.0))
+    predicted = prediction_frame(trained, inputs, source)
+    out = pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1)
     return PredictionResult(predictions=out, model=trained.name)
 
 
 def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
-    """Model inputs at the plan's points: the plan's columns; inputs the estimator does not use
-    take their training mean; a condition the estimator uses but the plan lacks is left missing
-    (NaN), which widens the interval of a wear map; an input only a measurement can give (the
-    linear test's deviations) is refused in one line."""
-    used = set(getattr(model.estimator, "used_features_", model.feature_names_))
-    optional = set(getattr(model.estimator, "conditions_", ()))
-    training = model.training_inputs_
-    inputs = plan.copy()
-    for name in model.feature_names_:
-        if name in plan:
-            continue
-        if name in used and name not in optional:
-            why = (" a plan cannot give it: measure the linear tests, or train a forecasting "
-                   "predictor (wear-map)" if name.startswith("deviation") else "")
-            raise InputError(f"model {model.name!r} needs input {name!r}, which the plan "
-                             f"lacks;{why or ' add the column'}", file=source, column=name)
-        fill = (float(training[name].mean()) if name not in used and training is not None
-                and name in training else np.nan)
-        inputs[name] = fill
+    """Model inputs at the plan's points (``models.serving.filled_inputs``: what the plan
+    lacks and the estimator does not use takes its training mean, a missing condition is NaN,
+    a missing deviation is one error line), checked for how far it forecasts."""
+    from models.serving import filled_inputs
+
+    inputs = filled_inputs(model, plan, source)
     check_forecast(model, inputs, source, plan=True)
     return inputs
 

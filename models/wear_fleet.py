@@ -1,0 +1,280 @@
+"""The wear map on a fleet: one level and wear-rate map per machine axis, pooled.
+
+Trained on inputs whose ``machine_id`` and ``axis`` columns name more than one machine axis,
+the wear map (``models.wear_map``) fits every axis its own maps and condition terms:
+
+- over its own travel: the position mapped to 0..1 between the axis's end targets, so axes of
+  different lengths share one B-spline basis;
+- on its own wear clock: hours count from the axis's ``hours_origin`` (an adjustment that left
+  the hour counter running on);
+- with its own per-target wear-rate deviations (hat functions on its own targets), since a
+  screw wears where that machine works, in a shape no common basis follows;
+- sharing strength by partial pooling (``models.pooling``): an axis with few visits borrows
+  from the fleet's distribution of maps, an axis with many visits follows its own data.
+
+The number of control points is chosen by cross-validation over the fleet (fold k holds out
+every axis's visits of rank k), and what the held-out visits missed beyond the model's own
+variance (``misfit_um_``: the shape no basis follows) widens every interval. A plan for an
+axis the model does not know is forecast from the fleet's distribution, with its spread of
+maps and of per-target deviations in the interval.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.special import stdtrit
+
+from models.wear_basis import AXIS_INDEX, HOURS, POSITION, split_groups, target_basis
+
+# the fitted state of a model that knows its machine axes (saved with the rest)
+FLEET_STATE = ("pooled_", "axes_", "axis_range_", "hours_origin_", "axis_visits_",
+               "axis_sigma_um_", "misfit_um_", "axis_knots_", "deviation_sd_", "axis_coef_",
+               "axis_covariance_", "prior_covariance_", "shrinkage_")
+FLEET_ARRAYS = ("axis_coef_", "axis_covariance_", "prior_covariance_")
+
+
+class FleetWearMap:
+    """The fleet half of ``models.wear_map.WearMap`` (module docstring): its fit, local
+    frames, design, pooled fit, cross-validation and the fleet's wear-rate maps. Uses the
+    single-axis design (``_design``, ``_solve``, ``_learn_inputs``) of the estimator."""
+
+    def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
+                   hours_origin: dict):
+        axis = self._axis_index(labels)
+        x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
+        self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
+                            for a in range(len(self.axes_))]
+        self.hours_origin_ = [float(hours_origin.get(k, 0.0)) for k in self.axes_]
+        self.axis_visits_ = [len(np.unique(frame[HOURS].to_numpy(float)[axis == a]))
+                             if HOURS in frame else 1 for a in range(len(self.axes_))]
+        self.misfit_um_ = 0.0
+        local = self._local(frame, axis)
+        self.axis_knots_ = [np.unique(local[POSITION].to_numpy(float)[axis == a]).tolist()
+                            if POSITION in local else [0.0] for a in range(len(self.axes_))]
+        self._learn_inputs(local.drop(columns=AXIS_INDEX))
+        self.range_mm_ = (float(x.min()), float(x.max()))
+        self.cv_scores_ = {}
+        if self.use_position_:
+            self.n_control_, fitted = self._choose_fleet(local, y, axis)
+        else:
+            self.n_control_ = 1
+        A = self._fleet_design(local, self.n_control_)
+        if not self.use_position_:
+            fitted = self._pool(A, y, local, self._blocks(A, y, axis, local))
+        # spread of the axes' own per-target deviations [um per 1000 h, or um without hours]
+        self.deviation_sd_ = float(fitted.deviation_sd[0]) if self.use_position_ else 0.0
+        self.coef_ = fitted.mu
+        self.covariance_ = fitted.mu_covariance
+        self.prior_covariance_ = fitted.prior
+        self.axis_coef_ = fitted.means
+        self.axis_covariance_ = fitted.covariances
+        self.shrinkage_ = self._borrowed(A, axis, fitted)
+        self.axis_sigma_um_ = fitted.sigma.tolist()
+        self.sigma_um_ = float(np.sqrt(np.mean(fitted.sigma ** 2)))
+        self.visit_sd_um_ = fitted.tau
+        self.dof_ = max(len(y) - A.shape[1], 1)
+        self.can_forecast_ = bool(self.use_hours_)
+        return self
+
+    def _borrowed(self, A: np.ndarray, axis: np.ndarray, fitted) -> list[float]:
+        """How much of each axis's mean wear rate rests on the fleet: its posterior variance
+        over the fleet's spread of mean wear rates, 0 (its own visits decide) .. 1 (the fleet
+        alone)."""
+        if not self.use_hours_:
+            return [1.0] * len(self.axes_)
+        out = []
+        for a in range(len(self.axes_)):
+            row = self._rate_rows(np.asarray(self.axis_knots_[a], float), a)[1].mean(axis=0)
+            spread = float(row @ fitted.prior @ row)
+            out.append(float(row @ fitted.covariances[a] @ row / spread) if spread > 0 else 1.0)
+        return out
+
+    def _axis_index(self, labels: np.ndarray) -> np.ndarray:
+        """Row -> index into ``axes_`` (-1 for an axis the model does not know)."""
+        lookup = {k: i for i, k in enumerate(self.axes_)}
+        return np.array([lookup.get(tuple(k), -1) for k in labels], int)
+
+    def _local(self, frame: pd.DataFrame, axis: np.ndarray, labels=None) -> pd.DataFrame:
+        """The inputs in each axis's own frame: position 0..1 between the axis's end targets,
+        operating hours since its wear clock restarted. An axis the model does not know is
+        mapped over its own targets in ``frame`` (grouped by ``labels``)."""
+        local = frame.copy()
+        if POSITION in local:
+            x = local[POSITION].to_numpy(float)
+            lo, hi = np.zeros(len(x)), np.ones(len(x))
+            for a in np.unique(axis):
+                rows = axis == a
+                if a >= 0:
+                    lo[rows], hi[rows] = self.axis_range_[a]
+                else:  # unknown axes: each over its own targets
+                    for key in {tuple(k) for k in labels[rows]}:
+                        own = rows & np.array([tuple(k) == key for k in labels])
+                        lo[own], hi[own] = x[own].min(), x[own].max()
+            local[POSITION] = np.clip((x - lo) / np.maximum(hi - lo, 1e-12), 0.0, 1.0)
+        if HOURS in local:
+            origin = np.array([self.hours_origin_[a] if a >= 0 else 0.0 for a in axis])
+            local[HOURS] = local[HOURS].to_numpy(float) - origin
+        local[AXIS_INDEX] = axis
+        return local
+
+    def _fleet_design(self, local: pd.DataFrame, choice) -> np.ndarray:
+        """The shared design (``_design``: maps on the common 0..1 basis and the condition
+        terms) followed by each axis's own per-target wear-rate deviations."""
+        return np.hstack([self._design(local, choice), self._deviation_design(local)])
+
+    def _deviation_design(self, local: pd.DataFrame) -> np.ndarray:
+        """Hat functions on each axis's own targets (padded to the fleet's most targets) for
+        the wear rate (for the level when there are no hours): where one screw wears in a
+        shape the common basis cannot follow. The level needs none: every visit measures it
+        again, the wear rate is what a forecast extrapolates. Zero for an axis the model does
+        not know."""
+        if not self.use_position_:
+            return np.zeros((len(local), 0))
+        width = max(len(k) for k in self.axis_knots_)
+        x, axis = local[POSITION].to_numpy(float), local[AXIS_INDEX].to_numpy(int)
+        hats = np.zeros((len(local), width))
+        for a in np.unique(axis[axis >= 0]):
+            rows = axis == a
+            knots = np.asarray(self.axis_knots_[a], float)
+            hats[rows, :len(knots)] = (target_basis(x[rows], knots) if len(knots) > 1
+                                       else np.ones((rows.sum(), 1)))
+        if not self.use_hours_:
+            return hats
+        return hats * local[HOURS].to_numpy(float)[:, None] / 1000.0
+
+    def _deviations(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame):
+        """The axes' own coefficients for ``models.pooling.pool``: which columns each axis
+        has and the starting variance (a twentieth of the backlash spread, per the hours
+        span for a rate)."""
+        from models.pooling import Deviations
+
+        if not self.use_position_:
+            return None
+        width = max(len(k) for k in self.axis_knots_)
+        used = np.array([[j < len(k) for j in range(width)] for k in self.axis_knots_])
+        start = (0.05 * max(float(np.std(y)), 1e-6)) ** 2
+        if self.use_hours_:
+            start /= max(float(np.ptp(local[HOURS])) / 1000.0, 1e-6) ** 2
+        return Deviations(np.zeros(width, int), used, np.array([start]))
+
+    def _blocks(self, A: np.ndarray, y: np.ndarray, axis: np.ndarray, local: pd.DataFrame):
+        from models.pooling import VisitBlocks
+
+        visit = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(y))
+        return VisitBlocks.of(A, y, axis, visit, len(self.axes_))
+
+    def _pool(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame, blocks, warm=None):
+        """The pooled fit of the rows ``A``, ``y`` (``blocks`` their statistics); ``warm``: a
+        fit to start from (a cross-validation fold starts from the fit on all the data)."""
+        from models.pooling import FOLD_ITERATIONS, MAX_ITERATIONS, pool
+
+        deviations = self._deviations(A, y, local)
+        shared = A.shape[1] - (deviations.size if deviations else 0)
+        start = self._solve(A[:, :shared], y)[0]
+        column = np.sqrt(np.mean(A[:, :shared] ** 2, axis=0))
+        scale = np.maximum(np.abs(start), np.std(y) / np.maximum(column, 1e-12))
+        return pool(blocks, start, np.maximum(scale, 1e-9), deviations, warm,
+                    MAX_ITERATIONS if warm is None else FOLD_ITERATIONS)
+
+    def _choose_fleet(self, local: pd.DataFrame, y: np.ndarray, axis: np.ndarray):
+        """Control points by cross-validation over the fleet: fold k holds out every axis's
+        visits of rank k (mod the folds), so each fold forecasts visits the pooled fit has not
+        seen, as the model will. Returns the choice and its fit on all the rows."""
+        smallest = min(len(np.unique(local[POSITION].to_numpy(float)[axis == a]))
+                       for a in range(len(self.axes_)))
+        if self.n_control == "targets":
+            raise ValueError("n_control='targets' is for one machine axis; on a fleet every "
+                             "axis has per-target deviations from the common B-spline maps")
+        candidates = ([self.n_control] if self.n_control is not None
+                      else list(range(1, min(self.max_control, smallest) + 1)))
+        folds, by_visit = visit_folds(local, axis)
+        excess, fits = {}, {}
+        for choice in candidates:
+            scores = list(self.cv_scores_.values())
+            if len(scores) >= 3 and scores[-1] > scores[-2] > scores[-3]:
+                break  # worse twice in a row: more control points only fit noise
+            A = self._fleet_design(local, choice)
+            blocks = self._blocks(A, y, axis, local)
+            fits[choice] = whole = self._pool(A, y, local, blocks)
+            if len(candidates) == 1:
+                break
+            sse, expected = 0.0, 0.0
+            for k in np.unique(folds):
+                train, test = folds != k, folds == k
+                part = (blocks.subset(block_folds(blocks, folds.max() + 1) != k) if by_visit
+                        else self._blocks(A[train], y[train], axis[train], local[train]))
+                fitted = self._pool(A[train], y[train], local[train], part, whole)
+                a = axis[test]
+                sse += float(np.sum((y[test] - np.sum(A[test] * fitted.means[a], axis=1)) ** 2))
+                expected += float(np.sum(
+                    np.einsum("ij,ijk,ik->i", A[test], fitted.covariances[a], A[test])
+                    + fitted.tau ** 2 + fitted.sigma[a] ** 2))
+            self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
+            excess[choice] = max(0.0, (sse - expected) / len(y))
+        best = min(fits) if len(fits) == 1 else int(min(self.cv_scores_,
+                                                         key=self.cv_scores_.get))
+        # what the held-out visits missed by beyond what the posterior, the visit offset and
+        # the point noise explain: the shape the basis cannot follow; every forecast carries it
+        self.misfit_um_ = float(np.sqrt(excess.get(best, 0.0)))
+        return best, fits[best]
+
+    def _unknown_shape_var(self, local: pd.DataFrame) -> np.ndarray:
+        hours = (local[HOURS].to_numpy(float) / 1000.0 if self.use_hours_
+                 else np.ones(len(local)))
+        return (hours * self.deviation_sd_) ** 2
+
+    def unknown_axes(self, X) -> list[tuple[str, str]]:
+        """The machine axes named in ``X`` that the model was not fitted on (a fleet model
+        forecasts them from the fleet's distribution of maps)."""
+        labels, _ = split_groups(X)
+        if labels is None or not getattr(self, "pooled_", False):
+            return []
+        return sorted({tuple(k) for k in labels} - set(self.axes_))
+
+    def _rate_rows(self, position: np.ndarray, a: int):
+        """Design rows of axis ``a`` at ``position`` (0..1) giving its level at 0 h (condition
+        terms left out) and its wear rate per 1000 h."""
+        frame = pd.DataFrame({POSITION: position, HOURS: 0.0, AXIS_INDEX: a,
+                              **{c: self.condition_means_[c] for c in self.conditions_}})
+        at_zero = self._fleet_design(frame, self.n_control_)
+        at_1000 = self._fleet_design(frame.assign(**{HOURS: 1000.0}), self.n_control_)
+        k = self._design(frame, self.n_control_).shape[1]
+        at_zero[:, k - len(self.conditions_):k] = 0.0
+        return at_zero, at_1000 - self._fleet_design(frame, self.n_control_)
+
+    def _fleet_rate_map(self, positions_mm, level) -> pd.DataFrame:
+        """One wear-rate map per machine axis over its own travel (``wear_rate_map``)."""
+        maps = []
+        z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
+        for a, ((machine, axis), (lo, hi)) in enumerate(zip(self.axes_, self.axis_range_)):
+            x = (np.linspace(lo, hi, 50) if positions_mm is None
+                 else np.asarray(positions_mm, float))
+            start, rate = self._rate_rows(np.clip((x - lo) / max(hi - lo, 1e-12), 0, 1), a)
+            coef, cov = self.axis_coef_[a], self.axis_covariance_[a]
+            w = rate @ coef
+            half = z * np.sqrt(np.einsum("ij,jk,ik->i", rate, cov, rate))
+            maps.append(pd.DataFrame({
+                "machine_id": machine, "axis": axis, "position_mm": x,
+                "wear_rate_um_per_1000h": w, "wear_rate_low": w - half,
+                "wear_rate_high": w + half, "b0_um": start @ coef}))
+        return pd.concat(maps, ignore_index=True)
+
+
+def block_folds(blocks, n_folds: int) -> np.ndarray:
+    """Fold of every visit block (n_axes, V): its rank within its axis modulo the folds, as
+    ``visit_folds`` gives its rows."""
+    return np.broadcast_to(np.arange(blocks.size.shape[1]) % n_folds, blocks.size.shape)
+
+
+def visit_folds(local: pd.DataFrame, axis: np.ndarray, n_folds: int = 5):
+    """Fold of every row: its visit's rank within its axis (by hours) modulo the folds, and
+    True; five folds by row when the axes have fewer than three visits, and False."""
+    hours = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(local))
+    rank = np.zeros(len(local), int)
+    for a in np.unique(axis):
+        rows = axis == a
+        rank[rows] = np.unique(hours[rows], return_inverse=True)[1]
+    if rank.max() < 2:
+        return np.arange(len(local)) % n_folds, False
+    return rank % min(n_folds, rank.max() + 1), True
