@@ -57,12 +57,15 @@ def persistence(table: FeatureTable, train: np.ndarray, test: np.ndarray) -> np.
 def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None = None,
              random_state: int = 0, min_train_visits: int = 2,
              progress: Progress | None = None,
-             visits: pd.DataFrame | None = None) -> pd.DataFrame:
+             visits: pd.DataFrame | None = None,
+             params: dict | None = None) -> pd.DataFrame:
     """One row per predictor and origin: ``model, origin, forecast_visit, n_train, n_test,
     rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and ``coverage_pct`` /
     ``truth_coverage_pct`` where known. ``progress(done, total, what)`` hears of each origin.
     ``visits``: the per-visit backlash (``features.visits.visit_backlash``) whose downward
-    change points up to each origin also restart the wear clock."""
+    change points up to each origin also restart the wear clock. ``params``: predictor name ->
+    parameters every origin's fit takes (a trained model's choices, so the backtest scores
+    that model rather than choosing again)."""
     meta = table.meta
     rank = evaluation.visit_order(meta)
     y = table.y.to_numpy(float)
@@ -90,7 +93,8 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
             continue
         forecast_visit = str(meta["visit"].iloc[test[0]])
         for name in [PERSISTENCE, *names]:
-            predicted, low, high = _forecast(table, name, train, test, random_state)
+            predicted, low, high = _forecast(table, name, train, test, random_state,
+                                             (params or {}).get(name, {}))
             row = {"model": name, "origin": int(k), "forecast_visit": forecast_visit,
                    "n_train": len(train), "n_test": len(test),
                    **{f"{m}": v for m, v in evaluation.scores(y[test], predicted).items()
@@ -110,12 +114,12 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
     return pd.DataFrame(rows)
 
 
-def _forecast(table, name, train, test, random_state):
+def _forecast(table, name, train, test, random_state, params):
     if name == PERSISTENCE:
         return persistence(table, train, test), None, None
     from models.training import model_inputs
 
-    estimator = registry.make(name, random_state)
+    estimator = registry.make(name, random_state, **params)
     (X, extra), y = model_inputs(table, name), table.y
     estimator.fit(X.iloc[train], y.iloc[train], **extra)
     if hasattr(estimator, "predict_interval"):

@@ -283,6 +283,12 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
                 frame[name] = np.nan
         return frame
 
+    def chosen_params(self) -> dict:
+        """The parameters cross-validation chose (the control points), to refit the same model
+        on other rows (a backtest) without choosing again."""
+        check_is_fitted(self, "coef_")
+        return {"n_control": self.n_control_}
+
     def predict(self, X) -> np.ndarray:
         return self.predict_interval(X)[0]
 

@@ -114,8 +114,11 @@ def forecast_skill(fit, min_visits: int = MIN_BACKTEST_VISITS,
         return {"skill": None, "reason": f"{visits} visit(s) in the training data; the "
                                          f"backtest needs at least {min_visits}"}
     try:
+        # the trained model's own choices (a wear map's control points): no CV per origin
+        chosen = getattr(fit.estimator, "chosen_params", dict)()
         results = backtest.backtest(fit.table, [fit.name],
-                                    min_train_visits=max(2, visits - max_origins))
+                                    min_train_visits=max(2, visits - max_origins),
+                                    params={fit.name: chosen})
         summary = backtest.summary(results).set_index("model")
     except InputError as err:
         return {"skill": None, "reason": err.message}
