@@ -41,6 +41,7 @@ class FleetWearMap:
 
     def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
                    hours_origin: dict):
+        check_one_unit(self.axes_)
         axis = self._axis_index(labels)
         x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
         self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
@@ -259,6 +260,20 @@ class FleetWearMap:
                 "wear_rate_um_per_1000h": w, "wear_rate_low": w - half,
                 "wear_rate_high": w + half, "b0_um": start @ coef}))
         return pd.concat(maps, ignore_index=True)
+
+
+def check_one_unit(axes: list[tuple[str, str]]) -> None:
+    """A fleet model pools one unit: rotary axes (backlash in arcsec) and linear axes (um)
+    cannot share a distribution of wear maps; refused in one line naming both kinds."""
+    from features.readings.errors import InputError
+    from features.readings.schema import is_rotary
+
+    rotary = [f"{m} {a}" for m, a in axes if is_rotary(a)]
+    linear = [f"{m} {a}" for m, a in axes if not is_rotary(a)]
+    if rotary and linear:
+        raise InputError(f"the data mix rotary axes ({', '.join(rotary[:3])}: arcsec) and "
+                         f"linear axes ({', '.join(linear[:3])}: um); a fleet model pools one "
+                         "unit: train the rotary and the linear axes apart", parameter="data")
 
 
 def block_folds(blocks, n_folds: int) -> np.ndarray:
