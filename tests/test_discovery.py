@@ -66,17 +66,27 @@ def test_twin_axis_with_lead_profile_and_reversal_along_the_axis(scenarios):
 
 
 @pytest.mark.parametrize("name", ["ess", "psi"])
-def test_real_ecmc_tests_are_noise_dominated(name, ess_file, psi_file, tmp_path, capsys):
+def test_structured_real_ecmc_tests_are_never_called_noise(name, ess_file, psi_file, tmp_path,
+                                                          capsys):
+    """Both real files hold residual structure their own F-test finds significant (ESS:
+    position x direction, 80 % of the gap left): they get a name or an explicit 'structure'
+    verdict with the table, never 'noise-dominated'."""
     path = ess_file if name == "ess" else psi_file
     assert main(["discover", str(path), "--out", str(tmp_path / "d"), "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert result["named"] == [] and result["steps"] == []
-    assert result["unexplained"]["verdict"] == "noise-dominated"
-    assert "noise-dominated" in result["unexplained"]["reason"]
-    assert any(n.startswith("noise-dominated") for n in result["notes"])
-    if name == "ess":  # the two readings the ISO step flags are left out, and it says so
-        assert any("2 reading(s) flagged as outliers" in n for n in result["notes"])
-    assert "noise-dominated" in (tmp_path / "d" / "discovery.html").read_text()
+    assert result["unexplained"]["verdict"] == "structure"
+    assert result["unexplained"]["structure"][0]["p_value"] < 1e-3
+    assert not any("noise-dominated" in n for n in result["notes"])
+    if name == "ess":
+        # the two readings the ISO step flags no longer inflate the repeatability (14 um with
+        # them, about 2 um without), and the notes say so
+        assert any("2 reading(s) flagged as outliers" in n and "of the repeatability" in n
+                   for n in result["notes"])
+        assert 1.0 < result["repeatability_um"] < 3.0
+        assert result["named"] == ["lead_error_profile"]
+        assert result["rmse_after_um"] < 0.5 * result["rmse_before_um"]
+        assert result["unexplained"]["strongest"] == "position x direction"
+    assert "noise-dominated" not in (tmp_path / "d" / "discovery.html").read_text()
 
 
 def cycle_offset_readings(seed: int = 0) -> pd.DataFrame:

@@ -11,7 +11,13 @@ from features import iso230
 from features.readings.errors import InputError
 from models.discovery.candidates import LOST_MOTION_PROFILE, candidates
 from models.discovery.design import Design, lstsq_fit, rmse, stack
-from models.discovery.structure import NOISE_RATIO, STOP_RATIO, confounding_notes, unexplained
+from models.discovery.structure import (
+    NOISE_RATIO,
+    STOP_RATIO,
+    confounding_notes,
+    structured,
+    unexplained,
+)
 from models.discovery.terms import PROFILES, RECORDS, missing_inputs, repeatability_um
 from models.discovery.verdicts import BOOT_MIN_RUNS, bootstrap, choose, nested, parameters
 
@@ -79,12 +85,14 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
         Name of the readings in errors.
     """
     baseline = check_baseline(baseline, source)
-    result = Discovery(repeatability_um=repeatability_um(readings))
     flagged = iso230.outliers(readings).to_numpy()
+    # one wild reading inflates the repeatability by its square: the floor, the stopping rule
+    # and the noise verdict all use the readings the ISO step keeps
+    result = Discovery(repeatability_um=repeatability_um(readings.loc[~flagged]))
     if flagged.any():
         result.notes.append(
             f"{int(flagged.sum())} reading(s) flagged as outliers by the ISO 230-2 step left "
-            "out of the fit (they still count in the repeatability)")
+            "out of the fit and of the repeatability")
     result.used = ~flagged
     design = Design(readings.loc[~flagged].reset_index(drop=True))
     skipped = _skipped(design, baseline, source, result)
@@ -96,8 +104,11 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
     result.rmse_before_um = rmse(resid, design, X)
     rng = np.random.default_rng(random_state)
     barred = set()  # general forms a named specific effect stood in for
+    # a single run within twice its repeatability is noise, unless its own residual structure
+    # test says otherwise
     single_noise = (design.n_runs == 1
-                    and result.rmse_before_um <= NOISE_RATIO * result.repeatability_um)
+                    and result.rmse_before_um <= NOISE_RATIO * result.repeatability_um
+                    and not structured(design, resid))
     if design.n_runs == 1:
         result.notes.append("one run only: cross-validation leaves out one cycle at a time; "
                             "repeat the test (other feed, dwell or temperature) to separate "

@@ -105,6 +105,20 @@ def residual_structure(design: Design, resid: np.ndarray) -> list[dict]:
     return sorted(rows, key=lambda r: -r["adjusted_share"])
 
 
+def significant_structure(design: Design, resid: np.ndarray) -> list[dict]:
+    """The rows of ``residual_structure`` significant at ``STRUCTURE_P`` (Bonferroni over the
+    factors tested), strongest first."""
+    structure = residual_structure(design, resid)
+    level = STRUCTURE_P / max(len(structure), 1)
+    return [s for s in structure if s["p_value"] < level]
+
+
+def structured(design: Design, resid: np.ndarray) -> bool:
+    """Whether the residual holds structure its own F-test finds significant: a file that
+    does is never called noise-dominated."""
+    return bool(significant_structure(design, resid))
+
+
 def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -> dict | None:
     """The remaining gap when it stays above the repeatability: its size and the residual's
     strongest structure, or the reason it is noise (its reason is added to ``result.notes``)."""
