@@ -95,3 +95,7 @@ def test_unknown_controller_names_the_parameter_and_the_records():
     with pytest.raises(InputError, match="unknown controller 'okuma'") as err:
         model.load("okuma", {})
     assert err.value.parameter == "controller"
+
+
+def test_the_names_users_type_for_their_controllers():
+    assert resolve("840D,828d,TNC640,0i,tnc7,840dsl") == ["siemens", "heidenhain", "fanuc"]
