@@ -148,13 +148,18 @@ def with_inputs(points: pd.DataFrame, readings: pd.DataFrame) -> pd.DataFrame:
     """Points joined with their inputs (``point_inputs``), each point's conditions from the
     tests its ``target_kind`` uses (``CONDITION_METHODS``)."""
     keys = list(POINT_KEYS)
-    parts = [group.merge(point_inputs(readings, CONDITION_METHODS[kind]), on=keys, how="left",
+
+    def inputs(methods):  # the point's own columns (its date) win over the inputs'
+        found = point_inputs(readings, methods)
+        return found.drop(columns=[c for c in found if c in points and c not in keys])
+
+    parts = [group.merge(inputs(CONDITION_METHODS[kind]), on=keys, how="left",
                          validate="many_to_one")
              for kind, group in points.groupby("target_kind", sort=True)]
     if len(parts) == 1:
         return parts[0]
     if not parts:
-        return points.merge(point_inputs(readings), on=keys, how="left", validate="many_to_one")
+        return points.merge(inputs(None), on=keys, how="left", validate="many_to_one")
     return pd.concat(parts, ignore_index=True)
 
 

@@ -128,3 +128,17 @@ def test_library_errors_and_notes_name_python_parameters_not_options():
         text = path.read_text(encoding="utf-8")
         assert "print(" not in text, path
         assert "sys.stderr" not in text, path
+
+
+def test_feature_table_meta_keeps_each_points_date():
+    """The points' dates survive the join with their inputs (both carry one), so a forward
+    split orders visits by date."""
+    import backlash as bl
+    from features.table import feature_table
+
+    readings = bl.read("experiments/data/twin/readings.csv")
+    table = feature_table(readings)
+    assert table.meta["started_at"].notna().all()
+    first = readings.groupby("visit")["started_at"].min()
+    assert (table.meta.groupby("visit")["started_at"].min() >= first.loc[
+        table.meta["visit"].unique()].to_numpy()).all()
