@@ -19,15 +19,17 @@ from features.readings.errors import BacklashWarning, InputError
 # ``import backlash`` stays light).
 _WHERE = {
     "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
+    "ingest": "ingest",
     "iso": "iso", "simulate": "simulate",
     "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
     "backtest": "compare", "tune": "tune",
     "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
     "hidden_effects": "hidden_effects", "compensate": "compensate", "uncertainty": "uncertainty",
+    "fleet": "fleet",
 }
 __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
     "BacklashWarning", "InputError", "backtest", "compare", "compensate", "convert", "discover",
-    "drift", "hidden_effects", "iso", "load_model", "predict", "rank", "read", "replicate",
+    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "predict", "rank", "read", "replicate",
     "simulate", "train", "tune", "uncertainty", "validate", "write",
 ]
 

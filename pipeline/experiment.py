@@ -44,6 +44,7 @@ from pathlib import Path
 from features.readings.config import read_config
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result
+from pipeline.store import is_url
 
 SQLITE = "sqlite:///"
 ALERT_EXIT = 3  # an alert (drift monitoring) is a result, not a failure
@@ -263,6 +264,8 @@ def _place(value, role: str, step: Step, values: dict, path: Path, label: str):
         return [_place(v, role, step, values, path, label) for v in value]
     if not isinstance(value, str):
         return value  # a table or a number: the workflow's constraints judge it
+    if role == "input" and is_url(value):
+        return value  # a store's URL (postgresql://...): no path to resolve
     out = Path(values["out"])
     base = Path(values["here"]) if role == "input" else out
     resolved = Path(os.path.realpath(base / Path(value).expanduser()))

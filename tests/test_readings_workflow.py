@@ -14,6 +14,7 @@ from features import iso230
 from features.readings import layouts, schema
 from features.readings.errors import BacklashWarning, InputError
 from pipeline.cli import build_parser, main
+from pipeline.commands.data import READINGS_HELP
 
 
 def small_table(cycles: int = 3) -> pd.DataFrame:
@@ -55,11 +56,11 @@ def test_every_format_option_and_readings_help_come_from_the_records():
             text = action.help or ""
             if not action.option_strings and any(r.help in text or "ecmc" in text
                                                   for r in layouts.RECORDS):
-                assert text == schema.DATA_HELP, (command, text)
+                assert text == READINGS_HELP, (command, text)
     assert with_format >= 10
     for command in ("convert", "iso"):
         file = next(a for a in parser.commands[command]._actions if a.dest == "file")
-        assert file.help == schema.DATA_HELP
+        assert file.help == READINGS_HELP
 
 
 def test_help_text_names_every_layout(capsys):

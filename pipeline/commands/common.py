@@ -1,9 +1,8 @@
-"""What the commands share: the data options of the model commands (train, compare, tune),
-output checks and the progress bar (the checked option types are in ``options``)."""
+"""What the commands share: comma lists, output checks and the progress bar (the checked option
+types are in ``options``, the DATA argument of every command that reads readings in ``data``)."""
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import shutil
 import sys
@@ -11,35 +10,8 @@ from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import InputError
-from features.readings.schema import DATA_HELP
 
 FORMATS = schema.FORMATS  # the input layouts every --format option offers
-
-
-def add_data_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help=DATA_HELP)
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout (default: detect)")
-    parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
-                        help="backlash definition: pendulum minus linear (paper), ISO reversal "
-                             "value (iso) or chosen from the measuring-system evidence (auto)")
-    parser.add_argument("--features", help="comma-separated feature-table columns (default: the "
-                                           "paper's inputs the data supply, plus dwell_s and "
-                                           "operating_hours)")
-    parser.add_argument("--split", default="random", choices=("random", "forward"),
-                        help="hold-out: random 15 %% (paper) or the later visits (forward)")
-    parser.add_argument("--truth", metavar="FILE",
-                        help="twin truth table (backlash simulate): also score against the "
-                             "true backlash")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-
-
-def data_params(args) -> dict:
-    """The keyword parameters of ``add_data_arguments`` for a model workflow (train, compare,
-    backtest, tune), the comma lists parsed."""
-    return {"format": args.format, "target": args.target,
-            "features": parse_features(args.features), "truth": args.truth,
-            "seed": args.seed}
 
 
 def parse_list(text: str | None, parameter: str) -> list[str] | None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import add_data_arguments
+from pipeline.commands.data import add_data_arguments
 
 HELP = "Train every predictor (network, physics baselines, comparators) on one split; compare."
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
@@ -31,13 +31,14 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.fileio import dumps
     from pipeline import tracking
-    from pipeline.commands.common import data_params, parse_list, progress_bar
+    from pipeline.commands.common import parse_list, progress_bar
+    from pipeline.commands.data import data_params, readings_arg
     from pipeline.workflows.compare import compare
 
     tracking.check_uri()
     models = parse_list(args.models, "models")  # same list syntax as --features
     with progress_bar("origins" if args.split == "backtest" else "models") as progress:
-        result = compare(args.data, models=models, split=args.split, progress=progress,
+        result = compare(readings_arg(args), models=models, split=args.split, progress=progress,
                          **data_params(args))
     backtest = args.split == "backtest"
     out = args.out or tempfile.mkdtemp(prefix=f"backlash-{'backtest' if backtest else 'compare'}-")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.compensation import CONTROLLERS
 from pipeline.workflows.compensate import WORKFLOW
 
@@ -22,16 +22,14 @@ def controller_help() -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("source", metavar="DATA|MODEL_DIR",
-                        help="readings file (ISO tests) or a model directory (backlash train)")
+    add_readings_argument(parser, "source", metavar="DATA|MODEL_DIR", skip=("axis",),
+                          help="model directory (backlash train) or readings file (ISO tests)")
     parser.add_argument("--controller", required=True, help=controller_help())
     parser.add_argument("--out", required=True, help="output folder")
-    parser.add_argument("--format", default="auto",
-                        choices=FORMATS,
-                        help="input layout of DATA (default: detect)")
     parser.add_argument("--conditions", metavar="NAME=VALUE,...",
                         help="conditions for a predictor, e.g. feed_mm_min=500,machine_temp_c=21")
-    parser.add_argument("--axis", default="X", help="axis name for a predictor (default X)")
+    parser.add_argument("--axis", help="axis name: a predictor's axis (default X), or only this "
+                                       "axis's tests of DATA")
     parser.add_argument("--spacing", type=float, metavar="MM",
                         help="table spacing of equidistant formats (default: a quarter of the "
                              "smallest target interval, rounded down to 1/2/2.5/5 x 10^k)")
@@ -50,10 +48,11 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.common import progress_bar
 
+    source = _source(args)
     with progress_bar("compensate") as progress:
         result = WORKFLOW.function(
-            args.source, controller=args.controller, format=args.format,
-            conditions=args.conditions, axis=args.axis, spacing=args.spacing,
+            source, controller=args.controller, format=args.format,
+            conditions=args.conditions, axis=args.axis or "X", spacing=args.spacing,
             reference_mm=args.reference_mm, fanuc_unit_um=args.fanuc_unit_um,
             verify=args.verify, progress=progress)
     result.write(args.out)
@@ -61,6 +60,23 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(dumps(result.to_json()))
     return 0 if result.passed else 3
+
+
+def _source(args):
+    """A model directory as given (only --axis applies to it), else the selected readings."""
+    import os
+
+    from features.readings.errors import InputError
+    from pipeline.commands.data import readings_arg, selected
+    from pipeline.store import is_store
+
+    if not os.path.isdir(args.source) or is_store(args.source):
+        return readings_arg(args, "source")
+    given = selected(args, skip=("axis",))
+    if given:
+        raise InputError(f"--{next(iter(given))} selects tests of readings; {args.source} is a "
+                         "model directory")
+    return args.source
 
 
 def _print_summary(result) -> None:

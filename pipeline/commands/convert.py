@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from features.readings.schema import DATA_HELP, FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.convert import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -12,9 +12,7 @@ OUTPUTS = {"out": "file"}  # output paths by argparse dest: checked before any w
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help=DATA_HELP)
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout (default: detect)")
+    add_readings_argument(parser, "file")
     parser.add_argument("--out", required=True, help="output file, .csv or .parquet")
 
 
@@ -23,13 +21,14 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.errors import InputError
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.convert import convert
 
     # realpath, not Path.resolve: a symbolic-link loop is the reader's one-line error
     if os.path.realpath(args.out) == os.path.realpath(args.file):
         raise InputError("--out is the input file; expected a new file name (the original "
                          "is kept)", file=args.out)
-    result = convert(args.file, args.out, args.format)
+    result = convert(readings_arg(args, "file"), args.out, args.format)
     print(f"{len(result.readings)} readings in {result.tests} tests -> {args.out}",
           file=sys.stderr)
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.discover import DEFAULT_BASELINE, WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -13,25 +13,24 @@ OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="readings file (columns of docs/data-contract.md; "
-                                     "measured_at for time effects)")
+    add_readings_argument(parser, help="readings file (columns of docs/data-contract.md; "
+                                       "measured_at for time effects)")
     parser.add_argument("--baseline", default=DEFAULT_BASELINE,
                         help="comma-separated effects of the simulation model "
                              f"(default {DEFAULT_BASELINE})")
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout (default: detect)")
 
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline import tracking
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.discover import discover
 
     tracking.check_uri()
-    result = discover(args.data, format=args.format, baseline=args.baseline, seed=args.seed)
+    result = discover(readings_arg(args), format=args.format, baseline=args.baseline, seed=args.seed)
     result.write(args.out)
     tracking.log_result(result)
     for step in result.steps:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.drift import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -13,7 +13,8 @@ ALERT_EXIT = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="readings file with several visits (visit, started_at)")
+    add_readings_argument(parser, help="readings file with several visits (visit, "
+                                       "started_at)")
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--threshold-um", type=float, metavar="X",
                         help="backlash limit [um]: forecast the date it is crossed")
@@ -28,9 +29,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a change point must move the level by this many standard "
                              "errors (default 3)")
     parser.add_argument("--json", action="store_true", help="print the series as JSON")
-    parser.add_argument("--format", default="auto",
-                        choices=FORMATS,
-                        help="input layout (default: detect)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,10 +36,11 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.fileio import dumps
     from pipeline import tracking
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.drift import drift
 
     tracking.check_uri()
-    result = drift(args.data, format=args.format, threshold_um=args.threshold_um,
+    result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
                    model=args.model, warn_months=args.warn_months, alpha=args.alpha,
                    min_jump_sigma=args.min_jump_sigma)
     result.write(args.out)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from features.readings.schema import DATA_HELP, FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.iso import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -13,9 +13,7 @@ FLAGS = {"path": "--plot"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help=DATA_HELP)
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout (default: detect)")
+    add_readings_argument(parser, "file")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object per test on stdout")
     parser.add_argument("--plot", metavar="OUT.png", help="write the ISO chart (one panel per test)")
@@ -31,11 +29,12 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.errors import InputError
     from features.readings.fileio import dumps
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.iso import iso
 
     if args.plot and not args.plot.lower().endswith(".png"):  # refused before any reading
         raise InputError("expected a .png file name", file=args.plot, parameter="path")
-    result = iso(args.file, args.format, args.drop_outliers, uncertainty=args.uncertainty)
+    result = iso(readings_arg(args, "file"), args.format, args.drop_outliers, uncertainty=args.uncertainty)
     if args.plot:
         result.plot(args.plot)
     print(result.table(), file=sys.stderr)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import FORMATS
+from pipeline.commands.data import add_readings_argument
 
 HELP = ("Predict backlash with a trained model directory from new tests or from a plan table "
         "(targets and conditions); write a CSV.")
@@ -15,22 +15,21 @@ OUTPUTS = {"out": "file"}  # output paths by argparse dest: checked before any w
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="DIR", help="model directory written by backlash train")
-    parser.add_argument("data", help="readings file (linear tests suffice) or a plan table "
-                                     "(target and conditions, no deviations)")
+    add_readings_argument(parser, help="readings file (linear tests suffice) or a plan table "
+                                       "(target and conditions, no deviations)")
     parser.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout (default: detect)")
     parser.add_argument("--json", action="store_true", help="print the predictions as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.errors import InputError
     from features.readings.fileio import dumps
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.predict import predict
 
     if not str(args.out).lower().endswith(".csv"):  # before any work
         raise InputError("expected a .csv file name", file=args.out, parameter="out")
-    result = predict(args.model, args.data, format=args.format)
+    result = predict(args.model, readings_arg(args), format=args.format)
     result.write(args.out)
     out = result.predictions
     print(f"{len(out)} points, backlash {out['backlash_um'].min():.2f}-"

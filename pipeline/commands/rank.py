@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from features.readings.schema import DATA_HELP
-from pipeline.commands.common import FORMATS, parse_features
+from pipeline.commands.common import parse_features
+from pipeline.commands.data import add_readings_argument
 from pipeline.commands.options import zero_or_more
 from pipeline.workflows.rank import WORKFLOW
 
@@ -17,7 +17,7 @@ FLAGS = {"dropcolumn": "--no-dropcolumn"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help=DATA_HELP)
+    add_readings_argument(parser)
     parser.add_argument("--out", required=True, help="output folder for the report")
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory; its predictor gives the permutation "
@@ -43,20 +43,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-dropcolumn", action="store_true",
                         help="skip the drop-column importance of gradient boosting (faster)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--format", default="auto",
-                        choices=FORMATS,
-                        help="input layout (default: detect)")
 
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline import tracking
     from pipeline.commands.common import progress_bar
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.rank import rank
 
     tracking.check_uri()
     with progress_bar("rank") as progress:
-        result = rank(args.data, format=args.format, model=args.model, bins=args.bins,
+        result = rank(readings_arg(args), format=args.format, model=args.model, bins=args.bins,
                       features=parse_features(args.features), target=args.target, k=args.k,
                       rank_by=args.rank_by, boot=args.boot, dropcolumn=not args.no_dropcolumn,
                       seed=args.seed, progress=progress)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import FORMATS
+from pipeline.commands.data import add_readings_argument
 from pipeline.commands.options import zero_or_more
 from pipeline.workflows.replicate import WORKFLOW
 
@@ -14,11 +14,8 @@ OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", help="readings file with paired linear and pendulum tests")
+    add_readings_argument(parser, help="readings file with paired linear and pendulum tests")
     parser.add_argument("--out", required=True, help="output folder")
-    parser.add_argument("--format", default="auto",
-                        choices=FORMATS,
-                        help="input layout (default: detect)")
     parser.add_argument("--truth", metavar="FILE",
                         help="twin truth table: also the k-NN accuracy the true backlash "
                              "would reach in the measured classes (the ceiling set by noise)")
@@ -31,10 +28,11 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from pipeline.commands.common import progress_bar
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.replicate import replicate
 
     with progress_bar("replicate") as progress:
-        result = replicate(args.data, format=args.format, truth=args.truth, boot=args.boot,
+        result = replicate(readings_arg(args), format=args.format, truth=args.truth, boot=args.boot,
                            seed=args.seed, progress=progress)
     paths = result.write(args.out)
     print(result.markdown(), file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import add_data_arguments
+from pipeline.commands.data import add_data_arguments
 
 HELP = ("Train a backlash predictor on paired tests and save it (default: the recommended "
         "model).")
@@ -27,13 +27,13 @@ def run(args: argparse.Namespace) -> int:
 
     from pipeline import tracking
     from pipeline.background_run import BackgroundRun
-    from pipeline.commands.common import data_params
+    from pipeline.commands.data import data_params, readings_arg
 
     tracking.check_uri()
     with BackgroundRun("train", tracking.log_into) as mlflow_run:
         from pipeline.workflows.train import train
 
-        result = train(args.data, model=args.model, split=args.split, **data_params(args))
+        result = train(readings_arg(args), model=args.model, split=args.split, **data_params(args))
         mlflow_run.start(f"train {result.model}")  # the input is valid: the run may start
         print(f"{result.n_points} backlash points, target {result.target_kind}: "
               f"{result.target_reason}", file=sys.stderr)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.common import add_data_arguments
+from pipeline.commands.data import add_data_arguments
 
 HELP = ("Tune the network (hidden sizes, activation, trainer, regularisation) by "
         "cross-validation with Optuna.")
@@ -34,11 +34,12 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline import tracking
     from pipeline.commands.common import parse_features, progress_bar
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.tune import tune
 
     tracking.check_uri()
     with progress_bar("trials") as progress:
-        result = tune(args.data, trials=args.trials, storage=args.storage, study=args.study,
+        result = tune(readings_arg(args), trials=args.trials, storage=args.storage, study=args.study,
                       workers=args.workers, folds=args.folds, heartbeat_s=args.heartbeat_s,
                       format=args.format, target=args.target,
                       features=parse_features(args.features), seed=args.seed, track=True,

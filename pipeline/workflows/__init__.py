@@ -88,18 +88,55 @@ def each_once(names: list, parameter: str) -> list:
     return names
 
 
-def readings_of(data, format: str = "auto", parameter: str = "data"):
-    """The validated readings frame a workflow works on: ``data`` is a readings file path
-    (read in ``format``) or a frame as ``read`` returns it (checked, not re-read)."""
+def readings_of(data, format: str = "auto", parameter: str = "data", selection=None):
+    """The validated readings frame a workflow works on.
+
+    Parameters
+    ----------
+    data : str, path-like or DataFrame
+        A readings file (read in ``format``), a fleet store (a store folder or a
+        ``postgresql://`` URL: ``pipeline.store``) or a frame as ``read`` returns it (checked,
+        not re-read).
+    format : str
+        Layout of a readings file (``"auto"``: detect); a store takes only ``"auto"``.
+    parameter : str
+        The caller's parameter that passed ``data`` (named in errors).
+    selection : features.readings.selection.Selection, optional
+        Keep only these tests (a store reads only what it may keep).
+    """
+    import os
+
+    from features.readings.selection import Selection
+
+    selection = selection or Selection()
+    if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import is_store, open_store
+
+        if is_store(data) or os.path.isdir(data):
+            if format != "auto":
+                raise InputError(f"is {format!r}, but a fleet store holds validated readings; "
+                                 "expected 'auto'", parameter="format")
+            return open_store(data).read(selection)
+        from features.readings.io import read_readings
+
+        frame = read_readings(data, format)
+    else:
+        from features.readings.validation import check_readings
+
+        frame = check_readings(data, parameter)
+    return selection.apply(frame, frame.attrs.get("source", parameter))
+
+
+def source_of(data, readings) -> str:
+    """The name a result gives its data: the path or store as given (a store URL without its
+    password), or the frame's ``attrs["source"]``."""
     import os
 
     if isinstance(data, (str, os.PathLike)):
-        from features.readings.io import read_readings
+        from pipeline.store import redact
 
-        return read_readings(data, format)
-    from features.readings.validation import check_readings
-
-    return check_readings(data, parameter)
+        return redact(data)
+    return readings.attrs.get("source", "readings")
 
 
 # --------------------------------------------------------------------------- the registry
@@ -107,8 +144,9 @@ import importlib
 from dataclasses import dataclass
 
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
-NAMES = ("convert", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
-         "replicate", "drift", "discover", "hidden-effects", "compensate", "uncertainty")
+NAMES = ("convert", "ingest", "iso", "simulate", "train", "predict", "compare", "tune", "rank",
+         "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
+         "uncertainty")
 
 
 @dataclass(frozen=True)

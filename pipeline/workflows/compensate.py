@@ -140,8 +140,8 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     Parameters
     ----------
     data : path, DataFrame or TrainedModel
-        A readings file or frame (ISO tests: per machine axis, the latest visit's linear
-        tests), or a model directory written by ``train`` or a loaded model (its backlash at
+        A readings file, fleet store or frame (ISO tests: per machine axis, the latest
+        visit's linear tests), or a model directory written by ``train`` or a loaded model (its backlash at
         ``conditions`` over its training target range, no position error).
     controller : str or list of str, default "csv"
         Names or aliases of ``pipeline.compensation.CONTROLLERS`` (a list or comma-separated),
@@ -201,9 +201,10 @@ def _profiles(data, format, conditions, axis, spacing, verify) -> list:
     import pandas as pd
 
     from pipeline.compensation.profile import measured_profiles, predicted_profile
+    from pipeline.store import is_store
 
     is_path = isinstance(data, (str, os.PathLike))
-    if (is_path and Path(data).is_dir()) or not (is_path or isinstance(data, pd.DataFrame)):
+    if (is_path and Path(data).is_dir() and not is_store(data)) or not (is_path or isinstance(data, pd.DataFrame)):
         if verify:
             raise InputError(f"needs twin readings, not a model{' directory' if is_path else ''}",
                              parameter="verify", file=data if is_path else None)

@@ -3,6 +3,7 @@ canonical table, or all three at once (``convert``).
 
 >>> import backlash as bl
 >>> readings = bl.read("ess_mcu1025_ISO230.dat")          # doctest: +SKIP
+>>> fleet = bl.read("fleet/", machine="M01", axis="X")    # doctest: +SKIP
 >>> bl.write(readings, "ess.parquet")                     # doctest: +SKIP
 >>> bl.convert("table2.csv", "table2.parquet").tests      # doctest: +SKIP
 """
@@ -37,32 +38,45 @@ def _parameters() -> dict:
 PARAMETERS = Constraints(_parameters)
 
 
-def read(path, format: str = "auto"):
-    """Read a readings file in any accepted layout into the validated readings frame.
+def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None):
+    """Read a readings file in any accepted layout, or a fleet store, into the validated
+    readings frame; optionally only some tests.
 
     Parameters
     ----------
     path : str or path-like
-        The readings file.
+        A readings file, a store folder or a ``postgresql://`` store URL (``docs/store.md``).
     format : str
         ``"auto"`` (recognise the layout from the file) or a layout name of
-        ``features.readings.layouts.RECORDS`` (``schema.FORMATS``).
+        ``features.readings.layouts.RECORDS`` (``schema.FORMATS``); a store takes ``"auto"``.
+    machine : str or list of str, optional
+        Only the tests of these machines (a str is one machine id).
+    axis : str or list of str, optional
+        Only the tests of these axes (X, Y, Z, A, B, C).
+    since, until : str, date or datetime, optional
+        Only tests whose ``started_at`` lies on or after ``since`` and on or before ``until``
+        (ISO 8601; a date alone includes that whole day; UTC unless the time has an offset).
+        Tests without ``started_at`` are left out when either is given (a note says how many).
 
     Returns
     -------
     DataFrame
         One row per reading, the columns of ``docs/data-contract.md`` (deviations in um,
-        arcsec for rotary axes); ``attrs["source"]`` is the file.
+        arcsec for rotary axes); ``attrs["source"]`` is the file or the store (a URL without
+        its password), followed by the filters in parentheses. A store's tests come sorted by
+        machine, axis, visit and test_id.
 
     Raises
     ------
     InputError
-        The file cannot be read or breaks the readings contract: names file, row and column.
+        The file or store cannot be read, breaks the readings contract (naming file, row and
+        column), or no test matches the filters.
     """
-    check_params(_parameters(), {"path": path, "format": format}, "read")
-    from features.readings.io import read_readings
+    from features.readings.selection import selection
 
-    return read_readings(path, format)
+    check_params(_parameters(), {"path": path, "format": format}, "read")
+    chosen = selection(machine=machine, axis=axis, since=since, until=until)
+    return readings_of(path, format, "path", chosen)
 
 
 def validate(frame, source: str = "<memory>"):
@@ -176,6 +190,6 @@ def convert(data, out=None, format: str = "auto") -> ConvertResult:
 
 WORKFLOW = Workflow(
     name="convert", function=convert,
-    summary="Read a readings file (canonical, paper Table 2, ecmc or Renishaw .rtl), validate "
-            "it, write CSV/Parquet.",
+    summary="Read a readings file (canonical, paper Table 2, ecmc or Renishaw .rtl) or a fleet "
+            "store, validate it, write CSV/Parquet.",
     inputs=("data",))

@@ -8,7 +8,6 @@ and show the gap shrink (``models.discovery``).
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from numbers import Integral
 from pathlib import Path
@@ -16,7 +15,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 
@@ -144,8 +143,7 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
 
     names = search.check_baseline(baseline)  # before the data are read
     readings = readings_of(data, format)
-    source = (str(data) if isinstance(data, (str, os.PathLike))
-              else readings.attrs.get("source", "readings"))
+    source = source_of(data, readings)
     found = search.discover(readings, names, random_state=seed, source=source)
     for text in found.notes:
         note(text)

@@ -16,7 +16,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 
 def _parameters() -> dict:
@@ -158,8 +158,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
               for _, g in visits.groupby(list(SERIES_KEYS), sort=True) if len(g) >= 2]
     if predictor is not None:
         drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
-    source = (str(data) if isinstance(data, (str, os.PathLike))
-              else readings.attrs.get("source", "readings"))
+    source = source_of(data, readings)
     return DriftResult(series, source, readings, values, notes=notes)
 
 

@@ -19,7 +19,7 @@ from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
 from models.registry import TrainedModel
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows import Workflow, check_params, readings_of, source_of
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")
@@ -126,11 +126,11 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
         inputs = plan_inputs(table, trained, source)
         keys = list(table.columns)
     else:
-        inputs = prediction_inputs(readings_of(data, format), trained.feature_names_)
+        readings = readings_of(data, format)
+        source = source_of(data, readings)
+        inputs = prediction_inputs(readings, trained.feature_names_)
         keys = list(KEYS)
-        check_forecast(trained, inputs, str(data), plan=False)
-    if plan is None:
-        source = str(data) if isinstance(data, (str, os.PathLike)) else "data"
+        check_forecast(trained, inputs, source, plan=False)
     unknown = getattr(trained.estimator, "unknown_axes", lambda X: [])(
         trained.inputs(inputs, source))
     if unknown:

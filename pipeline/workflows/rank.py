@@ -17,7 +17,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 
 def _parameters() -> dict:
@@ -179,8 +179,7 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     if predictor is not None and names is None:
         names = list(predictor.feature_names_)
     readings = readings_of(data, format)
-    source = (str(data) if isinstance(data, (str, os.PathLike))
-              else readings.attrs.get("source", "readings"))
+    source = source_of(data, readings)
     table = feature_table(readings, target=target or getattr(predictor, "target_kind", "auto"),
                           features=names)
     notes = _notes(predictor, table)

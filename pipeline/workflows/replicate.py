@@ -16,7 +16,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import Progress
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 
 def _parameters() -> dict:
@@ -115,8 +115,7 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
         truth_um = true_backlash(table.meta, frame, table.target_kind)
     cases = replication.replicate(table.X, table.y, table.meta, seed, boot, truth_um,
                                   progress=progress)
-    source = (str(data) if isinstance(data, (str, os.PathLike))
-              else readings.attrs.get("source", "readings"))
+    source = source_of(data, readings)
     return ReplicationResult(cases, source)
 
 

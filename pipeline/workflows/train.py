@@ -21,7 +21,7 @@ from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, each_once, readings_of
+from pipeline.workflows import Workflow, check_params, each_once, readings_of, source_of
 
 MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
 TARGETS = ("auto", "paper", "iso")
@@ -65,8 +65,7 @@ def model_data(data, format: str = "auto", target: str = "auto", features=None,
     from models.evaluation import read_truth, target_noise_floor
 
     readings = readings_of(data, format)
-    source = str(data) if isinstance(data, (str, os.PathLike)) else readings.attrs.get(
-        "source", "data")
+    source = source_of(data, readings)
     table = feature_table(readings, target=target, features=check_feature_names(features))
     check_features(table.X, source)
     if truth is not None and not isinstance(truth, pd.DataFrame):

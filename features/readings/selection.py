@@ -1,0 +1,224 @@
+"""Which tests of a readings table to work on: one record per filter.
+
+A fleet store holds every test of every machine axis; a command usually wants some of them.
+The filters are records (``FILTERS``): the CLI declares one option per record on every
+command that reads DATA (``--machine``, ``--axis``, ``--since``, ``--until``), the Python API
+takes them as keyword parameters of ``read``, and ``Selection.apply`` is the one definition of
+what they keep, for a store and a readings file alike. A store may select less first (by
+partition or in SQL); it then applies the same ``Selection`` to what it read.
+
+This module is light (no pandas at import): ``backlash --help`` reads ``FILTERS``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from dataclasses import dataclass
+
+from features.readings import schema
+from features.readings.errors import InputError, note
+
+_DATE = re.compile(r"^\d{4}-\d{2}-\d{2}$")
+
+
+@dataclass(frozen=True)
+class Filter:
+    """One filter of the tests to read.
+
+    Attributes
+    ----------
+    name : str
+        The Python keyword of ``read`` and the CLI option ``--name``.
+    column : str
+        The readings column it looks at (``docs/data-contract.md`` section 1).
+    metavar : str
+        The option's value in the help text.
+    help : str
+        The option's help text and the docs' table.
+    """
+
+    name: str
+    column: str
+    metavar: str
+    help: str
+
+
+FILTERS: tuple[Filter, ...] = (
+    Filter("machine", "machine_id", "ID[,ID...]", "only the tests of these machines"),
+    Filter("axis", "axis", "AXIS[,AXIS...]",
+           "only the tests of these axes (X, Y, Z, A, B, C)"),
+    Filter("since", "started_at", "DATE",
+           "only tests started on or after DATE (ISO 8601, e.g. 2026-01-31; UTC unless the "
+           "time carries an offset)"),
+    Filter("until", "started_at", "DATE",
+           "only tests started on or before DATE (a date without a time includes that day)"),
+)
+NAMES = tuple(f.name for f in FILTERS)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Checked filters: None where a filter was not given.
+
+    Attributes
+    ----------
+    machine, axis : tuple of str or None
+        Machines and axes to keep.
+    since, until : pandas.Timestamp or None
+        First and last start time [UTC] to keep, both inclusive, compared with a test's
+        ``started_at`` (its earliest, when readings of one test differ).
+    text : str
+        The filters as given, for messages and the name of the selected data.
+    """
+
+    machine: tuple[str, ...] | None = None
+    axis: tuple[str, ...] | None = None
+    since: object = None  # pandas.Timestamp
+    until: object = None  # pandas.Timestamp
+    text: str = ""
+
+    @property
+    def empty(self) -> bool:
+        """No filter given: every test is kept."""
+        return not self.text
+
+    def apply(self, readings, source: str):
+        """The readings of the tests this selection keeps.
+
+        Parameters
+        ----------
+        readings : DataFrame
+            A validated readings frame.
+        source : str
+            Its name, for notes and errors; the result's ``attrs["source"]`` is
+            ``"source (filters)"``.
+
+        Raises
+        ------
+        InputError
+            No test is left (naming ``source`` and what it holds).
+        """
+        if self.empty:
+            return readings
+        keep = self._labels(readings) & self._times(readings, source)
+        if not keep.any():
+            raise InputError(f"no test matches {self.text}; {_holdings(readings)}", file=source)
+        out = (readings.copy(deep=False) if keep.all()
+               else readings[keep].reset_index(drop=True))
+        out.attrs["source"] = f"{source} ({self.text})"
+        return out
+
+    def _labels(self, readings):
+        import numpy as np
+
+        keep = np.ones(len(readings), dtype=bool)
+        for name in ("machine", "axis"):
+            wanted = getattr(self, name)
+            if wanted is not None:
+                keep &= readings[_column(name)].isin(wanted).to_numpy()
+        return keep
+
+    def _times(self, readings, source):
+        import numpy as np
+
+        if self.since is None and self.until is None:
+            return np.ones(len(readings), dtype=bool)
+        if "started_at" not in readings:
+            raise InputError(f"no started_at column: {self.text} cannot select tests by date",
+                             file=source)
+        started = readings.groupby(list(schema.TEST_KEYS), sort=False)["started_at"] \
+            .transform("min")
+        undated = started.isna()
+        if undated.any():
+            tests = readings.loc[undated, list(schema.TEST_KEYS)].drop_duplicates()
+            note(f"{source}: {len(tests)} tests without started_at left out by {self.text}")
+        keep = ~undated
+        if self.since is not None:
+            keep &= started >= self.since
+        if self.until is not None:
+            keep &= started <= self.until
+        return keep.to_numpy()
+
+
+def selection(machine=None, axis=None, since=None, until=None) -> Selection:
+    """Check the filters of ``read`` and return them as a ``Selection``.
+
+    Parameters
+    ----------
+    machine : str or list of str, optional
+        Machine ids to keep (a str is one id).
+    axis : str or list of str, optional
+        Axis names to keep (X, Y, Z, A, B, C; any case).
+    since, until : str, datetime.date, datetime.datetime or pandas.Timestamp, optional
+        First and last day or instant of ``started_at`` to keep (inclusive; a date without a
+        time is the whole day; times without an offset are UTC).
+
+    Raises
+    ------
+    InputError
+        A filter that cannot select anything, naming its parameter.
+    """
+    machines = _labels_of(machine, "machine")
+    axes = _labels_of(axis, "axis")
+    if axes is not None:
+        axes = tuple(a.upper() for a in axes)
+        known = schema.LINEAR_AXES + schema.ROTARY_AXES
+        unknown = [a for a in axes if a not in known]
+        if unknown:
+            raise InputError(f"unknown axis {unknown[0]!r}; expected {', '.join(known)}",
+                             parameter="axis")
+    first, last = _instant(since, "since", end=False), _instant(until, "until", end=True)
+    if first is not None and last is not None and first > last:
+        raise InputError(f"since {since} is after until {until}; expected since <= until",
+                         parameter="since")
+    parts = [f"{n} {', '.join(v)}" for n, v in (("machine", machines), ("axis", axes)) if v]
+    parts += [f"{n} {v}" for n, v in (("since", since), ("until", until)) if v is not None]
+    return Selection(machines, axes, first, last, "; ".join(parts))
+
+
+def _column(name: str) -> str:
+    return next(f.column for f in FILTERS if f.name == name)
+
+
+def _labels_of(value, parameter: str) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    values = [value] if isinstance(value, str) else value
+    if not isinstance(values, (list, tuple)) or not all(isinstance(v, str) for v in values):
+        raise InputError(f"must be a str or a list of str; got {value!r}", parameter=parameter)
+    values = [v.strip() for v in values]
+    if not values or not all(values):
+        raise InputError("is empty; expected one or more names", parameter=parameter)
+    return tuple(dict.fromkeys(values))
+
+
+def _instant(value, parameter: str, end: bool):
+    """``value`` as a UTC Timestamp; a date alone is its first (``end``: last) microsecond."""
+    import pandas as pd
+
+    if value is None:
+        return None
+    whole_day = (isinstance(value, dt.date) and not isinstance(value, dt.datetime)) or (
+        isinstance(value, str) and _DATE.match(value.strip()))
+    try:
+        if not isinstance(value, (str, dt.date)):
+            raise TypeError
+        stamp = pd.Timestamp(value.strip() if isinstance(value, str) else value)
+    except (TypeError, ValueError):
+        raise InputError(f"{value!r} is not an ISO 8601 date or date-time (e.g. 2026-01-31)",
+                         parameter=parameter) from None
+    if stamp is pd.NaT:
+        raise InputError(f"{value!r} is not a date", parameter=parameter)
+    stamp = stamp.tz_localize("UTC") if stamp.tzinfo is None else stamp.tz_convert("UTC")
+    if whole_day and end:
+        stamp += pd.Timedelta(days=1) - pd.Timedelta(microseconds=1)
+    return stamp
+
+
+def _holdings(readings) -> str:
+    """What the data hold, for the "no test matches" error."""
+    machines = sorted(readings["machine_id"].unique())
+    axes = sorted(readings["axis"].unique())
+    shown = ", ".join(machines[:5]) + (" ..." if len(machines) > 5 else "")
+    return f"the data hold machines {shown} and axes {', '.join(axes)}"

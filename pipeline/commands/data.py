@@ -1,0 +1,82 @@
+"""The DATA of every command that reads readings: a readings file or a fleet store, ``--format``
+and the test filters (one option per record of ``features.readings.selection.FILTERS``),
+declared here once; and the data options of the model commands (train, compare, tune)."""
+
+from __future__ import annotations
+
+import argparse
+
+from features.readings.schema import DATA_HELP
+from features.readings.selection import FILTERS
+from pipeline.commands.common import FORMATS, parse_features, parse_list
+
+STORE_HELP = "; or a fleet store: a folder or a postgresql:// URL (backlash ingest)"
+# The help of every readings argument that lists the layouts: generated from their records.
+READINGS_HELP = DATA_HELP + STORE_HELP
+
+
+def add_readings_argument(parser: argparse.ArgumentParser, dest: str = "data",
+                          help: str | None = None, metavar: str | None = None,
+                          skip: tuple[str, ...] = ()) -> None:
+    """DATA (a readings file or a fleet store), ``--format`` and one option per test filter
+    (except ``skip``): every command that reads readings declares them here, so their choices
+    and help are the same everywhere."""
+    parser.add_argument(dest, metavar=metavar,
+                        help=READINGS_HELP if help is None else help + STORE_HELP)
+    parser.add_argument("--format", default="auto", choices=FORMATS,
+                        help="input layout of a file (default: detect)")
+    group = parser.add_argument_group("test selection (a store or a file)")
+    for f in FILTERS:
+        if f.name not in skip:
+            group.add_argument(f"--{f.name}", metavar=f.metavar, help=f.help)
+
+
+def readings_arg(args, dest: str = "data"):
+    """What a workflow gets as DATA: the path as given for a readings file without filters
+    (the workflow reads it), else the validated frame of the store or file with only the
+    selected tests (a store's URL without its password as ``attrs["source"]``)."""
+    import os
+
+    from pipeline.store import is_store
+
+    value = getattr(args, dest)
+    filters = selected(args)
+    if not filters and not (is_store(value) or os.path.isdir(value)):
+        return value
+    from pipeline.workflows.convert import read
+
+    return read(value, args.format, **filters)
+
+
+def selected(args, skip: tuple[str, ...] = ()) -> dict:
+    """The filters given on the command line (comma lists parsed), by Python parameter."""
+    given = {f.name: getattr(args, f.name, None) for f in FILTERS if f.name not in skip}
+    for name in ("machine", "axis"):
+        if given.get(name) is not None:
+            given[name] = parse_list(given[name], name)
+    return {name: value for name, value in given.items() if value is not None}
+
+
+def add_data_arguments(parser: argparse.ArgumentParser) -> None:
+    """DATA and the options of the model commands (train, compare, tune)."""
+    add_readings_argument(parser)
+    parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
+                        help="backlash definition: pendulum minus linear (paper), ISO reversal "
+                             "value (iso) or chosen from the measuring-system evidence (auto)")
+    parser.add_argument("--features", help="comma-separated feature-table columns (default: the "
+                                           "paper's inputs the data supply, plus dwell_s and "
+                                           "operating_hours)")
+    parser.add_argument("--split", default="random", choices=("random", "forward"),
+                        help="hold-out: random 15 %% (paper) or the later visits (forward)")
+    parser.add_argument("--truth", metavar="FILE",
+                        help="twin truth table (backlash simulate): also score against the "
+                             "true backlash")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+
+
+def data_params(args) -> dict:
+    """The keyword parameters of ``add_data_arguments`` for a model workflow (train, compare,
+    backtest, tune), the comma lists parsed."""
+    return {"format": args.format, "target": args.target,
+            "features": parse_features(args.features), "truth": args.truth,
+            "seed": args.seed}

@@ -1,0 +1,78 @@
+"""``backlash fleet``: one view of the fleet, worst first; a static site with ``--out``."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.commands.data import add_readings_argument
+from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
+
+HELP = WORKFLOW.summary
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+ALERT_EXIT = 3
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_readings_argument(parser, help="readings with several visits per machine axis (visit, "
+                                       "started_at)")
+    parser.add_argument("--threshold-um", type=float, metavar="X",
+                        help="backlash limit [um]: forecast the date each axis crosses it")
+    parser.add_argument("--interval-days", type=float, default=DEFAULT_INTERVAL_DAYS,
+                        metavar="D", help="maintenance interval [days]: the next visit is due "
+                                          "this long after the last one at the latest "
+                                          f"(default {DEFAULT_INTERVAL_DAYS:g})")
+    parser.add_argument("--warn-months", type=float, default=6.0,
+                        help="alert when the crossing may come within this many months of "
+                             "the last visit (default 6)")
+    parser.add_argument("--alpha", type=float, default=0.05,
+                        help="significance level of trend tests and intervals (default 0.05)")
+    parser.add_argument("--min-jump-sigma", type=float, default=3.0,
+                        help="a change point must move the level by this many standard "
+                             "errors (default 3)")
+    parser.add_argument("--out", metavar="DIR",
+                        help="write the fleet site into DIR (index.html, one page per axis, "
+                             "fleet.json); it opens from disk")
+    parser.add_argument("--json", action="store_true", help="print the axes as JSON, worst "
+                                                            "first")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
+
+    from features.readings.fileio import dumps
+    from pipeline import tracking
+    from pipeline.background_run import BackgroundRun
+
+    tracking.check_uri()
+    with BackgroundRun("fleet", tracking.log_into) as mlflow_run:
+        from pipeline.commands.data import readings_arg
+        from pipeline.workflows.fleet import fleet
+
+        result = fleet(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
+                       interval_days=args.interval_days, warn_months=args.warn_months,
+                       alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out)
+        record = result.tracking_record()
+        mlflow_run.start(record.run_name)  # the input is valid: the run may start
+        mlflow_run.log(tracking.record_data(record))
+        print_summary(result, file=sys.stderr)
+        if args.json:
+            print(dumps(result.to_json()))
+        mlflow_run.finish()
+    return ALERT_EXIT if result.alerts else 0
+
+
+def print_summary(result, file) -> None:
+    print(f"{'#':>3} {'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} "
+          f"{'slope um/mo':>11}  {'crossing':<10}  {'next due':<10}  alerts", file=file)
+    for rank, view in enumerate(result.axes, 1):
+        j = view.to_json()
+        slope = j["slope_um_per_month"]
+        print(f"{rank:>3} {view.machine_id:<12} {view.axis:<4} {j['visits']:>6} "
+              f"{j['backlash_um']:>11.3f} "
+              f"{slope if slope is not None else float('nan'):>11.4f}  "
+              f"{j['crossing_date'] or '-':<10}  {j['next_visit_due']:<10}  "
+              f"{', '.join(j['alerts']) or '-'}", file=file)
+    if "index" in result.files:
+        print(f"site: {result.files['index']}", file=file)

@@ -1,0 +1,40 @@
+"""``backlash ingest``: validate readings files and add their tests to a fleet store."""
+
+from __future__ import annotations
+
+import argparse
+
+from features.readings.schema import FORMATS
+from pipeline.commands.data import READINGS_HELP
+from pipeline.workflows.ingest import WORKFLOW
+
+HELP = WORKFLOW.summary
+FLAGS = {"files": "FILE"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help=READINGS_HELP)
+    parser.add_argument("--store", required=True, metavar="STORE",
+                        help="store folder (created when new or empty) or postgresql://USER@HOST"
+                             "/DB (password in ~/.pgpass or PGPASSWORD, not in the URL)")
+    parser.add_argument("--format", default="auto", choices=FORMATS,
+                        help="input layout of the files (default: detect each)")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.readings.fileio import dumps
+    from pipeline.commands.common import progress_bar
+    from pipeline.workflows.ingest import ingest
+
+    with progress_bar("ingest") as progress:
+        result = ingest(args.files, args.store, format=args.format, progress=progress)
+    for f in result.inputs:
+        print(f"{f['file']}: {f['tests']} tests, {f['readings']} readings: {f['added']} added, "
+              f"{f['unchanged']} already stored", file=sys.stderr)
+    print(f"store {result.store}: {result.tests_in_store} tests", file=sys.stderr)
+    if args.json:
+        print(dumps(result.to_json()))
+    return 0

@@ -1,0 +1,276 @@
+"""The fleet site: a static folder that opens from disk (no server, no script, no URL).
+
+Files written into the output folder (``write_site``), all or nothing:
+
+- ``index.html``: the fleet table, worst first, a sparkline of each axis's history and
+  forecast band, each row linking to the axis's page;
+- ``<machine>_<axis>.html`` per axis: the history chart with change points, forecast band,
+  threshold and crossing interval, the visit table, alerts, the wear-rate map since the last
+  change point, the last visit's ISO 230-2 chart and figures, forecast and compensation
+  history;
+- ``fleet.json``: what ``backlash fleet --json`` prints.
+
+Pages use the product's one page shell (``pipeline.report_page.page``); charts are inline SVG
+(``pipeline.fleet_charts``). The pages are built in memory, written into a temporary folder
+beside the output folder (``features.readings.fileio.temp_folder``) and renamed into place: a
+new folder appears whole, files of an existing one are replaced one by one only after every
+file was written.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import shutil
+from pathlib import Path
+
+from features.readings.errors import InputError
+from pipeline import fleet_charts
+from pipeline.report_page import page
+
+INDEX, JSON = "index.html", "fleet.json"
+TITLE = "Fleet backlash"
+KIND_NAMES = {"paper": "pendulum − linear", "iso": "ISO |B_i|", "mixed": "mixed"}
+REASONS = {"above_threshold": "at or above the threshold at the last visit: due now",
+           "crossing": "the crossing interval opens (early end) before the interval ends",
+           "interval": "the maintenance interval after the last visit"}
+STYLE = """<style>
+svg.spark { vertical-align: middle; }
+table.fleet { font-size: 0.85em; }
+table.fleet td, table.fleet th { padding: 0.2em 0.4em; }
+svg.chart { max-width: 100%; height: auto; border: 1px solid #dde; margin: 0.4em 0; }
+tr.alerting td { background: #fff4f0; }
+td.alerts { color: #b8431f; font-weight: 600; }
+td.nowrap { white-space: nowrap; }
+nav { margin-bottom: 0.8em; }
+</style>"""
+
+
+def write_site(result, out) -> dict[str, Path]:
+    """Write the site of a ``FleetResult`` into folder ``out``; return the files by name
+    (``index.html`` also under ``"index"``, ``fleet.json`` under ``"json"``)."""
+    from features.readings.fileio import clean_nan, temp_folder
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
+    texts = {INDEX: page(TITLE, STYLE + index_body(result)),
+             JSON: json.dumps(clean_nan(result.to_json()), indent=2) + "\n"}
+    for view in result.axes:
+        texts[view.page] = page(f"{view.machine_id} axis {view.axis}", STYLE + axis_body(
+            view, result.parameters.get("threshold_um")))
+    tmp = temp_folder(out)
+    try:
+        for name, text in texts.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+        _move(tmp, out, list(texts))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    files = {name: out / name for name in texts}
+    return {"index": out / INDEX, "json": out / JSON, **files}
+
+
+def _move(tmp: Path, out: Path, names: list[str]) -> None:
+    """A new folder: rename the whole temporary folder into place; an existing one: replace
+    its files one by one (each rename is atomic)."""
+    from features.readings import fileio
+
+    if not out.exists():
+        os.chmod(tmp, 0o777 & ~fileio._UMASK)
+        try:
+            os.rename(tmp, out)
+            return
+        except OSError:  # created meanwhile: fall back to file by file
+            pass
+    out.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        os.replace(tmp / name, out / name)
+
+
+# --------------------------------------------------------------------------- helpers
+def _esc(value) -> str:
+    return html.escape(str(value))
+
+
+def _fmt(value, fmt: str = ".3f") -> str:
+    import math
+
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return format(value, fmt)
+
+
+def _history(view) -> dict:
+    """The series as the charts take it: days since the first visit, values, change days."""
+    from features.visits import DAYS_PER_MONTH
+
+    v = view.series.visits
+    days = v["t_month"].to_numpy(float) * DAYS_PER_MONTH
+    return {"days": days, "backlash_um": v["backlash_um"].to_numpy(float),
+            "sigma_um": v["sigma_um"].to_numpy(float),
+            "change_days": [float(days[c["index"]]) for c in view.series.change_points]}
+
+
+def _crossing_text(j: dict) -> str:
+    early, late = j["crossing_interval"]
+    if j["next_visit_reason"] == "above_threshold":
+        return "reached"
+    if j["crossing_date"] is None:
+        return "–"
+    return f"{_esc(j['crossing_date'])} [{_esc(early or '–')}, {_esc(late or 'later')}]"
+
+
+# --------------------------------------------------------------------------- index.html
+def index_body(result) -> str:
+    """The fleet table, worst first, with a sparkline per axis and notes."""
+    p = result.parameters
+    threshold = p.get("threshold_um")
+    rows = "".join(_index_row(i, view, threshold) for i, view in enumerate(result.axes, 1))
+    notes = "".join(f"<li>{_esc(n)}</li>" for n in result.notes)
+    alerting = sum(1 for v in result.axes if v.alerts)
+    return f"""<p class="summary">Data: {_esc(result.source)}. {len(result.axes)} machine axes,
+{alerting} with an alert. Threshold: {_fmt(threshold, 'g') + ' µm' if threshold else 'none'};
+maintenance interval {_fmt(p.get('interval_days'), 'g')} days.</p>
+<p>Backlash: the axis's lost motion at its last visit by its measuring system (pendulum − linear
+with a direct system, ISO |B_i| with an indirect one) ± its standard uncertainty. Sorted worst
+first: axes at or above the threshold, then other alerting axes, then the rest; within each, the
+earliest next visit due, the earliest crossing, the highest backlash. Next visit due: the
+earlier of the last visit + the interval and the early end of the crossing interval (the day a
+future visit's upper prediction bound reaches the threshold); due now when already above it.
+History: backlash per visit, change points dashed, forecast band orange, threshold red.</p>
+{f'<ul>{notes}</ul>' if notes else ''}
+<table class="fleet"><tr><th>#</th><th>machine axis</th><th>visits</th><th>last visit</th>
+<th>backlash [µm]</th><th>history and forecast</th><th>slope [µm/month]</th>
+<th>change points</th><th>crossing [interval]</th><th>next visit due</th><th>alerts</th></tr>
+{rows}</table>
+<p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
+
+
+def _index_row(rank: int, view, threshold) -> str:
+    j = view.to_json()
+    spark = fleet_charts.sparkline(_history(view), view.forecast, threshold_um=threshold,
+                                   alert=bool(view.alerts),
+                                   label=f"{view.machine_id} {view.axis} backlash history")
+    low, high = j["slope_interval"]
+    slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>[{_fmt(low)}, "
+             f"{_fmt(high)}]</small>" if j["slope_um_per_month"] is not None else "–")
+    early, late = j["crossing_interval"]
+    crossing = (f"{_esc(j['crossing_date'])}<br><small>[{_esc(early or '–')}, "
+                f"{_esc(late or 'later')}]</small>" if j["crossing_date"] else _crossing_text(j))
+    return (f"<tr class='{'alerting' if view.alerts else ''}'><td class='num'>{rank}</td>"
+            f"<td class='nowrap'><a href=\"{_esc(view.page)}\">{_esc(view.machine_id)} "
+            f"{_esc(view.axis)}</a></td><td class='num'>{j['visits']}</td>"
+            f"<td class='nowrap'>{_esc(j['last_visit_date'])}<br><small>visit "
+            f"{_esc(j['last_visit'])}</small></td>"
+            f"<td class='num'>{_fmt(j['backlash_um'])}<br><small>± {_fmt(j['backlash_u_um'])}"
+            f"</small></td><td>{spark}</td><td class='num'>{slope}</td>"
+            f"<td>{_esc(', '.join(j['change_points']) or '–')}</td>"
+            f"<td class='nowrap'>{crossing}</td><td class='nowrap'>{_esc(j['next_visit_due'])}"
+            f"</td><td class='alerts'>{'<br>'.join(map(_esc, j['alerts']))}</td></tr>\n")
+
+
+# --------------------------------------------------------------------------- axis pages
+def axis_body(view, threshold) -> str:
+    """An axis's page: summary, alerts, history chart, visits, wear map, ISO chart."""
+    j = view.to_json()
+    return "\n".join([
+        f'<nav><a href="{INDEX}">← fleet</a></nav>', _summary(view, j), _alerts(view),
+        "<h2>History and forecast</h2>", _history_chart(view, threshold),
+        "<h2>Visits</h2>", _visit_table(view),
+        "<h2>Wear-rate map since the last change point</h2>", _wear(view),
+        "<h2>Last visit: ISO 230-2 chart</h2>", _iso(view),
+        "<h2>Forecasts and compensation</h2>", NOTHING_RECORDED])
+
+
+def _summary(view, j: dict) -> str:
+    kind = KIND_NAMES.get(j["target_kind"], j["target_kind"] or "–")
+    low, high = j["slope_interval"]
+    changes = ", ".join(f"{c} ({d:+.2f} µm)" for c, d in zip(j["change_points"],
+                                                              j["change_jumps_um"]))
+    trend = (f"Trend since visit {_esc(j['trend_since_visit'])}: "
+             f"{_fmt(j['slope_um_per_month'], '+.3f')} µm/month [{_fmt(low)}, {_fmt(high)}]"
+             if j["slope_um_per_month"] is not None
+             else "No trend (fewer than two visits since the last change point)")
+    visits = f"{j['visits']} visit{'s' if j['visits'] > 1 else ''}"
+    return f"""<div class="summary"><p>Backlash at visit {_esc(j['last_visit'])}
+({_esc(j['last_visit_date'])}): <strong>{_fmt(j['backlash_um'])} ± {_fmt(j['backlash_u_um'])}
+µm</strong> ({_esc(kind)}), {visits} since {_esc(j['first_visit_date'])}.<br>
+{trend}. Change points: {_esc(changes or 'none')}.<br>
+Threshold crossing: {_crossing_text(j)}.<br>
+Next visit due: <strong>{_esc(j['next_visit_due'])}</strong>
+({_esc(REASONS[j['next_visit_reason']])}).</p></div>"""
+
+
+def _alerts(view) -> str:
+    if not view.alerts:
+        return "<p>No alert.</p>"
+    items = "".join(f"<li>{_esc(a['kind'])}: {_esc(a['message'])}</li>" for a in view.alerts)
+    return f"<div class='alert'><ul>{items}</ul></div>"
+
+
+def _history_chart(view, threshold) -> str:
+    origin = view.series.visits["date"].iloc[0].date()
+    return fleet_charts.history_chart(
+        _history(view), view.forecast, view.trend_line, origin,
+        threshold_um=threshold, crossing=view.crossing_days,
+        due_days=float((view.next_visit_due - origin).days),
+        label=f"{view.machine_id} {view.axis}: backlash per visit and forecast")
+
+
+def _visit_table(view) -> str:
+    rows = []
+    for r in view.series.visits.to_dict("records"):
+        cells = (_fmt(r.get("n_tests"), "d"), _fmt(r.get("n_points"), "d"),
+                 _esc(KIND_NAMES.get(r.get("target_kind"), "–")), _fmt(r["backlash_um"]),
+                 _fmt(r["backlash_u_um"]), _fmt(r["sigma_um"]), _fmt(r.get("reversal_mean_um")),
+                 _fmt(r.get("reversal_max_um")))
+        rows.append(f"<tr><td>{_esc(r['visit'])}</td><td>{r['date'].date().isoformat()}</td>"
+                    + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
+    return ("<table><tr><th>visit</th><th>date</th><th>tests</th><th>points</th><th>target</th>"
+            "<th>backlash [µm]</th><th>u [µm]</th><th>σ [µm]</th>"
+            "<th>mean reversal B_i [µm]</th><th>B = max|B_i| [µm]</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def _wear(view) -> str:
+    if view.wear is None:
+        return f"<p>No wear-rate map: {_esc(view.wear_note)}.</p>"
+    w = view.wear
+    chart = fleet_charts.wear_chart(w, label=f"{view.machine_id} {view.axis}: wear-rate map")
+    return (f"{chart}<p>Wear rate w(x) [µm per 1000 operating hours] with its 95 % interval, "
+            f"from {w['n_points']} interior backlash points of visits "
+            f"{_esc(', '.join(w['visits']))} (models.wear_map.WearMap, "
+            f"{_esc(w['n_control'])} control points).</p>")
+
+
+FIGURE_KEYS = ("A", "E", "M", "R", "B", "B_mean")
+NOTHING_RECORDED = ("<p>Last forecast: none recorded. Compensation history: none recorded (the "
+                    "readings hold neither; a fleet store that records them will fill this "
+                    "section).</p>")
+
+
+def _iso(view) -> str:
+    iso = view.iso
+    if iso is None:
+        return "<p>No per-target statistics for the last visit.</p>"
+    chart = fleet_charts.iso_chart(iso["targets"], iso["unit"], iso["position_unit"],
+                                   label=f"ISO 230-2 chart of {iso['test_id']}")
+    head = "".join(f"<th>{k} [{_esc(iso['unit'])}]</th>" for k in FIGURE_KEYS)
+    rows = "".join(f"<tr><td>{_esc(name)}</td>"
+                   + "".join(f"<td class='num'>{_fmt(values.get(k))}</td>" for k in FIGURE_KEYS)
+                   + "</tr>" for name, values in _figure_rows(iso))
+    return (f"<p>Test {_esc(iso['test_id'])} ({_esc(iso['method'])}) of visit "
+            f"{_esc(iso['visit'])}: mean deviation per target and direction with ±2s bands."
+            f"</p>{chart}<table><tr><th>ISO 230-2 figures</th>{head}</tr>{rows}</table>")
+
+
+def _figure_rows(iso: dict) -> list[tuple[str, dict]]:
+    """The charted test's figures, then the mean over the visit's tests of each method."""
+    figures = iso["figures"]
+    rows = [(f"test {iso['test_id']}", f) for f in figures if f["test_id"] == iso["test_id"]]
+    for method in sorted({str(f.get("method")) for f in figures}):
+        mine = [f for f in figures if str(f.get("method")) == method]
+        mean = {k: sum(float(f[k]) for f in mine) / len(mine) for k in FIGURE_KEYS}
+        rows.append((f"mean of {len(mine)} {method} test{'s' if len(mine) > 1 else ''}", mean))
+    return rows

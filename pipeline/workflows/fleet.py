@@ -1,0 +1,524 @@
+"""One view of the fleet: every machine axis's backlash now, its trend, when it crosses the
+limit, when it is next due, its alerts, worst first; a static site that opens from disk.
+
+>>> import backlash as bl
+>>> view = bl.fleet("readings.csv", threshold_um=8.0, out="fleet/")   # doctest: +SKIP
+>>> view.axes[0].to_json()["next_visit_due"]                          # doctest: +SKIP
+
+Per machine axis (``AxisView``): the visit series (``features.visits.visit_backlash``: the
+axis's backlash ``backlash_um`` by its measuring system, docs/backlash.md), its drift
+(``models.drift.analyse_series``: change points, Theil-Sen trend since the last one, the date
+the threshold is crossed with its interval, alerts), the date the next visit is due, the
+forecast band, the wear-rate map since the last change point (``models.wear_map.WearMap``) and
+the ISO 230-2 chart of the last visit (``features.iso230``).
+
+Rules (docs/fleet.md):
+
+- **next visit due** = the earlier of (last visit + ``interval_days``) and the early end of the
+  crossing interval (the first day the upper prediction band of a future visit reaches the
+  threshold; the crossing date itself where the band gives no early end); the last visit's date
+  (due now) when the axis is already at or above the threshold. Never before the last visit.
+- **worst first**: axes at or above the threshold, then other alerting axes, then the rest;
+  within each group the earliest next visit due, then the earliest crossing date (none last),
+  then the highest backlash now, then machine and axis.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import re
+from dataclasses import dataclass, field
+from numbers import Real
+from pathlib import Path
+
+from features.readings import schema
+from features.readings.errors import InputError, note
+from pipeline.results import Result, TrackingRecord
+from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+
+DEFAULT_INTERVAL_DAYS = 90.0
+# The forecast is drawn one visit interval ahead, further up to the crossing date but never
+# more than this many months past the last visit.
+FORECAST_CAP_MONTHS = 24.0
+FORECAST_STEPS = 40
+MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
+NEXT_VISIT_REASONS = ("above_threshold", "crossing", "interval")
+
+
+def _parameters() -> dict:
+    """The constraints of ``fleet``'s parameters (scikit-learn's constraint language), built on
+    first use: importing scikit-learn would slow every command's start."""
+    from sklearn.utils._param_validation import Interval, StrOptions
+
+    positive = Interval(Real, 0, None, closed="neither")
+    return {
+        "format": [StrOptions(set(schema.FORMATS))],
+        "threshold_um": [positive, None],
+        "interval_days": [positive],
+        "warn_months": [Interval(Real, 0, None, closed="left")],
+        "alpha": [Interval(Real, 0, 0.5, closed="neither")],
+        "min_jump_sigma": [positive],
+        "out": [str, os.PathLike, None],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+# --------------------------------------------------------------------------- one axis
+@dataclass
+class AxisView:
+    """Everything the fleet view shows of one machine axis.
+
+    Attributes
+    ----------
+    series : models.drift.DriftSeries
+        The visits (``backlash_um``, ``backlash_u_um``, ``sigma_um`` [um], ``t_month``), change
+        points, trend [um/month], threshold crossing [months since the first visit], alerts.
+    next_visit_due : datetime.date
+        When the axis should next be measured (module docstring).
+    next_visit_reason : str
+        Which rule set it: ``above_threshold``, ``crossing`` or ``interval``.
+    forecast : dict or None
+        The prediction band ahead: ``days`` since the first visit, ``fit``, ``low``, ``high``
+        [um]; None with fewer than two visits since the last change point.
+    trend_line : dict or None
+        The Theil-Sen line since the last change point: ``days``, ``fit`` [um].
+    wear : dict or None
+        The wear-rate map since the last change point: ``position_mm``, ``rate``, ``low``,
+        ``high`` [um per 1000 h], ``n_points``, ``visits``; None when it cannot be fitted.
+    wear_note : str
+        Why there is no wear-rate map (empty when there is one).
+    iso : dict or None
+        The last visit's ISO 230-2 chart: ``test_id``, ``method``, ``unit``, per-target arrays
+        ``targets`` and the figures of every test of the visit (``figures``).
+    page : str
+        File name of the axis's page in the site.
+    """
+
+    series: object
+    next_visit_due: dt.date
+    next_visit_reason: str
+    forecast: dict | None = None
+    trend_line: dict | None = None
+    wear: dict | None = None
+    wear_note: str = ""
+    iso: dict | None = None
+    page: str = ""
+
+    @property
+    def machine_id(self) -> str:
+        return self.series.machine_id
+
+    @property
+    def axis(self) -> str:
+        return self.series.axis
+
+    @property
+    def last(self):
+        """The last visit's row of the series."""
+        return self.series.visits.iloc[-1]
+
+    @property
+    def alerts(self) -> list[dict]:
+        return self.series.alerts
+
+    @property
+    def crossing_days(self) -> tuple:
+        """Crossing (date, early, late) in days since the first visit, None where unknown."""
+        from features.visits import DAYS_PER_MONTH
+
+        return tuple(None if t is None else t * DAYS_PER_MONTH for t in self.series.crossing)
+
+    def to_json(self) -> dict:
+        """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
+        s, v = self.series, self.series.visits
+        trend = s.trend
+        return {
+            "machine_id": s.machine_id, "axis": s.axis, "visits": len(v),
+            "first_visit_date": _day(v["date"].iloc[0]).isoformat(),
+            "last_visit": str(self.last["visit"]), "last_visit_date": _day(self.last["date"]).isoformat(),
+            "target_kind": str(self.last.get("target_kind", "")) or None,
+            "backlash_um": _round(self.last["backlash_um"]),
+            "backlash_u_um": _round(self.last["backlash_u_um"]),
+            "slope_um_per_month": _round(trend.get("slope")),
+            "slope_interval": [_round(trend.get("low")), _round(trend.get("high"))],
+            "trend_since_visit": str(v["visit"].iloc[s.segment_start]),
+            "change_points": [str(v["visit"].iloc[c["index"]]) for c in s.change_points],
+            "change_jumps_um": [_round(c["jump_um"]) for c in s.change_points],
+            "threshold_um": s.threshold_um,
+            "crossing_date": s.date_at(s.crossing[0]),
+            "crossing_interval": [s.date_at(s.crossing[1]), s.date_at(s.crossing[2])],
+            "next_visit_due": self.next_visit_due.isoformat(),
+            "next_visit_reason": self.next_visit_reason,
+            "alerts": [a["kind"] for a in s.alerts],
+            "alert_messages": [a["message"] for a in s.alerts],
+            "last_forecast": None, "last_compensation": None,
+            "history": {"visits": v["visit"].astype(str).tolist(),
+                        "dates": [_day(d).isoformat() for d in v["date"]],
+                        "backlash_um": [_round(x) for x in v["backlash_um"]],
+                        "backlash_u_um": [_round(x) for x in v["backlash_u_um"]]},
+            "page": self.page,
+        }
+
+
+def _day(timestamp) -> dt.date:
+    return timestamp.date()
+
+
+def _round(value, digits: int = 4):
+    import math
+
+    if value is None:
+        return None
+    value = float(value)
+    return round(value, digits) if math.isfinite(value) else None
+
+
+# --------------------------------------------------------------------------- the result
+@dataclass
+class FleetResult(Result):
+    """The fleet view: one ``AxisView`` per machine axis, worst first.
+
+    Attributes
+    ----------
+    axes : list of AxisView
+        Sorted worst first (module docstring).
+    source : str
+        Where the readings came from.
+    readings : DataFrame
+        The validated readings.
+    parameters : dict
+        The workflow's parameters as given (logged with the run).
+    """
+
+    axes: list
+    source: str
+    readings: object = field(repr=False)
+    parameters: dict = field(default_factory=dict)
+
+    @property
+    def alerts(self) -> list[dict]:
+        """Every alert of every axis (``kind``, ``message``, ``machine_id``, ``axis``)."""
+        return [{**a, "machine_id": v.machine_id, "axis": v.axis}
+                for v in self.axes for a in v.alerts]
+
+    def write(self, out) -> dict[str, Path]:
+        """The static site (``pipeline.fleet_report``): ``index.html``, ``fleet.json`` and
+        one page per axis, written together (all or nothing)."""
+        from pipeline.fleet_report import write_site
+
+        self.files = write_site(self, out)
+        return self.files
+
+    def to_json(self) -> dict:
+        p = self.parameters
+        return {"source": self.source, "threshold_um": p.get("threshold_um"),
+                "interval_days": p.get("interval_days"), "n_alerts": len(self.alerts),
+                "axes": [v.to_json() for v in self.axes]}
+
+    def tracking_record(self) -> TrackingRecord:
+        """One run in experiment ``fleet``: parameters, per-axis figures, the site's files."""
+        from pipeline.tracking import data_hash
+
+        p = self.parameters
+        params = {"data": self.source, "data_sha256": data_hash(self.readings),
+                  **{k: p.get(k) for k in ("threshold_um", "interval_days", "warn_months",
+                                           "alpha", "min_jump_sigma")},
+                  "n_axes": len(self.axes)}
+        metrics = {"n_alerts": float(len(self.alerts))}
+        for v in self.axes:
+            key = f"{v.machine_id}_{v.axis}"  # any id: the adapter makes valid metric names
+            metrics[f"backlash_um_{key}"] = float(v.last["backlash_um"])
+            metrics[f"slope_um_per_month_{key}"] = v.series.trend.get("slope", float("nan"))
+            metrics[f"days_to_next_visit_{key}"] = float(
+                (v.next_visit_due - _day(v.last["date"])).days)
+        return TrackingRecord("fleet", f"fleet {os.path.basename(self.source)}", params=params,
+                              metrics=metrics, artifacts=sorted(set(self.files.values())),
+                              artifact_path="fleet")
+
+
+# --------------------------------------------------------------------------- the workflow
+def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
+          interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
+          alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None) -> FleetResult:
+    """One view of every machine axis of the fleet, worst first.
+
+    Parameters
+    ----------
+    data : str, path or DataFrame
+        Readings with visits (``visit``, ``started_at``): a file, a fleet store or a frame as
+        ``read`` returns it.
+    format : str, default 'auto'
+        Input layout of a file.
+    threshold_um : float, optional
+        Backlash limit [um]: forecast the date each axis crosses it.
+    interval_days : float, default 90
+        Maintenance interval [d]: the next visit is due this long after the last one at the
+        latest.
+    warn_months : float, default 6.0
+        Alert when the crossing may come within this many months of the last visit [month].
+    alpha : float, default 0.05
+        Significance level of the trend tests and intervals, in (0, 0.5).
+    min_jump_sigma : float, default 3.0
+        A change point must move the level by this many standard errors.
+    out : str or path, optional
+        Folder to write the site into (``FleetResult.write``).
+
+    Returns
+    -------
+    FleetResult
+        Its ``alerts`` are empty when nothing needs attention.
+
+    Raises
+    ------
+    InputError
+        A parameter out of range (naming it), ``out`` naming a file, or readings without
+        dates or with one visit per axis only.
+    """
+    values = {"format": format, "threshold_um": threshold_um, "interval_days": interval_days,
+              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
+              "out": out}
+    check_params(_parameters(), values, "fleet")
+    if out is not None and Path(out).exists() and not Path(out).is_dir():
+        raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
+    from features.visits import SERIES_KEYS, visit_backlash
+    from models.drift import analyse_series
+
+    readings = readings_of(data, format)
+    visits = visit_backlash(readings)
+    series = [analyse_series(g, threshold_um=threshold_um, alpha=alpha,
+                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+              for _, g in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)]
+    notes = [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
+             if len(s.visits) < 2]
+    for text in notes:
+        note(text)
+    views = axis_views(series, readings, interval_days)
+    result = FleetResult(views, source_of(data, readings), readings, values, notes=notes)
+    if out is not None:
+        result.write(out)
+    return result
+
+
+def axis_views(series: list, readings, interval_days: float) -> list[AxisView]:
+    """One ``AxisView`` per analysed series, worst first, each with its page name."""
+    from features import iso230
+    from features.targets import targets_of
+
+    stats = iso230.per_target(readings)
+    parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
+                   iso230.axis_figures(readings, stats))
+    views = [_view(s, parts, interval_days) for s in series]
+    views.sort(key=worst_first)
+    for view, name in zip(views, page_names(views)):
+        view.page = name
+    return views
+
+
+def _view(s, parts: _Parts, interval_days: float) -> AxisView:
+    due, reason = next_visit(s, interval_days)
+    end = _forecast_end(s, interval_days)
+    wear, why = wear_map(s, parts)
+    return AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
+                    last_iso(s, parts))
+
+
+def worst_first(view: AxisView) -> tuple:
+    """Sort key: above the threshold, other alerts, none; then the earliest next visit due,
+    the earliest crossing (none last), the highest backlash now, machine and axis."""
+    kinds = {a["kind"] for a in view.alerts}
+    group = 0 if "above_threshold" in kinds else 1 if kinds else 2
+    crossing = view.series.crossing[0]
+    return (group, view.next_visit_due, crossing is None, crossing or 0.0,
+            -float(view.last["backlash_um"]), view.machine_id, view.axis)
+
+
+def page_names(views: list[AxisView]) -> list[str]:
+    """``<machine>_<axis>.html`` per axis, characters other than letters, digits, ``.``,
+    ``-`` and ``_`` replaced by ``_``; a name taken twice gets ``-2``, ``-3``..."""
+    names, taken = [], set()
+    for v in views:
+        stem = re.sub(r"[^\w.-]", "_", f"{v.machine_id}_{v.axis}", flags=re.ASCII).lstrip(".")
+        name, k = f"{stem}.html", 2
+        while name.lower() in taken or name == "index.html":
+            name, k = f"{stem}-{k}.html", k + 1
+        taken.add(name.lower())
+        names.append(name)
+    return names
+
+
+# --------------------------------------------------------------------------- per-axis rules
+def next_visit(s, interval_days: float) -> tuple[dt.date, str]:
+    """When the axis is next due and which rule set it (module docstring): ``above_threshold``
+    (the last visit's date: due now), ``crossing`` (the early end of the crossing interval,
+    before the interval ends) or ``interval`` (last visit + ``interval_days``)."""
+    import pandas as pd
+
+    last = s.visits["date"].iloc[-1]
+    by_interval = _day(last + pd.Timedelta(days=float(interval_days)))
+    if s.threshold_um is not None and s.visits["backlash_um"].iloc[-1] >= s.threshold_um:
+        return _day(last), "above_threshold"
+    early = s.crossing[1] if s.crossing[1] is not None else s.crossing[0]
+    if early is not None:
+        when = max(dt.date.fromisoformat(s.date_at(early)), _day(last))
+        if when < by_interval:
+            return when, "crossing"
+    return by_interval, "interval"
+
+
+def _forecast_end(s, interval_days: float) -> float:
+    """Months since the first visit up to which the forecast is drawn: one interval past the
+    last visit, or up to the crossing date, at most ``FORECAST_CAP_MONTHS`` past the last
+    visit."""
+    from features.visits import DAYS_PER_MONTH
+
+    t_last = float(s.visits["t_month"].iloc[-1])
+    end = t_last + interval_days / DAYS_PER_MONTH
+    if s.crossing[0] is not None:
+        end = max(end, min(s.crossing[0], t_last + FORECAST_CAP_MONTHS))
+    return end
+
+
+def _segment(s):
+    """The visits since the last change point: times [month], values and sigma [um]."""
+    seg = s.visits.iloc[s.segment_start:]
+    return (seg["t_month"].to_numpy(float), seg["backlash_um"].to_numpy(float),
+            seg["sigma_um"].to_numpy(float))
+
+
+def forecast(s, end_month: float) -> dict | None:
+    """The prediction band of a future visit (``models.drift.prediction_band``) from the
+    last visit to ``end_month``, in days since the first visit; None without a trend."""
+    import numpy as np
+
+    from features.visits import DAYS_PER_MONTH
+    from models.drift import prediction_band
+
+    t, y, sigma = _segment(s)
+    if len(t) < 2 or not np.isfinite(s.trend.get("slope", np.nan)):
+        return None
+    ahead = np.linspace(t[-1], max(end_month, t[-1]), FORECAST_STEPS)
+    fit, low, high = prediction_band(t, y, sigma, ahead, s.alpha)
+    return {"days": ahead * DAYS_PER_MONTH, "fit": fit, "low": low, "high": high}
+
+
+def trend_line(s, end_month: float) -> dict | None:
+    """The Theil-Sen line from the first visit of the last segment to ``end_month``."""
+    import numpy as np
+
+    from features.visits import DAYS_PER_MONTH
+
+    tr = s.trend
+    if not np.isfinite(tr.get("slope", np.nan)):
+        return None
+    t = np.array([float(s.visits["t_month"].iloc[s.segment_start]), end_month])
+    return {"days": t * DAYS_PER_MONTH, "fit": tr["intercept"] + tr["slope"] * t}
+
+
+# --------------------------------------------------------------------------- per-axis figures
+@dataclass
+class _Parts:
+    """What the per-axis figures read, computed once for the fleet and looked up by machine
+    axis (and visit): per-target ISO statistics, backlash points, per-test figures, hours."""
+
+    stats: object
+    points: object
+    figures: object
+
+    def __post_init__(self):
+        from features.visits import SERIES_KEYS, VISIT_KEYS
+
+        self._stats_rows = _rows(self.stats, VISIT_KEYS)
+        self._figure_rows = _rows(self.figures, VISIT_KEYS)
+        self.points = self.points[self.points["interior"].to_numpy()]
+        self._point_rows = _rows(self.points, SERIES_KEYS)
+        hours = (self.stats.groupby(list(VISIT_KEYS), observed=True)["operating_hours"].mean()
+                 if "operating_hours" in self.stats else None)
+        self.hours = None if hours is None or hours.isna().all() else {
+            tuple(map(str, k)): float(h) for k, h in hours.items()}
+
+    def stats_at(self, key: tuple):
+        return _take(self.stats, self._stats_rows, key)
+
+    def figures_at(self, key: tuple):
+        return _take(self.figures, self._figure_rows, key)
+
+    def points_of(self, key: tuple):
+        return _take(self.points, self._point_rows, key)
+
+
+def _rows(frame, keys) -> dict:
+    """Row positions of ``frame`` by the text of its ``keys`` columns."""
+    groups = frame.groupby(list(keys), sort=False, observed=True).indices
+    return {tuple(map(str, k)): rows for k, rows in groups.items()}
+
+
+def _take(frame, rows: dict, key: tuple):
+    """The rows of ``frame`` under ``key``, or None."""
+    return frame.iloc[rows[key]] if key in rows else None
+
+
+def wear_map(s, parts: _Parts) -> tuple[dict | None, str]:
+    """The wear-rate map w(x) [um per 1000 h] of the axis, fitted by ``models.wear_map.WearMap``
+    on its interior backlash points since the last change point (position, operating hours and,
+    when it varies, feed); (None, why) when that cannot be done."""
+    import numpy as np
+    import pandas as pd
+
+    if parts.hours is None:
+        return None, "the readings carry no operating hours: no wear-rate map"
+    kept = set(s.visits["visit"].astype(str).iloc[s.segment_start:])
+    if len(kept) < MIN_WEAR_VISITS:
+        return None, (f"{len(kept)} visit(s) since the last change point; a wear-rate map needs "
+                      f"{MIN_WEAR_VISITS}")
+    points = parts.points_of((s.machine_id, s.axis))
+    points = points[points["visit"].astype(str).isin(kept)] if points is not None else None
+    if points is None or points.empty:
+        return None, "no interior backlash points since the last change point"
+    hours = [parts.hours.get((s.machine_id, s.axis, str(v)), np.nan) for v in points["visit"]]
+    X = pd.DataFrame({"target": points["target"].to_numpy(float),
+                      "operating_hours": np.asarray(hours, float)})
+    if points["feed_mm_min"].nunique() > 1:
+        X["feed_mm_min"] = points["feed_mm_min"].to_numpy(float)
+    if X["operating_hours"].isna().any() or X["operating_hours"].nunique() < 2:
+        return None, "operating hours missing or constant since the last change point"
+    return _fit_wear(X, points["backlash_um"].to_numpy(float), sorted(kept)), ""
+
+
+def _fit_wear(X, y, visits: list[str]) -> dict:
+    from models.wear_map import WearMap
+
+    model = WearMap().fit(X, y)
+    rate = model.wear_rate_map()
+    return {"position_mm": rate["position_mm"].to_numpy(),
+            "rate": rate["wear_rate_um_per_1000h"].to_numpy(),
+            "low": rate["wear_rate_low"].to_numpy(), "high": rate["wear_rate_high"].to_numpy(),
+            "n_points": len(y), "visits": visits, "n_control": str(model.n_control_)}
+
+
+def last_iso(s, parts: _Parts) -> dict | None:
+    """The last visit's ISO 230-2 chart: its first linear test (else its first test) per
+    target, and the figures of every test of the visit."""
+    key = (s.machine_id, s.axis, str(s.visits["visit"].iloc[-1]))
+    stats = parts.stats_at(key)
+    if stats is None:
+        return None
+    order = stats.assign(_lin=stats["method"] != "linear").sort_values(["_lin", "test_id"])
+    test = order["test_id"].iloc[0]
+    rows = stats[stats["test_id"] == test].sort_values("target")
+    figures = parts.figures_at(key)
+    return {"test_id": str(test), "method": str(rows["method"].iloc[0]),
+            "visit": key[2], "unit": str(rows["unit"].iloc[0]),
+            "position_unit": schema.position_unit(s.axis),
+            "targets": {c: rows[c].to_numpy(float) for c in
+                        ("target", "mean_up", "mean_down", "s_up", "s_down", "mean_bi", "B_i")},
+            "figures": [] if figures is None else figures.to_dict("records")}
+
+
+WORKFLOW = Workflow(
+    name="fleet", function=fleet, inputs=("data",),
+    summary=("One view of the fleet: every machine axis's backlash now, trend, change points, "
+             "threshold crossing and next visit due, worst first, with a static site (--out). "
+             "Exit 3 when an alert fires."))

@@ -1,0 +1,354 @@
+"""``backlash fleet``: one view of the fleet, checked against known truth (the twin's small
+fleet and the independently written fleet of ``tests/independent_fleet.py``), its JSON
+contract, its worst-first order and next-visit rule, the static site and bad input."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from features.readings.errors import InputError
+from pipeline.workflows.fleet import fleet
+
+SMALL = {"fleet": {"machines": 2, "axes": ["X", "Y"], "visits": 6, "adjust_at": [4]}}
+QUIET_UM = 20.0       # far above every axis: no alert
+CROSSING_UM = 2.5     # every axis of the small twin crosses it within months: crossing_soon
+MIXED_UM = 2.2        # some axes of the small twin are already above it at the last visit
+
+
+def registered() -> bool:
+    from pipeline.workflows import NAMES
+
+    return "fleet" in NAMES
+
+
+cli = pytest.mark.skipif(not registered(), reason="fleet not registered yet")
+
+
+@pytest.fixture(scope="module")
+def twin():
+    import backlash as bl
+
+    return bl.simulate(preset="fleet", config=SMALL, seed=0)
+
+
+@pytest.fixture(scope="module")
+def twin_file(twin, tmp_path_factory) -> Path:
+    return twin.write(tmp_path_factory.mktemp("twin"))["readings"]
+
+
+@pytest.fixture(scope="module")
+def mixed(twin):
+    return fleet(twin.readings, threshold_um=MIXED_UM)
+
+
+@pytest.fixture(scope="module")
+def site(twin, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("site") / "fleet"
+    fleet(twin.readings, threshold_um=MIXED_UM, out=out)
+    return out
+
+
+def true_lost_motion(sim) -> pd.Series:
+    """True lost motion per machine, axis and visit: the mean over the pendulum tests'
+    interior targets (the twin is a direct system: its linear tests do not reverse there)."""
+    t = sim.truth
+    extent = t.groupby("test_id")["target"].agg(["min", "max"])
+    lo, hi = (t["test_id"].map(extent[c]) for c in ("min", "max"))
+    inner = (t["target"] > lo) & (t["target"] < hi) & (t["method"] == "pendulum")
+    return t[inner].groupby(["machine_id", "axis", "visit"])["true_backlash_um"].mean()
+
+
+# --------------------------------------------------------------------------- against truth
+# The fleet preset's laser resolves 0.1 um, and its visit series (features.visits, not the
+# fleet view) reads about 0.07 um below the twin's mean lost motion on every visit (2 u): the
+# tolerance is 3 u plus the resolution.
+RESOLUTION_UM = 0.1
+
+
+def test_backlash_now_is_the_true_lost_motion_of_the_last_visit(twin, mixed):
+    truth = true_lost_motion(twin)
+    for a in mixed.to_json()["axes"]:
+        true = truth[(a["machine_id"], a["axis"], a["last_visit"])]
+        error = a["backlash_um"] - true
+        assert abs(error) < 3 * a["backlash_u_um"] + RESOLUTION_UM, (a["machine_id"],
+                                                                     a["axis"], error)
+        assert a["target_kind"] == "paper" and a["visits"] == 6
+
+
+def test_the_adjusted_axes_show_the_change_point(twin, mixed):
+    events = twin.visits[twin.visits["event"] == "adjustment"]
+    adjusted = {(m, a): v for m, a, v in events[["machine_id", "axis", "visit"]].itertuples(
+        index=False)}
+    assert len(adjusted) == 4
+    for a in mixed.to_json()["axes"]:
+        visit = adjusted[(a["machine_id"], a["axis"])]
+        assert a["change_points"] == [visit]
+        assert a["change_jumps_um"][0] < 0          # an adjustment lowers the level
+        assert a["trend_since_visit"] == visit      # the trend starts after it
+        assert a["slope_um_per_month"] > 0          # wear since then
+
+
+def test_the_independent_fleet_backlash_change_points_and_late_joiner():
+    """An independently written fleet: a machine on its rotary encoder (iso), two machines
+    adjusted with their hour counter running on, one machine with three visits only."""
+    from independent_fleet import fleet as independent
+
+    import backlash as bl
+
+    readings, truth, _ = independent(0)
+    result = fleet(bl.validate(readings), threshold_um=6.0)
+    axes = {(a["machine_id"], a["axis"]): a for a in result.to_json()["axes"]}
+    assert len(axes) == 10
+    extent = truth.groupby(["machine_id", "axis"])["target"].transform
+    inner = (truth["target"] > extent("min")) & (truth["target"] < extent("max"))
+    true = truth[inner].groupby(["machine_id", "axis", "visit"])["backlash_true_um"].mean()
+    for (machine, axis), a in axes.items():
+        error = a["backlash_um"] - true[(machine, axis, a["last_visit"])]
+        assert abs(error) < 3 * a["backlash_u_um"], (machine, axis, error)
+        assert a["target_kind"] == ("iso" if machine == "M3" else "paper")
+        expected = {"M2": ["5"], "M4": ["4"]}.get(machine, [])
+        assert a["change_points"] == expected, (machine, axis)
+    assert axes[("M5", "X")]["visits"] == 3
+
+
+# --------------------------------------------------------------------------- JSON contract
+TYPES = {"machine_id": str, "axis": str, "visits": int, "first_visit_date": str,
+         "last_visit": str, "last_visit_date": str, "target_kind": str, "backlash_um": float,
+         "backlash_u_um": float, "slope_um_per_month": (float, type(None)),
+         "slope_interval": list, "trend_since_visit": str, "change_points": list,
+         "change_jumps_um": list, "threshold_um": (float, type(None)),
+         "crossing_date": (str, type(None)), "crossing_interval": list, "next_visit_due": str,
+         "next_visit_reason": str, "alerts": list, "alert_messages": list,
+         "last_forecast": type(None), "last_compensation": type(None), "history": dict,
+         "page": str}
+
+
+def test_json_keys_and_types(mixed):
+    from features.readings.fileio import dumps
+
+    data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
+    assert set(data) == {"source", "threshold_um", "interval_days", "n_alerts", "axes"}
+    assert data["threshold_um"] == MIXED_UM and data["interval_days"] == 90.0
+    for a in data["axes"]:
+        assert set(a) == set(TYPES)
+        for key, kind in TYPES.items():
+            assert isinstance(a[key], kind), (key, a[key])
+        for key in ("first_visit_date", "last_visit_date", "next_visit_due"):
+            dt.date.fromisoformat(a[key])
+        assert all(isinstance(k, str) for k in a["alerts"])
+        assert a["next_visit_reason"] in ("above_threshold", "crossing", "interval")
+        assert set(a["history"]) == {"visits", "dates", "backlash_um", "backlash_u_um"}
+        assert len(a["history"]["backlash_um"]) == a["visits"]
+        assert a["history"]["backlash_um"][-1] == a["backlash_um"]
+    assert data["n_alerts"] == sum(len(a["alerts"]) for a in data["axes"])
+
+
+def _worst_key(a: dict) -> tuple:
+    """The documented order (docs/fleet.md), from the JSON alone."""
+    group = 0 if "above_threshold" in a["alerts"] else 1 if a["alerts"] else 2
+    crossing = a["crossing_date"]
+    return (group, a["next_visit_due"], crossing is None, crossing or "", -a["backlash_um"],
+            a["machine_id"], a["axis"])
+
+
+def test_axes_are_sorted_worst_first(mixed):
+    axes = mixed.to_json()["axes"]
+    kinds = [set(a["alerts"]) for a in axes]
+    assert any("above_threshold" in k for k in kinds)           # the case needs both kinds
+    assert any(k and "above_threshold" not in k for k in kinds)
+    assert axes == sorted(axes, key=_worst_key)
+    groups = [_worst_key(a)[0] for a in axes]
+    assert groups == sorted(groups)
+
+
+def test_next_visit_due_rule(twin):
+    for threshold in (MIXED_UM, CROSSING_UM, QUIET_UM, None):
+        result = fleet(twin.readings, threshold_um=threshold, interval_days=45.0)
+        for a in result.to_json()["axes"]:
+            last = dt.date.fromisoformat(a["last_visit_date"])
+            due = dt.date.fromisoformat(a["next_visit_due"])
+            by_interval = last + dt.timedelta(days=45)
+            if threshold is not None and a["backlash_um"] >= threshold:
+                assert (due, a["next_visit_reason"]) == (last, "above_threshold")
+                assert a["crossing_date"] is None
+                continue
+            early = a["crossing_interval"][0] or a["crossing_date"]
+            expected = min(by_interval, max(dt.date.fromisoformat(early), last)) if early \
+                else by_interval
+            assert due == expected, (a["machine_id"], a["axis"], threshold)
+            assert a["next_visit_reason"] == ("interval" if due == by_interval else "crossing")
+            if threshold is None:
+                assert a["crossing_date"] is None and a["next_visit_reason"] == "interval"
+
+
+def test_no_alert_without_a_near_threshold(twin):
+    quiet = fleet(twin.readings, threshold_um=QUIET_UM)
+    assert quiet.alerts == []
+    assert all(a["crossing_date"] is not None for a in quiet.to_json()["axes"])  # all growing
+    crossing = fleet(twin.readings, threshold_um=CROSSING_UM)
+    assert {a["kind"] for a in crossing.alerts} == {"crossing_soon"}
+
+
+# --------------------------------------------------------------------------- the site
+class _Links(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links, self.tags = [], []
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.append(tag)
+        self.links += [v for k, v in attrs if k in ("href", "src") and v]
+
+
+def _parse(page: Path) -> _Links:
+    parser = _Links()
+    parser.feed(page.read_text(encoding="utf-8"))
+    return parser
+
+
+def test_the_site_files_exist_and_every_link_resolves(site, mixed):
+    names = {"index.html", "fleet.json", *(a.page for a in mixed.axes)}
+    assert {p.name for p in site.iterdir()} == names
+    assert not [p for p in site.parent.iterdir() if ".backlash-tmp-" in p.name]
+    index = _parse(site / "index.html")
+    assert sorted(set(index.links)) == sorted({"fleet.json", *(a.page for a in mixed.axes)})
+    for page in site.glob("*.html"):
+        for link in _parse(page).links:
+            assert (site / link).is_file(), (page.name, link)
+    assert json.loads((site / "fleet.json").read_text()) == json.loads(
+        json.dumps(mixed.to_json()))
+
+
+def test_the_index_lists_axes_worst_first_with_a_sparkline_each(site, mixed):
+    text = (site / "index.html").read_text(encoding="utf-8")
+    order = re.findall(r'<a href="([^"]+\.html)">', text)
+    assert order == [a.page for a in mixed.axes]
+    assert text.count("<svg class='spark'") == len(mixed.axes)
+    page = (site / mixed.axes[0].page).read_text(encoding="utf-8")
+    assert page.count("<svg class='chart'") == 3  # history, wear-rate map, ISO chart
+    assert "none recorded" in page
+
+
+def test_no_page_refers_to_anything_outside_the_folder(site):
+    for page in site.glob("*.html"):
+        text = page.read_text(encoding="utf-8")
+        parsed = _parse(page)
+        assert "script" not in parsed.tags and "link" not in parsed.tags, page.name
+        assert not re.search(r"(?i)\b(?:https?|ftp|file):|//[\w.-]+\.\w", text), page.name
+        assert all(not re.match(r"^[a-z]+:|^/", link) for link in parsed.links), page.name
+
+
+def test_writing_into_an_existing_folder_keeps_other_files(twin, tmp_path):
+    out = tmp_path / "site"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    result = fleet(twin.readings, threshold_um=QUIET_UM, out=out)
+    assert (out / "notes.txt").read_text() == "mine"
+    assert all(p.is_file() for p in result.files.values())
+
+
+def test_a_failure_while_writing_leaves_nothing(twin, tmp_path, monkeypatch):
+    from pipeline import fleet_charts
+
+    result = fleet(twin.readings, threshold_um=QUIET_UM)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk gone")
+
+    monkeypatch.setattr(fleet_charts, "wear_chart", broken)
+    with pytest.raises(RuntimeError):
+        result.write(tmp_path / "site")
+    assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize(("parameter", "value"), [("threshold_um", 0.0), ("threshold_um", -1.0),
+                                                  ("interval_days", 0.0),
+                                                  ("interval_days", -30.0)])
+def test_a_parameter_out_of_range_names_itself_and_writes_nothing(twin, tmp_path, parameter,
+                                                                   value):
+    with pytest.raises(InputError) as err:
+        fleet(twin.readings, out=tmp_path / "site", **{parameter: value})
+    assert err.value.parameter == parameter
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_out_path_that_is_a_file_is_refused(twin, tmp_path):
+    target = tmp_path / "site"
+    target.write_text("not a folder")
+    with pytest.raises(InputError) as err:
+        fleet(twin.readings, out=target)
+    assert err.value.parameter == "out"
+    assert target.read_text() == "not a folder" and list(tmp_path.iterdir()) == [target]
+
+
+# --------------------------------------------------------------------------- the command
+def _cli(args: list[str], capsys) -> tuple[int, str, str]:
+    from pipeline.cli import main
+
+    code = main(["fleet", *args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@cli
+def test_cli_exits_3_with_an_alert_and_0_without(twin_file, tmp_path, capsys):
+    code, out, err = _cli([str(twin_file), "--threshold-um", str(CROSSING_UM), "--json",
+                           "--out", str(tmp_path / "site")], capsys)
+    assert code == 3, err
+    data = json.loads(out)
+    assert len(data["axes"]) == 4 and all(a["alerts"] for a in data["axes"])
+    assert (tmp_path / "site" / "index.html").is_file()
+    code, out, err = _cli([str(twin_file), "--threshold-um", str(QUIET_UM), "--json"], capsys)
+    assert code == 0, err
+    assert all(a["alerts"] == [] for a in json.loads(out)["axes"])
+
+
+@cli
+@pytest.mark.parametrize(("args", "flag"), [(["--threshold-um", "0"], "--threshold-um"),
+                                            (["--threshold-um", "-2"], "--threshold-um"),
+                                            (["--interval-days", "0"], "--interval-days")])
+def test_cli_bad_values_are_one_line_exit_2_nothing_written(twin_file, tmp_path, capsys, args,
+                                                            flag):
+    out = tmp_path / "site"
+    code, stdout, err = _cli([str(twin_file), *args, "--out", str(out)], capsys)
+    assert code == 2 and stdout == ""
+    assert len(err.strip().splitlines()) == 1 and flag in err, err
+    assert not out.exists()
+
+
+@cli
+def test_cli_out_that_is_a_file_is_one_line_exit_2(twin_file, tmp_path, capsys):
+    target = tmp_path / "site"
+    target.write_text("not a folder")
+    code, stdout, err = _cli([str(twin_file), "--out", str(target)], capsys)
+    assert code == 2 and stdout == "" and len(err.strip().splitlines()) == 1, err
+    assert target.read_text() == "not a folder" and list(tmp_path.iterdir()) == [target]
+
+
+def test_the_command_module_is_ready_to_register():
+    """Adding "fleet" to ``pipeline.workflows.NAMES`` is all that is left: the record, the
+    command module and its help agree with the workflow contract."""
+    import argparse
+
+    from pipeline.commands import fleet as command
+    from pipeline.workflows import Workflow
+    from pipeline.workflows.fleet import PARAMETERS, WORKFLOW
+
+    assert isinstance(WORKFLOW, Workflow) and WORKFLOW.name == "fleet"
+    assert WORKFLOW.function is fleet and WORKFLOW.inputs == ("data",)
+    assert command.HELP == WORKFLOW.summary and command.OUTPUTS == {"out": "folder"}
+    assert {"threshold_um", "interval_days", "out"} <= set(PARAMETERS)
+    parser = argparse.ArgumentParser()
+    command.add_arguments(parser)
+    args = parser.parse_args(["data.csv", "--threshold-um", "8", "--out", "x"])
+    assert (args.threshold_um, args.interval_days, args.out) == (8.0, 90.0, "x")
+    assert np.isclose(args.alpha, 0.05)
