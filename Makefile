@@ -21,9 +21,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/backlash run experiments/demo.toml
 
-# -rs prints why a test was skipped (the browser test without Chromium, PostgreSQL tests).
+# -rs prints why a test was skipped (the browser test without Chromium, PostgreSQL tests);
+# -n 2 runs the tests on two processes (the machines have two cores; about 7 minutes).
 test: $(STAMP)
-	$(BIN)/python -m pytest -rs
+	$(BIN)/python -m pytest -rs -n 2
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
