@@ -52,3 +52,9 @@ class Result:
     def tracking_record(self) -> TrackingRecord | None:
         """What to log to MLflow, or None for a result that is not tracked."""
         return None
+
+
+def axis_alerts(items) -> list[dict]:
+    """Every alert of every machine axis in ``items`` (each with ``machine_id``, ``axis`` and
+    ``alerts``), as ``kind``, ``message``, ``machine_id``, ``axis``."""
+    return [{**a, "machine_id": i.machine_id, "axis": i.axis} for i in items for a in i.alerts]

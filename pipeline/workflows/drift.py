@@ -15,7 +15,7 @@ from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import note
-from pipeline.results import Result, TrackingRecord
+from pipeline.results import Result, TrackingRecord, axis_alerts
 from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 
@@ -64,8 +64,7 @@ class DriftResult(Result):
     @property
     def alerts(self) -> list[dict]:
         """Every alert of every series (``kind``, ``message``, ``machine_id``, ``axis``)."""
-        return [{**a, "machine_id": s.machine_id, "axis": s.axis}
-                for s in self.series for a in s.alerts]
+        return axis_alerts(self.series)
 
     def write(self, out) -> dict[str, Path]:
         """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.drift_report``)."""

@@ -34,7 +34,7 @@ from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import InputError, note
-from pipeline.results import Result, TrackingRecord
+from pipeline.results import Result, TrackingRecord, axis_alerts
 from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
 
 DEFAULT_INTERVAL_DAYS = 90.0
@@ -201,8 +201,7 @@ class FleetResult(Result):
     @property
     def alerts(self) -> list[dict]:
         """Every alert of every axis (``kind``, ``message``, ``machine_id``, ``axis``)."""
-        return [{**a, "machine_id": v.machine_id, "axis": v.axis}
-                for v in self.axes for a in v.alerts]
+        return axis_alerts(self.axes)
 
     def write(self, out) -> dict[str, Path]:
         """The static site (``pipeline.fleet_report``): ``index.html``, ``fleet.json`` and
