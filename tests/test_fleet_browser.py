@@ -4,33 +4,22 @@ sparklines and an axis page with its charts (opt-in: BACKLASH_BROWSER_TESTS=1 wi
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from browser import CHROMIUM, FLAGS, skip_reason
 
-CHROMIUM = Path("/usr/bin/chromium")
 pytestmark = pytest.mark.browser
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-
-
-def _skip_reason() -> str | None:
-    if os.environ.get("BACKLASH_BROWSER_TESTS") != "1":
-        return "set BACKLASH_BROWSER_TESTS=1 to run the headless Chromium test"
-    if not CHROMIUM.exists():
-        return f"{CHROMIUM} not found (apt-get install chromium)"
-    return None
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     """The small twin fleet (2 machines x 2 axes, 6 visits, adjusted at visit 4) with a
     threshold that some axes already exceed: alerts of both kinds."""
-    reason = _skip_reason()
+    reason = skip_reason()
     if reason:
         print(f"\nbrowser test skipped: {reason}")
         pytest.skip(reason)

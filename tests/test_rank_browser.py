@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 from pathlib import Path
@@ -10,22 +9,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from browser import CHROMIUM, FLAGS, skip_reason
 
-CHROMIUM = Path("/usr/bin/chromium")
 pytestmark = pytest.mark.browser
-
-
-def _skip_reason() -> str | None:
-    if os.environ.get("BACKLASH_BROWSER_TESTS") != "1":
-        return "set BACKLASH_BROWSER_TESTS=1 to run the headless Chromium test"
-    if not CHROMIUM.exists():
-        return f"{CHROMIUM} not found (apt-get install chromium)"
-    return None
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory) -> Path:
-    reason = _skip_reason()
+    reason = skip_reason()
     if reason:
         print(f"\nbrowser test skipped: {reason}")
         pytest.skip(reason)
@@ -58,9 +49,7 @@ def test_every_image_in_the_page_exists(report):
 
 def test_headless_chromium_screenshot_is_not_blank(report, tmp_path):
     shot = tmp_path / "report.png"
-    command = [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-               "--no-first-run", "--disable-background-networking",
-               "--disable-component-update", "--disable-sync",
+    command = [str(CHROMIUM), *FLAGS,
                f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
                "--window-size=1200,2000", report.as_uri()]
     done = subprocess.run(command, check=False, capture_output=True, text=True, timeout=120)
