@@ -126,3 +126,24 @@ def start_stalled(where: str, argv: list[str]) -> subprocess.Popen:
 def run_cli(argv: list[str], **env) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "pipeline.cli", *argv], env=child_env(**env),
                           capture_output=True, text=True, timeout=600, check=False)
+
+
+def cli(capsys, argv) -> tuple[int, str, list[str]]:
+    """Exit code, stdout and the non-empty stderr lines of ``backlash ARGV`` (in process)."""
+    from pipeline.cli import main
+
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as stop:
+        code = stop.code
+    out, err = capsys.readouterr()
+    return code, out, [line for line in err.splitlines() if line.strip()]
+
+
+def refused(capsys, argv) -> str:
+    """``backlash ARGV`` ends with exit code 2 and exactly one stderr line, naming the command;
+    returns it."""
+    code, _, err = cli(capsys, argv)
+    assert code == 2 and len(err) == 1, (code, err)
+    assert err[0].startswith(f"backlash {argv[0]}: error: "), err
+    return err[0]

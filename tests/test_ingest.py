@@ -14,8 +14,10 @@ import pandas as pd
 import pytest
 from store_files import (
     ECMC,
+    cli,
     content,
     layout_files,
+    refused,
     twin,
     visit_file,
     visit_frame,
@@ -25,26 +27,8 @@ from store_files import (
 import backlash as bl
 from features.readings.errors import BacklashWarning, InputError
 from features.readings.io import read_readings
-from pipeline.cli import build_parser, main
+from pipeline.cli import build_parser
 from pipeline.store.base import FORMAT_VERSION, MANIFEST
-
-
-def cli(capsys, argv: list[str]) -> tuple[int, str, list[str]]:
-    """Exit code, stdout and the non-empty stderr lines of ``backlash ARGV``."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as stop:
-        code = stop.code
-    out, err = capsys.readouterr()
-    return code, out, [line for line in err.splitlines() if line.strip()]
-
-
-def refused(capsys, argv: list[str]) -> str:
-    """``backlash ARGV`` ends with exit code 2 and exactly one stderr line; returns it."""
-    code, _, err = cli(capsys, argv)
-    assert code == 2 and len(err) == 1, (code, err)
-    assert err[0].startswith(f"backlash {argv[0]}: error: "), err
-    return err[0]
 
 
 def snapshot(folder) -> dict:

@@ -19,7 +19,9 @@ import pytest
 from store_files import (
     ECMC,
     child_env,
+    cli,
     content,
+    refused,
     start_stalled,
     twin,
     visit_file,
@@ -33,21 +35,6 @@ from pipeline.cli import main
 from pipeline.store.base import FORMAT_VERSION, MANIFEST
 
 PASSWORD = "s3cret-Pw"
-
-
-def cli(capsys, argv) -> tuple[int, str, list[str]]:
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as stop:
-        code = stop.code
-    out, err = capsys.readouterr()
-    return code, out, [line for line in err.splitlines() if line.strip()]
-
-
-def refused(capsys, argv) -> str:
-    code, _, err = cli(capsys, argv)
-    assert code == 2 and len(err) == 1, (code, err)
-    return err[0]
 
 
 def new_database(postgres_url: str) -> str:
