@@ -37,7 +37,7 @@ KINDS = ("auto", "paper", "iso")
 # Kind of a frame whose points use both definitions (different measuring systems per axis).
 MIXED = "mixed"
 POINT_KEYS = (*schema.PAIR_KEYS, "target")
-AXIS_KEYS = ("machine_id", "axis")
+AXIS_KEYS = schema.AXIS_KEYS
 # Linear tests whose interior reversal is below this share of the pendulum's: direct system.
 DIRECT_RATIO = 0.5
 # Axes named in a reason before the rest are only counted.

@@ -24,11 +24,12 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.readings.schema import AXIS_KEYS
 
 DAYS_PER_MONTH = 30.4375
 # Tests of one visit may span a few days (several shifts); more means two visits share an id.
 MAX_VISIT_SPAN_DAYS = 14.0
-SERIES_KEYS = ("machine_id", "axis")
+SERIES_KEYS = AXIS_KEYS  # one drift series per machine axis
 VISIT_KEYS = (*SERIES_KEYS, "visit")
 VISIT_COLUMNS = (*VISIT_KEYS, "date", "n_tests", "n_points", "target_kind", "backlash_um",
                  "backlash_u_um", "reversal_mean_um", "reversal_max_um")

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from features.readings import schema
 from features.readings.errors import InputError
 from models.persistence import load_estimator, save_estimator
 
@@ -28,7 +29,7 @@ MODEL_FILE = "model.json"
 TRAINING_INPUTS = "training_inputs.csv"
 
 RECOMMENDED = "wear-map"
-AXIS_KEYS = ("machine_id", "axis")  # the columns that name a machine axis
+AXIS_KEYS = schema.AXIS_KEYS  # the columns that name a machine axis
 
 
 @dataclass(frozen=True)

@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from features.readings.schema import AXIS_KEYS
 from features.statistics import bspline_basis
 
 POSITION = "target"
 HOURS = "operating_hours"
-GROUPS = ("machine_id", "axis")  # the columns that name a machine axis on a fleet
+GROUPS = AXIS_KEYS  # the columns that name a machine axis on a fleet
 AXIS_INDEX = "__axis__"  # row -> machine axis index in a fleet's local frame
 
 

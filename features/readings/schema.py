@@ -34,6 +34,8 @@ DATETIME_OPTIONAL = ("started_at", "measured_at")
 CONDITIONS = ("feed_mm_min", "dwell_s", "machine_temp_c", "ambient_temp_c", "pressure_hpa",
               "humidity_pct")
 
+# A machine axis: what a fleet's series, models and views are kept per.
+AXIS_KEYS = ("machine_id", "axis")
 # A test: one run with one method, one feed, one set of conditions.
 TEST_KEYS = ("machine_id", "axis", "visit", "test_id")
 # A linear and a pendulum test are paired when they share these (docs/data-contract.md).
