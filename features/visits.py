@@ -77,7 +77,7 @@ def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None) -> 
     return table
 
 
-def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
+def visit_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None) -> pd.DataFrame:
     """The visit series of every machine axis: its backlash (``axis_backlash``) per visit,
     dated, with the ISO reversal figures under their own names.
 
@@ -85,6 +85,8 @@ def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
     ----------
     readings : DataFrame
         Validated readings with ``visit`` and ``started_at``.
+    stats : DataFrame, optional
+        ``features.iso230.per_target(readings)`` when already computed.
 
     Returns
     -------
@@ -107,7 +109,7 @@ def visit_backlash(readings: pd.DataFrame) -> pd.DataFrame:
     source = readings.attrs.get("source", "readings")
     check_dates(readings, source)
     keys = list(VISIT_KEYS)
-    stats = iso230.per_target(readings)
+    stats = iso230.per_target(readings) if stats is None else stats
     figures = iso230.axis_figures(readings, stats)
     backlash = axis_backlash(readings, stats)
     dates = readings.groupby(keys, sort=False, observed=True)["started_at"].min()

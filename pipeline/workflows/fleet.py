@@ -282,11 +282,13 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     check_params(_parameters(), values, "fleet")
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
+    from features import iso230
     from features.visits import SERIES_KEYS, visit_backlash
     from models.drift import analyse_series
 
     readings = readings_of(data, format)
-    visits = visit_backlash(readings)
+    stats = iso230.per_target(readings)  # once, for the series and the pages alike
+    visits = visit_backlash(readings, stats)
     series = [analyse_series(g, threshold_um=threshold_um, alpha=alpha,
                              min_jump_sigma=min_jump_sigma, warn_months=warn_months)
               for _, g in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)]
@@ -294,19 +296,19 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
              if len(s.visits) < 2]
     for text in notes:
         note(text)
-    views = axis_views(series, readings, interval_days)
+    views = axis_views(series, readings, stats, interval_days)
     result = FleetResult(views, source_of(data, readings), readings, values, notes=notes)
     if out is not None:
         result.write(out)
     return result
 
 
-def axis_views(series: list, readings, interval_days: float) -> list[AxisView]:
-    """One ``AxisView`` per analysed series, worst first, each with its page name."""
+def axis_views(series: list, readings, stats, interval_days: float) -> list[AxisView]:
+    """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
+    the readings' per-target ISO statistics (``features.iso230.per_target``)."""
     from features import iso230
     from features.targets import targets_of
 
-    stats = iso230.per_target(readings)
     parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
                    iso230.axis_figures(readings, stats))
     views = [_view(s, parts, interval_days) for s in series]
