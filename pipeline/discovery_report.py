@@ -52,6 +52,19 @@ def _unexplained(gap: dict | None) -> str:
             f"<th>p (F-test)</th></tr>{rows}</table>")
 
 
+def _system(test: dict | None) -> str:
+    """The measuring-system decision and its test, one line."""
+    if not test:
+        return ""
+    line = (f"Measuring system: <b>{html.escape(str(test['system']))}</b> ({html.escape(test['test'])}: "
+            f"mean {test['mean_um']:.3g} um over {test['n']} values, t = {test['statistic']:.3g}, "
+            f"p = {test['p_value']:.2g}")
+    if "pendulum_statistic" in test:
+        line += (f"; against the pendulum tests' {test['pendulum_mean_um']:.3g} um: t = "
+                 f"{test['pendulum_statistic']:.3g}, p = {test['pendulum_p_value']:.2g}")
+    return f"<p>{line}).</p>"
+
+
 def write(result, readings, out_dir, source: str = "") -> dict:
     out = Path(out_dir)
     png = plot(result, readings, out / "discovery.png")
@@ -68,10 +81,11 @@ def write(result, readings, out_dir, source: str = "") -> dict:
         for i, table in enumerate(result.evidence, 1))
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in result.notes)
     ambiguous = '; '.join(', '.join(g) for g in result.ambiguous) or 'none'
+    system = _system(result.measuring_system)
     body = f"""<div class="summary"><p>{html.escape(source)}: named
 <b>{', '.join(result.named) or 'none'}</b>; ambiguous: {html.escape(ambiguous)}.
 Gap {result.rmse_before_um:.3f} um &rarr; {result.rmse_after_um:.3f} um; repeatability
-{result.repeatability_um:.3f} um.</p></div>
+{result.repeatability_um:.3f} um.</p>{system}</div>
 <img src="{png.name}" alt="residuals and gap per step">
 <h2>Steps</h2><table><tr><th>#</th><th>effect</th><th>parameters</th><th>95 % interval</th>
 <th>&Delta;BIC</th><th>CV gain</th><th>gap before [um]</th><th>gap after [um]</th>

@@ -121,15 +121,17 @@ def test_discover_from_python_on_a_real_test(ess_file, tmp_path):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", BacklashWarning)
         result = bl.discover(ess_file)
-    assert result.named == ["lead_error_profile"]
-    assert result.unexplained["verdict"] == "structure"
-    assert result.rmse_after_um < result.rmse_before_um
+    assert result.named == ["lead_error_profile", "reversal_profile"]
+    assert result.rmse_after_um <= 1.5 * result.repeatability_um
     shown = [str(w.message) for w in caught if w.category is BacklashWarning]
-    assert shown == result.notes and any("not explained" in n for n in shown)
+    assert shown == result.notes and any("direct measuring system" in n for n in shown)
     files = result.write(tmp_path / "new" / "discover")  # the folder is created
     assert files["html"].is_file() and files["png"].is_file()
     record = result.tracking_record()
-    assert record.params["named"] == "lead_error_profile" and record.experiment == "discover"
+    assert record.params["named"] == "lead_error_profile,reversal_profile"
+    assert record.params["measuring_system"] == "direct"
+    assert result.measuring_system["p_value"] > 0.05
+    assert record.experiment == "discover"
 
 
 @pytest.mark.parametrize("baseline, words", [

@@ -66,27 +66,38 @@ def test_twin_axis_with_lead_profile_and_reversal_along_the_axis(scenarios):
 
 
 @pytest.mark.parametrize("name", ["ess", "psi"])
-def test_structured_real_ecmc_tests_are_never_called_noise(name, ess_file, psi_file, tmp_path,
-                                                          capsys):
-    """Both real files hold residual structure their own F-test finds significant (ESS:
-    position x direction, 80 % of the gap left): they get a name or an explicit 'structure'
-    verdict with the table, never 'noise-dominated'."""
+def test_structured_real_ecmc_tests_are_named_or_explicitly_unexplained(name, ess_file, psi_file,
+                                                                        tmp_path, capsys):
+    """Both real files hold residual structure their own F-test finds significant. ESS (5
+    targets, reversal value -32, +10, +10, -13, -44 um: it changes sign, so no clearance) gets
+    a lead profile and a reversal profile and its gap falls from 15.1 um to within 1.5x its
+    robust floor (1.9 um); PSI (gap 1.4x its floor) gets the explicit 'structure' verdict
+    with the table. Neither is ever called noise before a name."""
     path = ess_file if name == "ess" else psi_file
     assert main(["discover", str(path), "--out", str(tmp_path / "d"), "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert result["unexplained"]["verdict"] == "structure"
-    assert result["unexplained"]["structure"][0]["p_value"] < 1e-3
-    assert not any("noise-dominated" in n for n in result["notes"])
+    system = result["measuring_system"]
+    # interior reversal values of both signs: no lost motion there, a direct system
+    assert system["system"] == "direct" and system["n"] == 3 and system["p_value"] > 0.05
+    assert any("direct measuring system" in n and "p = " in n for n in result["notes"])
+    html = (tmp_path / "d" / "discovery.html").read_text()
+    assert "Measuring system: <b>direct</b>" in html
     if name == "ess":
         # the two readings the ISO step flags no longer inflate the repeatability (14 um with
         # them, about 2 um without), and the notes say so
         assert any("2 reading(s) flagged as outliers" in n and "of the repeatability" in n
                    for n in result["notes"])
         assert 1.0 < result["repeatability_um"] < 3.0
-        assert result["named"] == ["lead_error_profile"]
-        assert result["rmse_after_um"] < 0.5 * result["rmse_before_um"]
-        assert result["unexplained"]["strongest"] == "position x direction"
-    assert "noise-dominated" not in (tmp_path / "d" / "discovery.html").read_text()
+        assert result["named"] == ["lead_error_profile", "reversal_profile"]
+        assert result["rmse_before_um"] == pytest.approx(15.1, abs=0.1)
+        assert result["rmse_after_um"] <= 1.5 * result["repeatability_um"]
+        assert result["steps"][0]["rmse_after_um"] == pytest.approx(5.7, abs=0.1)
+    else:
+        assert result["named"] == []
+        assert result["unexplained"]["verdict"] == "structure"
+        assert result["unexplained"]["structure"][0]["p_value"] < 1e-3
+        assert not any("noise-dominated" in n for n in result["notes"])
+        assert "noise-dominated" not in html and "Unexplained gap" in html
 
 
 def cycle_offset_readings(seed: int = 0) -> pd.DataFrame:
@@ -151,7 +162,10 @@ def test_foreign_csv_names_the_missing_effect(tmp_path, capsys, feed_effect, nam
     result = json.loads(captured.out)
     assert result["named"] == named
     assert set(result) == {"named", "ambiguous", "steps", "rmse_before_um", "rmse_after_um",
-                           "repeatability_um", "notes", "unexplained"}
+                           "repeatability_um", "notes", "unexplained", "measuring_system"}
+    # lost motion at every interior target of these linear tests: an indirect system
+    assert result["measuring_system"]["system"] == "indirect"
+    assert result["measuring_system"]["p_value"] < 1e-6
     if named:
         (step,) = result["steps"]
         assert step["effect"] == "backlash_feed"

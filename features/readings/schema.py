@@ -57,7 +57,7 @@ METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "
 EFFECTS = (
     "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
     "lead_error_linear", "lead_error_periodic", "lead_error_profile", "thermal_expansion",
-    "thermal_drift", "air_refraction", "abbe", "dwell_settling",
+    "thermal_drift", "air_refraction", "abbe", "dwell_settling", "reversal_profile",
 )
 NO_EFFECT = "none"
 
@@ -78,3 +78,9 @@ def position_unit(axis: str) -> str:
 def deviation_scale(axis: str) -> float:
     """Factor from position units to deviation units: mm -> um or deg -> arcsec."""
     return 3600.0 if is_rotary(axis) else 1000.0
+
+
+# ``frame.attrs[UNSTATED]``: the name columns a reader filled in because its file does not state
+# them (an ecmc file names no axis; its machine is the file's name). ``--machine``/``--axis``
+# then name them instead of selecting tests (``features.readings.selection``).
+UNSTATED = "unstated"

@@ -19,6 +19,7 @@ from models.discovery.design import (
     residualise,
     stack,
 )
+from models.discovery.system import SYSTEM_P
 from models.discovery.terms import (
     PROFILES,
     RECORDS,
@@ -27,6 +28,7 @@ from models.discovery.terms import (
     profile_basis,
     quadrature_pairs,
     searched_nuisance,
+    signed_by_approach,
 )
 from models.physics import effects
 
@@ -232,8 +234,10 @@ def amplitude(design, model, base_coef, name, nuisance, coef, noise) -> tuple[fl
     if "n_control" in nuisance:
         targets = np.unique(design.x)
         profile = profile_basis(targets, nuisance["n_control"]) @ coef
-        line = np.polyval(np.polyfit(targets, profile, 1), targets)
-        amp = float(np.max(np.abs(profile - line)))
+        # a constant reversal value is the backlash, a straight line the lead error
+        trend = (np.full_like(profile, profile.mean()) if signed_by_approach(name)
+                 else np.polyval(np.polyfit(targets, profile, 1), targets))
+        amp = float(np.max(np.abs(profile - trend)))
         ok = amp <= record.plausible[1] if record.kind == "position" else amp <= 50.0
     elif quadrature_pairs(name):
         amp = float(np.hypot(*coef[:2]))
@@ -241,11 +245,34 @@ def amplitude(design, model, base_coef, name, nuisance, coef, noise) -> tuple[fl
     else:
         amp = float(coef[0])
         ok = record.plausible[0] <= amp <= record.plausible[1]
+    if ok and signed_by_approach(name) and design.reversal is None:
+        ok = reversal_changes_sign(design, noise)
     if ok and record.kind == "lost_motion" and "backlash" in model:
         b0 = float(base_coef[column_start(design, model, "backlash")])
         shape = _lost_motion_shape(design, name, nuisance, coef)
         ok = b0 + float(np.percentile(shape, 5)) >= -noise
     return amp, ok
+
+
+def reversal_changes_sign(design: Design, noise: float) -> bool:
+    """Whether the measured reversal value B(x) = mean(+) - mean(-) [um] changes sign along
+    the axis: some target significantly above zero and some below (z-test with the reading
+    repeatability ``noise`` [um], Bonferroni over the targets at ``SYSTEM_P``). With an
+    indirect measuring system a clearance b(x) >= 0 gives B(x) = -b(x), one sign at every
+    target; only a reversal value that changes sign is not a clearance."""
+    from scipy.stats import norm
+
+    if not np.isfinite(noise) or noise <= 0:
+        return False
+    frame = pd.DataFrame({"x": design.x, "up": design.d > 0, "y": design.y0})
+    stats = frame.groupby(["x", "up"])["y"].agg(["mean", "count"]).unstack("up").dropna()
+    if stats.empty:
+        return False
+    b = stats[("mean", True)] - stats[("mean", False)]
+    se = noise * np.sqrt(1 / stats[("count", True)] + 1 / stats[("count", False)])
+    z = b / se
+    level = norm.isf(SYSTEM_P / len(z))
+    return bool(z.max() > level and z.min() < -level)
 
 
 def column_start(design: Design, model: dict, name: str) -> int:

@@ -9,17 +9,38 @@ import pandas as pd
 
 from features import iso230
 from features.readings.errors import InputError
-from models.discovery.candidates import LOST_MOTION_PROFILE, candidates
-from models.discovery.design import Design, lstsq_fit, rmse, stack
+from models.discovery.candidates import (
+    LOST_MOTION_PROFILE,
+    amplitude,
+    candidates,
+    column_start,
+)
+from models.discovery.design import Design, bic, lstsq_fit, rank, rmse, stack
 from models.discovery.structure import (
     NOISE_RATIO,
     STOP_RATIO,
     confounding_notes,
     structured,
+    structured_beyond,
     unexplained,
 )
-from models.discovery.terms import PROFILES, RECORDS, missing_inputs, repeatability_um
-from models.discovery.verdicts import BOOT_MIN_RUNS, bootstrap, choose, nested, parameters
+from models.discovery.system import measuring_system
+from models.discovery.terms import (
+    PROFILES,
+    RECORDS,
+    control_counts,
+    missing_inputs,
+    nuisance_grid,
+    repeatability_um,
+)
+from models.discovery.verdicts import (
+    BOOT_MIN_RUNS,
+    bootstrap,
+    choose,
+    clearance_first,
+    nested,
+    parameters,
+)
 
 DEFAULT_BASELINE = ("backlash", "lead_error_linear")
 COMPENSATE_HINT = ("a compensation table can correct it: backlash compensate (pitch-error "
@@ -58,13 +79,14 @@ class Discovery:
     residual_before: np.ndarray | None = None
     residual_after: np.ndarray | None = None
     used: np.ndarray | None = None                 # readings kept in the fit (mask)
+    measuring_system: dict | None = None           # the decision and its test
 
     def to_json(self) -> dict:
         return {"named": self.named, "ambiguous": self.ambiguous,
                 "steps": [s.__dict__ for s in self.steps],
                 "rmse_before_um": self.rmse_before_um, "rmse_after_um": self.rmse_after_um,
                 "repeatability_um": self.repeatability_um, "notes": self.notes,
-                "unexplained": self.unexplained}
+                "unexplained": self.unexplained, "measuring_system": self.measuring_system}
 
 
 def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int = 4,
@@ -94,10 +116,14 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
             f"{int(flagged.sum())} reading(s) flagged as outliers by the ISO 230-2 step left "
             "out of the fit and of the repeatability")
     result.used = ~flagged
-    design = Design(readings.loc[~flagged].reset_index(drop=True))
+    kept = readings.loc[~flagged].reset_index(drop=True)
+    design = Design(kept)
     skipped = _skipped(design, baseline, source, result)
-    model = {name: {} for name in baseline}
-    _choose_system(design, model, result)
+    # a profile in the baseline is its general form at its finest (a compensation table per
+    # target): its record's own control points are not fitted
+    model = {name: ({"n_control": max(control_counts(design.x))} if name in PROFILES else {})
+             for name in baseline}
+    _choose_system(design, model, kept, result)
     X = stack(design, model)
     _, resid = lstsq_fit(X, design.y0)
     result.residual_before = resid
@@ -115,11 +141,14 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
                             "effects that act between runs")
     for _ in range(0 if single_noise else max_steps):
         rmse_now = rmse(resid, design, X)
-        if rmse_now <= STOP_RATIO * result.repeatability_um:
+        # within the repeatability: stop, unless the residual still varies with a factor no
+        # effect of the model acts along (a slow drift inflates the floor itself)
+        if (rmse_now <= STOP_RATIO * result.repeatability_um
+                and not structured_beyond(design, resid, model)):
             break
         table = candidates(design, model, skipped, result.repeatability_um, barred)
         result.evidence.append(table.drop(columns=["family"], errors="ignore"))
-        passing = table[table["passes"]]
+        passing = clearance_first(table[table["passes"]])
         if passing.empty:
             break
         sse0 = float(np.sum(lstsq_fit(X, design.y0)[1] ** 2))
@@ -144,6 +173,7 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
                 f"better (the effect's shape differs a little from the record's): "
                 f"{RECORDS[name].separating_test}")
         model[name] = winner["nuisance"]
+        _refit_nuisances(design, model, result)
         X = stack(design, model)
         coef, resid = lstsq_fit(X, design.y0)
         result.named.append(name)
@@ -163,6 +193,41 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
     confounding_notes(design, model, skipped, result)
     result.unexplained = unexplained(design, resid, result, single_noise)
     return result
+
+
+def _refit_nuisances(design: Design, model: dict, result: Discovery) -> None:
+    """Forward selection that re-fits: with a new effect in the model, each effect named
+    before it gets its nuisance value again, the others held, since it was chosen while the
+    new one was missing: a specific effect's searched value over its grid, a general form's
+    number of control points by BIC. A changed value updates the model, the named step's
+    parameters (at the current fit) and the notes."""
+    n = len(design.y0)
+    for step in result.steps:
+        name, nuisance = step.effect, model[step.effect]
+        if "n_control" in nuisance:
+            key, grid = "n_control", list(control_counts(design.x))
+        else:
+            key, grid = nuisance_grid(name, design.x)
+        if key is None or key not in nuisance or len(grid) < 2:
+            continue
+        score = {}
+        for value in (nuisance[key], *grid):
+            trial = {**model, name: {**nuisance, key: value}}
+            X = stack(design, trial)
+            score[value] = bic(float(np.sum(lstsq_fit(X, design.y0)[1] ** 2)), n, rank(X))
+        best = min(score, key=score.get)
+        if score[best] < score[nuisance[key]]:
+            model[name] = {**nuisance, key: best}
+            coef = lstsq_fit(stack(design, model), design.y0)[0]
+            start = column_start(design, model, name)
+            own = coef[start:start + design.column(name, model[name]).shape[1]]
+            amp_key = next(iter(step.interval))
+            amp, _ = amplitude(design, model, coef, name, model[name], own, 0.0)
+            step.parameters = parameters(design, model, name, coef,
+                                         {"nuisance": model[name], "amplitude": amp_key,
+                                          "coef": amp})
+            result.notes.append(f"{name}: {key} re-fitted to {best:g} with "
+                                f"{list(model)[-1]} in the model")
 
 
 def check_baseline(baseline, source: str = "readings") -> list[str]:
@@ -197,10 +262,21 @@ def _skipped(design: Design, baseline: list, source: str, result: Discovery) -> 
     return skipped
 
 
-def _choose_system(design: Design, model: dict, result: Discovery) -> None:
-    """Indirect or direct measuring system: whichever fits the baseline's lost motion better
-    (they differ only where some readings do not follow a reversal)."""
-    if not any(RECORDS[m].kind == "lost_motion" for m in model) or design.reversal_flags.all():
+def _choose_system(design: Design, model: dict, readings: pd.DataFrame,
+                   result: Discovery) -> None:
+    """Indirect or direct measuring system, for the baseline and every candidate: from the
+    interior reversal values of the linear tests (``models.discovery.system``); without them,
+    whichever fits the baseline's lost motion better (they differ only where some readings do
+    not follow a reversal)."""
+    if design.reversal_flags.all():
+        return  # every reading follows a reversal: both systems see the same lost motion
+    test = measuring_system(readings)
+    if test.system is not None:
+        design.system = test.system
+        result.measuring_system = test.to_json()
+        result.notes.append(test.note())
+        return
+    if not any(RECORDS[m].kind == "lost_motion" for m in model):
         return
     sse = {}
     for system in ("indirect", "direct"):

@@ -113,6 +113,27 @@ def significant_structure(design: Design, resid: np.ndarray) -> list[dict]:
     return [s for s in structure if s["p_value"] < level]
 
 
+def acts_along(name: str) -> set[str]:
+    """The residual factors an effect acts along: those whose input (``FACTOR_INPUTS``) it
+    reads, the direction for lost motion, and run x position when it reads the target and a
+    condition that changes from run to run."""
+    record = RECORDS[name]
+    inputs = set(record.inputs) | ({"direction"} if record.kind == "lost_motion" else set())
+    factors = {f for f, column in FACTOR_INPUTS.items()
+               if column in inputs and f != "run x position"}
+    if "target" in inputs and inputs - {"target", "direction"}:
+        factors.add("run x position")
+    return factors
+
+
+def structured_beyond(design: Design, resid: np.ndarray, model: dict) -> bool:
+    """Whether the residual varies significantly along a factor no effect of the model acts
+    along: what a floor inflated by a slow drift would hide, unlike the small shape difference
+    of an effect already named."""
+    acts = set().union(*(acts_along(name) for name in model))
+    return any(s["against"] not in acts for s in significant_structure(design, resid))
+
+
 def structured(design: Design, resid: np.ndarray) -> bool:
     """Whether the residual holds structure its own F-test finds significant: a file that
     does is never called noise-dominated."""
@@ -136,7 +157,9 @@ def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -
                f"({noise:.3g} um) of a single run" if single_noise else
                f"the residual shows no significant structure (F-test, p >= {level:.2g}) against "
                + ", ".join(s["against"] for s in structure))
-        out["reason"] = f"noise-dominated: {why}; nothing to name"
+        out["reason"] = (f"noise-dominated: {why}; "
+                         + ("nothing more to name after " + ", ".join(result.named)
+                            if result.named else "nothing to name"))
     else:
         top = significant[0]
         column = FACTOR_INPUTS[top["against"]]

@@ -118,6 +118,12 @@ def quadrature_pairs(name: str) -> list[tuple[str, str]]:
 PROFILES = tuple(name for name in RECORDS if any(n.kind == "profile" for n in nuisances(name)))
 
 
+def signed_by_approach(name: str) -> bool:
+    """A profile along the axis that reads the approach direction: its general smooth form is
+    the half-difference between the directions (``reversal_profile``), not a common one."""
+    return name in PROFILES and "direction" in RECORDS[name].inputs
+
+
 # ------------------------------------------------------------------------------ data
 def conditions_of(readings: pd.DataFrame) -> dict:
     """Per-reading arrays the effects read; absent inputs are left out."""
@@ -183,6 +189,8 @@ def effect_column(name: str, x, d, cond, nuisance: dict | None = None,
     nuisance = dict(nuisance or {})
     if "n_control" in nuisance:
         value = profile_basis(x, int(nuisance["n_control"]))
+        if signed_by_approach(name):  # the profile is the reversal value r(x): e = d r(x) / 2
+            value = value * np.asarray(d, float)[:, None] / 2
     else:
         fixed = {n.key: data_value(n.word, x) for n in nuisances(name) if n.kind == "data"}
         pairs = quadrature_pairs(name)

@@ -8,9 +8,17 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from models.discovery.candidates import BIC_THRESHOLD, amplitude, column_start
-from models.discovery.design import Design, bic, cv_rmse, lstsq_fit, stack
-from models.discovery.terms import RECORDS, data_value, quadrature_pairs
+from models.discovery.candidates import BIC_THRESHOLD, amplitude, column_start, fit_batch
+from models.discovery.design import (
+    Design,
+    bic,
+    cv_rmse,
+    lstsq_fit,
+    projector,
+    residualise,
+    stack,
+)
+from models.discovery.terms import RECORDS, data_value, quadrature_pairs, signed_by_approach
 
 BOOT_SAMPLES = 40
 BOOT_AGREEMENT = 0.8
@@ -53,6 +61,23 @@ def choose(design: Design, model: dict, passing: pd.DataFrame, sse0: float) -> C
     return Choice(winner, ambiguous_group(winner, specific.drop_duplicates("effect")), None)
 
 
+def clearance_first(passing: pd.DataFrame) -> pd.DataFrame:
+    """A direction-dependent profile (``reversal_profile``) is named only where a clearance
+    cannot explain it: a lost-motion candidate passes only when b(x) >= 0 holds along the axis
+    (a reversal value of one sign at every target), and then the profile yields to it unless
+    its BIC is lower by more than ``CLOSE_BIC`` (with an indirect system the two general forms
+    are the same columns)."""
+    if passing.empty:
+        return passing
+    lost = [RECORDS[e].kind == "lost_motion" for e in passing["effect"]]
+    if not any(lost):
+        return passing
+    best = float(passing.loc[lost, "delta_bic"].min())
+    keep = [not (signed_by_approach(row["effect"]) and row["delta_bic"] > best - CLOSE_BIC)
+            for _, row in passing.iterrows()]
+    return passing[keep]
+
+
 def target_cv(design: Design, model: dict, candidate) -> float:
     """Held-out RMSE of model + candidate, leaving out one target position at a time: how
     well the candidate's shape predicts the error where it was not fitted."""
@@ -78,9 +103,14 @@ def ambiguous_group(winner, pool: pd.DataFrame) -> set:
 
 
 def bootstrap(design: Design, model: dict, winner, passing: pd.DataFrame, rng):
-    """Resample runs (cycles of a single run) with replacement: the winner must stay the best
-    (by BIC) among the passing candidates of its kind, and its amplitude's 95 % interval must
-    exclude zero. Returns (stable, [low, high])."""
+    """Resample runs (cycles of a single run) with replacement: the winner must hold among the
+    passing candidates of its kind, and its amplitude's 95 % interval must exclude zero.
+    Returns (stable, [low, high]).
+
+    The winner holds in a resample when it is the best by BIC, or when it still lowers BIC by
+    more than ``-BIC_THRESHOLD`` with the resample's best candidate in the model: a rival
+    that replaces it is an alternative explanation, one that does not is a second effect
+    (both members of a pair are then named, one per step)."""
     y = design.y0
     base = stack(design, model)
     rivals = passing[passing["form"] == winner["form"]].drop_duplicates("effect")
@@ -90,18 +120,35 @@ def bootstrap(design: Design, model: dict, winner, passing: pd.DataFrame, rng):
     for _ in range(BOOT_SAMPLES):
         rows = resample(design, rng)
         score = {}
+        q = projector(base[rows])
+        r0 = residualise(y[rows], q)[:, 0]
         for name, col in cols.items():
-            X = np.column_stack([base, col])[rows]
-            coef, resid = lstsq_fit(X, y[rows])
-            score[name] = bic(float(np.sum(resid ** 2)), len(rows), col.shape[1])
+            # the candidate's coefficients as ``evaluate`` found them (model projected out,
+            # least norm where the design leaves a direction of them unidentified)
+            fit = fit_batch(col[rows][None], q, r0)[0]
+            score[name] = bic(fit.sse, len(rows), col.shape[1])
             if name == winner["effect"]:
-                amp, _ = amplitude(design, model, coef[:base.shape[1]], name,
-                                   winner["nuisance"], coef[base.shape[1]:], 0.0)
+                base_coef = lstsq_fit(base[rows], y[rows] - col[rows] @ fit.coef)[0]
+                amp, _ = amplitude(design, model, base_coef, name, winner["nuisance"],
+                                   fit.coef, 0.0)
                 amps.append(amp)
-        wins += min(score, key=score.get) == winner["effect"]
+        best = min(score, key=score.get)
+        wins += best == winner["effect"] or _complements(
+            base[rows], cols[best][rows], cols[winner["effect"]][rows], y[rows])
     low, high = np.percentile(amps, [2.5, 97.5])
     stable = wins / BOOT_SAMPLES >= BOOT_AGREEMENT and (low > 0 or high < 0)
     return stable, [float(low), float(high)]
+
+
+def _complements(base: np.ndarray, rival: np.ndarray, own: np.ndarray, y: np.ndarray) -> bool:
+    """Whether ``own`` columns lower BIC by more than ``-BIC_THRESHOLD`` when added to the
+    model with the ``rival``'s columns in it: both are needed, not one or the other."""
+    with_rival = np.column_stack([base, rival])
+    sse_rival = float(np.sum(lstsq_fit(with_rival, y)[1] ** 2))
+    q = projector(with_rival)
+    fit = fit_batch(own[None], q, residualise(y, q)[:, 0])[0]
+    n, k = len(y), q.shape[1]
+    return fit.rank > 0 and bic(fit.sse, n, k + fit.rank) - bic(sse_rival, n, k) < BIC_THRESHOLD
 
 
 def resample(design: Design, rng) -> np.ndarray:
@@ -123,7 +170,8 @@ def resample(design: Design, rng) -> np.ndarray:
 def parameters(design: Design, model: dict, name: str, coef: np.ndarray, winner) -> dict:
     """The named effect's fitted parameters: its nuisance values, its amplitude, and for a
     general smooth form the control points [um] at their positions [mm]."""
-    own = coef[column_start(design, model, name):]
+    start = column_start(design, model, name)
+    own = coef[start:start + design.column(name, model[name]).shape[1]]
     nuisance = dict(winner["nuisance"])
     params = {**nuisance, winner["amplitude"]: float(winner["coef"])}
     if "n_control" in nuisance:

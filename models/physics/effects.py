@@ -257,6 +257,54 @@ def lead_error_profile(position_mm, direction, conditions, p0_um=0.0, p1_um=2.0,
     return basis @ points
 
 
+def reversal_profile(position_mm, direction, conditions, r0_um=4.0, r1_um=4.0, r2_um=0.0,
+                     r3_um=-4.0, r4_um=-4.0, start_mm=0.0, stop_mm=350.0):
+    """Direction-dependent positioning error along the axis that may change sign: the carriage
+    pitches one way when driven forward and the other way when driven back (a direction-
+    dependent pitch seen through an Abbe offset), or the hysteresis of screw and nut varies
+    along the screw. What separate forward and reverse compensation tables correct.
+
+    Parameters
+    ----------
+    position_mm : array-like
+        Target position x [mm].
+    direction : array-like
+        Approach direction d (+1 or -1).
+    r0_um, r1_um, r2_um, r3_um, r4_um : float
+        Control-point values R_i of the reversal value r(x) [um], evenly spaced over the travel.
+    start_mm, stop_mm : float
+        Travel over which the curve is defined [mm]; t = (x - start) / (stop - start).
+
+    Returns
+    -------
+    e : ndarray
+        e = (d / 2) sum_i C(4, i) t^i (1 - t)^(4 - i) R_i [um]: the reversal value at x,
+        e(+) - e(-) = r(x), follows the Bezier curve, of either sign.
+
+    Notes
+    -----
+    A clearance b(x) >= 0 (``backlash``, ``backlash_position``) makes the + approach read
+    b/2 low and the - approach b/2 high with an indirect measuring system: its reversal value
+    is -b(x) <= 0 at every target. A reversal value that changes sign along the axis, or a
+    direction-dependent error at the interior targets of a linear test with a direct
+    measuring system (which hides lost motion there), is not a clearance: it is this effect.
+
+    References
+    ----------
+    Seed 000, eqs. 1-3 and 17 (Bezier intra-axis model; angular error through the Abbe
+    offset) applied to the half-difference between the directions, ISO 230-2:2014 (reversal
+    value B_i at each target); the discovery workflow fits the general form, eqs. 4-5 and 20
+    (B-spline of degree 2), with the number of control points chosen by BIC.
+    """
+    t = unit_interval(position_mm, start_mm, stop_mm)
+    points = np.stack(np.broadcast_arrays(r0_um, r1_um, r2_um, r3_um, r4_um), axis=-1)
+    points = np.asarray(points, float)
+    basis = bezier_basis(t, 4)
+    # per-test control points (tests, 1, 5) against (tests, points, 5)
+    value = np.sum(basis * points, axis=-1) if points.ndim > 1 else basis @ points
+    return np.asarray(direction, float) * value / 2
+
+
 def thermal_expansion(position_mm, direction, conditions, alpha_um_per_m_k=STEEL_ALPHA_UM_PER_M_K,
                       x_fixed_mm=0.0):
     """Screw expansion from its fixed bearing.
@@ -505,6 +553,18 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
             separating_test="repeat with several (at least three) dwell times",
             reading="the position loop overshoots against the approach and settles during the "
                     "dwell"),
+    _record(reversal_profile, kind="position", unit="um", amplitude="peak_um",
+            plausible=(0.0, 100.0),
+            nuisance={"n_control": "per_target", "start_mm": "start", "stop_mm": "stop"},
+            inputs=("target", "direction"), reference=ERROR_MODELS + "; ISO 230-2:2014",
+            separating_test="a clearance b(x) >= 0 gives a reversal value of one sign at every "
+                            "target: measure the reversal value at more targets (a sign change "
+                            "along the axis is not lost motion), or measure pitch along the "
+                            "axis in both directions",
+            reading="the error depends on the direction of approach and changes along the "
+                    "axis, of either sign (the carriage pitches differently each way, or the "
+                    "screw's hysteresis varies along it): what separate forward and reverse "
+                    "compensation tables correct (backlash compensate)"),
 )}
 
 # Derived views, kept for the twin and older callers.

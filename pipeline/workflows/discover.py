@@ -43,7 +43,8 @@ class DiscoveryResult(Result):
     ----------
     discovery : models.discovery.Discovery
         Steps (effect, parameters, 95 % interval, delta BIC, CV gain, gap before and after
-        [um]), ambiguous groups, residuals before and after, the unexplained gap.
+        [um]), ambiguous groups, residuals before and after, the unexplained gap, the
+        measuring-system decision and its test.
     baseline : list of str
         Effects of the simulation model the search started from.
     source : str
@@ -87,6 +88,12 @@ class DiscoveryResult(Result):
         return self.discovery.repeatability_um
 
     @property
+    def measuring_system(self) -> dict | None:
+        """The measuring system decided from the interior reversal values, with its test
+        (statistic, p), or None when the readings hold none."""
+        return self.discovery.measuring_system
+
+    @property
     def unexplained(self) -> dict | None:
         """The structure left in the residual, or None when the gap is explained."""
         return self.discovery.unexplained
@@ -112,7 +119,8 @@ class DiscoveryResult(Result):
             "discover", f"discover {self.source}",
             params={"data": self.source, "baseline": ",".join(self.baseline),
                     "data_sha256": data_hash(self.readings),
-                    "named": ",".join(d.named) or "none"},
+                    "named": ",".join(d.named) or "none",
+                    "measuring_system": (d.measuring_system or {}).get("system") or "n/a"},
             metrics={"rmse_before_um": d.rmse_before_um, "rmse_after_um": d.rmse_after_um,
                      "repeatability_um": d.repeatability_um},
             artifacts=list(self.files.values()), artifact_path="discover")
