@@ -37,11 +37,11 @@ from scipy.special import gammaincinv  # scipy.special, not scipy.stats: seconds
 from features.readings import schema
 from features.readings.errors import InputError
 from features.readings.validation import check_readings
+from features.standards import ISO230_2
 
 PER_TARGET_FIGURES = ("n_up", "n_down", "mean_up", "mean_down", "mean_bi", "s_up", "s_down",
                       "B_i", "R_up_i", "R_down_i", "R_i")
-AXIS_FIGURES = ("A", "A_up", "A_down", "E", "E_up", "E_down", "M", "R", "R_up", "R_down",
-                "B", "B_mean")
+AXIS_FIGURES = ISO230_2.figures
 # Carried from the readings to both result tables: first value per test.
 TEST_COLUMNS = ("method", "repeat", "feed_mm_min", "dwell_s", "started_at", "operating_hours")
 # Environment: mean over the readings at a target (per target) or over the test (per axis).

@@ -20,7 +20,7 @@ from features.readings.errors import BacklashWarning, InputError
 _WHERE = {
     "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
     "ingest": "ingest",
-    "iso": "iso", "simulate": "simulate",
+    "iso": "iso", "report": "report", "simulate": "simulate",
     "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
     "backtest": "compare", "tune": "tune",
     "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
@@ -29,7 +29,7 @@ _WHERE = {
 }
 __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
     "BacklashWarning", "InputError", "backtest", "compare", "compensate", "convert", "discover",
-    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "predict", "rank", "read", "replicate",
+    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "predict", "rank", "read", "replicate", "report",
     "simulate", "train", "tune", "uncertainty", "validate", "write",
 ]
 

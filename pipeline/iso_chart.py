@@ -63,3 +63,28 @@ def plot_tests(targets: pd.DataFrame, figures: pd.DataFrame, path) -> None:
         ax_reversal.sharex(ax)
         draw_test(ax, ax_reversal, targets.loc[mine], row)
     save_figure(fig, path)
+
+
+def draw_readings(ax, readings: pd.DataFrame, outlier: pd.Series) -> None:
+    """Every reading of one test on ``ax`` (dots, by direction) and the ISO-flagged outliers
+    ringed and labelled, so that a kept outlier is seen as a reading, not only as a wider
+    ±2s band.
+
+    Parameters
+    ----------
+    readings : DataFrame
+        The test's readings (``target`` [mm or deg], ``direction``, ``deviation_um``).
+    outlier : Series of bool
+        The flag of each reading (``features.iso230.outliers``), aligned with ``readings``.
+    """
+    for sign, colour in (("+", UP), ("-", DOWN)):
+        mine = readings["direction"] == sign
+        ax.plot(readings.loc[mine, "target"], readings.loc[mine, "deviation_um"], ".",
+                color=colour, ms=3, alpha=0.6, label=f"readings {sign}")
+    flagged = readings.loc[outlier.reindex(readings.index, fill_value=False)]
+    if len(flagged):
+        ax.plot(flagged["target"], flagged["deviation_um"], "o", mfc="none", mec="black",
+                ms=9, mew=1.2, label="outlier (ISO flag)")
+        for r in flagged.itertuples():
+            ax.annotate(f"{r.deviation_um:.1f}", (r.target, r.deviation_um), fontsize=6,
+                        xytext=(5, 3), textcoords="offset points")

@@ -17,11 +17,11 @@ READINGS_HELP = DATA_HELP + STORE_HELP
 
 def add_readings_argument(parser: argparse.ArgumentParser, dest: str = "data",
                           help: str | None = None, metavar: str | None = None,
-                          skip: tuple[str, ...] = ()) -> None:
-    """DATA (a readings file or a fleet store), ``--format`` and one option per test filter
-    (except ``skip``): every command that reads readings declares them here, so their choices
-    and help are the same everywhere."""
-    parser.add_argument(dest, metavar=metavar,
+                          skip: tuple[str, ...] = (), nargs: str | None = None) -> None:
+    """DATA (a readings file or a fleet store; several with ``nargs="+"``), ``--format`` and
+    one option per test filter (except ``skip``): every command that reads readings declares
+    them here, so their choices and help are the same everywhere."""
+    parser.add_argument(dest, metavar=metavar, nargs=nargs,
                         help=READINGS_HELP if help is None else help + STORE_HELP)
     parser.add_argument("--format", default="auto", choices=FORMATS,
                         help="input layout of a file (default: detect)")
@@ -34,12 +34,20 @@ def add_readings_argument(parser: argparse.ArgumentParser, dest: str = "data",
 def readings_arg(args, dest: str = "data"):
     """What a workflow gets as DATA: the path as given for a readings file without filters
     (the workflow reads it), else the validated frame of the store or file with only the
-    selected tests (a store's URL without its password as ``attrs["source"]``)."""
+    selected tests (a store's URL without its password as ``attrs["source"]``); a list of
+    them when the argument took several inputs."""
+    value = getattr(args, dest)
+    if isinstance(value, list):
+        inputs = [_input(one, args) for one in value]
+        return inputs[0] if len(inputs) == 1 else inputs
+    return _input(value, args)
+
+
+def _input(value: str, args):
     import os
 
     from pipeline.store import is_store
 
-    value = getattr(args, dest)
     filters = selected(args)
     if not filters and not (is_store(value) or os.path.isdir(value)):
         return value

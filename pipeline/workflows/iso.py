@@ -1,5 +1,5 @@
-"""ISO 230-2 figures of every test in a readings file: per target and per axis, with the
-readings far from their siblings flagged (and, on request, left out).
+"""ISO 230-2 figures of every test in one or more readings files: per target and per axis,
+with the readings far from their siblings flagged (and, on request, left out).
 
 >>> import backlash as bl
 >>> result = bl.iso("ess_mcu1025_ISO230.dat")             # doctest: +SKIP
@@ -16,9 +16,10 @@ uncertainties of A, E, M, R and B at its own measuring length and number of runs
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from features import standards
 from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
@@ -43,10 +44,11 @@ def _parameters() -> dict:
     from sklearn.utils._param_validation import StrOptions
 
     return {
-        "data": [str, os.PathLike, pd.DataFrame],
+        "data": [str, os.PathLike, pd.DataFrame, list, tuple],
         "format": [StrOptions(set(schema.FORMATS))],
         "drop_outliers": ["boolean"],
         "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
+        "standard": [StrOptions(set(standards.NAMES))],
     }
 
 
@@ -72,6 +74,12 @@ class IsoResult(Result):
         Whether the outliers were left out of the figures.
     budget : features.uncertainty.UncertaintyBudget or None
         The uncertainty budget the ``U_*_um`` columns come from, if one was given.
+    standard : features.standards.Standard
+        The standard the figures follow.
+    readings : DataFrame or None
+        Every reading of the tests, the outliers included whether dropped or kept.
+    sources : dict
+        The file (or frame) each test was read from, by its ``TEST_KEYS`` tuple.
     """
 
     targets: object  # pandas.DataFrame
@@ -79,6 +87,9 @@ class IsoResult(Result):
     outliers: object
     dropped: bool = False
     budget: unc.UncertaintyBudget | None = None
+    standard: standards.Standard = standards.ISO230_2
+    readings: object = None
+    sources: dict = field(default_factory=dict)
 
     def _extra(self) -> list[str]:
         """The uncertainty columns the figures carry (none without a budget)."""
@@ -188,14 +199,59 @@ def _budget(source) -> unc.UncertaintyBudget:
     return budget
 
 
+def read_tests(data, format: str = "auto"):
+    """The readings of one or more files (or frames) as one frame, and the source of each test.
+
+    Parameters
+    ----------
+    data : str, path-like, DataFrame or list of them
+        Readings files in any accepted layout, fleet stores, or frames ``read`` returned.
+    format : str
+        Input layout of the files, ``"auto"`` to recognise each.
+
+    Returns
+    -------
+    readings : DataFrame
+        Every reading, indexed 0..n-1.
+    sources : dict
+        ``TEST_KEYS`` tuple -> the file (or frame) the test came from.
+
+    Raises
+    ------
+    InputError
+        An unreadable input, an empty list, or a test (same ``TEST_KEYS``) in two inputs.
+    """
+    import pandas as pd
+
+    items = list(data) if isinstance(data, (list, tuple)) else [data]
+    if not items:
+        raise InputError("is empty; expected one or more readings files", parameter="data")
+    keys, frames, sources = list(schema.TEST_KEYS), [], {}
+    for i, item in enumerate(items):
+        if not isinstance(item, (str, os.PathLike, pd.DataFrame)):
+            raise InputError(f"item {i} is a {type(item).__name__}; expected a readings file "
+                             "or frame", parameter="data")
+        frame = readings_of(item, format)
+        name = frame.attrs.get("source", f"data[{i}]")
+        for test in frame[keys].drop_duplicates().itertuples(index=False, name=None):
+            if test in sources:  # two inputs, one test: which readings would be its?
+                raise InputError(f"test {test[3]!r} (machine {test[0]}, axis {test[1]}, visit "
+                                 f"{test[2]}) is also in {sources[test]}", file=name)
+            sources[test] = name
+        frames.append(frame)
+    if len(frames) == 1:
+        return frames[0], sources
+    return pd.concat(frames, ignore_index=True), sources
+
+
 def iso(data, format: str = "auto", drop_outliers: bool = False,
-        uncertainty=None) -> IsoResult:
+        uncertainty=None, standard: str = standards.DEFAULT) -> IsoResult:
     """ISO 230-2 figures of every test (ISO 230-2:2014 clause 2; ``features.iso230``).
 
     Parameters
     ----------
-    data : str, path-like or DataFrame
-        A readings file, or a frame ``read`` returned.
+    data : str, path-like, DataFrame or list of them
+        One or more readings files (``read_tests``), or frames ``read`` returned.
     format : str
         Input layout of a file, ``"auto"`` to recognise it.
     drop_outliers : bool
@@ -204,6 +260,9 @@ def iso(data, format: str = "auto", drop_outliers: bool = False,
         An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): adds the expanded
         uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every test, at its own
         measuring length and runs per direction (``with_uncertainty``). Linear axes only.
+    standard : str
+        The standard whose figures to compute, a name of ``features.standards.STANDARDS``;
+        only the supported ones are accepted (``"iso230-2"``).
 
     Returns
     -------
@@ -213,25 +272,27 @@ def iso(data, format: str = "auto", drop_outliers: bool = False,
     Raises
     ------
     InputError
-        Unreadable readings or budget, a non-physical budget, a budget for a rotary axis.
+        Unreadable readings or budget, a non-physical budget, a budget for a rotary axis, a
+        standard that is not supported (the error gives the reason).
     """
     from features import iso230
 
     check_params(_parameters(), {"data": data, "format": format,
-                                 "drop_outliers": drop_outliers, "uncertainty": uncertainty},
-                 "iso")
+                                 "drop_outliers": drop_outliers, "uncertainty": uncertainty,
+                                 "standard": standard}, "iso")
+    record = standards.standard(standard)
     budget = None if uncertainty is None else _budget(uncertainty)
-    readings = readings_of(data, format)
+    readings, sources = read_tests(data, format)
     flagged = iso230.outliers(readings)
     outliers = readings.loc[flagged]
-    if drop_outliers:
-        readings = readings.loc[~flagged]
-    targets = iso230.per_target(readings)
-    figures = iso230.axis_figures(readings, targets)
+    used = readings.loc[~flagged] if drop_outliers else readings
+    targets = iso230.per_target(used)
+    figures = iso230.axis_figures(used, targets)
     if budget is not None:
         figures = with_uncertainty(figures, targets, budget)
     result = IsoResult(targets=targets, figures=figures, outliers=outliers,
-                       dropped=drop_outliers, budget=budget)
+                       dropped=drop_outliers, budget=budget, standard=record,
+                       readings=readings, sources=sources)
     action = "dropped" if drop_outliers else "kept; dropping outliers leaves it out"
     for r in outliers.itertuples():
         text = (f"outlier ({action}): test {r.test_id} target {r.target:g} direction "
