@@ -8,6 +8,7 @@ import pytest
 
 from features.readings import read_readings, write_readings
 from features.readings.errors import BacklashWarning
+from features.readings.formats import _read_plain_csv
 from pipeline.cli import main
 
 TARGETS = (0.0, 50.0, 100.0)
@@ -53,6 +54,35 @@ def test_canonical_csv_round_trip_through_parquet(tmp_path):
     write_readings(frame, tmp_path / "r.parquet")
     again = read_readings(tmp_path / "r.parquet")
     pd.testing.assert_frame_equal(frame.reset_index(drop=True), again, check_dtype=False)
+
+
+@pytest.mark.parametrize("variant", ["quoted", "space after comma", "blank line", "bom"])
+def test_fast_and_general_csv_readers_give_the_same_readings(tmp_path, variant):
+    """A plain CSV goes through Arrow's reader; a quote, a space after a delimiter or a
+    byte-order mark sends the file to pandas' reader: both read the same readings, and a blank
+    line keeps the row numbers of the lines after it."""
+    plain = write_csv(tmp_path, valid_table(), "plain.csv")
+    lines = plain.read_text().splitlines()
+    if variant == "quoted":
+        lines[1] = lines[1].replace("M1", '"M1"', 1)
+    elif variant == "space after comma":
+        lines[1] = lines[1].replace(",", ", ")
+    elif variant == "blank line":
+        lines.insert(2, "")
+    other = tmp_path / "other.csv"
+    other.write_text(("\ufeff" if variant == "bom" else "") + "\n".join(lines) + "\n",
+                     encoding="utf-8")
+    assert _read_plain_csv(plain) is not None
+    # Arrow reads a blank line as a row of empty cells, which is dropped as pandas' NaN row is
+    assert (_read_plain_csv(other) is None) == (variant != "blank line")
+    fast, general = read_readings(plain), read_readings(other)
+    pd.testing.assert_frame_equal(fast, general)
+    # row numbers in errors: a bad value after the blank line is on the line it is written
+    if variant == "blank line":
+        lines[4] = lines[4].replace("X", "Q", 1)
+        other.write_text("\n".join(lines) + "\n")
+        with pytest.raises(Exception, match="row 5"):
+            read_readings(other)
 
 
 def test_aliases_are_normalised(tmp_path):

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError, note
 from features.readings.layouts import (  # noqa: F401 - detect_format, read_text: their old home
     PAPER_DEV_LIN_F,
@@ -70,18 +71,11 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
         check_header([str(c) for c in frame.columns], path)
         row_base = 1
     else:
-        text = read_text(path) if text is None else text
-        if not text.strip():
-            raise InputError("empty file; expected a header row and readings", file=path)
-        header = next(csv.reader(io.StringIO(text)), [])
-        try:
-            frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
-                                skipinitialspace=True, skip_blank_lines=False)
-        except pd.errors.ParserError as err:
-            raise InputError(f"malformed CSV: {err}", file=path) from None
-        except pd.errors.EmptyDataError:
-            raise InputError("empty file; expected a header row and readings",
-                             file=path) from None
+        frame = _read_plain_csv(path) if text is None else None
+        if frame is None:
+            frame, header = _read_csv_text(path, text)
+        else:
+            header = list(frame.columns)
         if frame.shape[1] == 1:
             check_delimiter(frame.columns[0], path)
         frame = _drop_blank_columns(frame, header, path)
@@ -94,6 +88,60 @@ def read_table(path: Path, text: str | None = None) -> tuple[pd.DataFrame, int]:
     if frame.empty:
         raise InputError("no readings: the file has a header but no data rows", file=path)
     return frame, row_base
+
+
+def _read_csv_text(path: Path, text: str | None) -> tuple[pd.DataFrame, list[str]]:
+    """Every cell as text, and the header as written: the general reader, whose errors name
+    what is wrong with the file."""
+    text = read_text(path) if text is None else text
+    if not text.strip():
+        raise InputError("empty file; expected a header row and readings", file=path)
+    header = next(csv.reader(io.StringIO(text)), [])
+    try:
+        frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False,
+                            skipinitialspace=True, skip_blank_lines=False)
+    except pd.errors.ParserError as err:
+        raise InputError(f"malformed CSV: {err}", file=path) from None
+    except pd.errors.EmptyDataError:
+        raise InputError("empty file; expected a header row and readings", file=path) from None
+    return frame, header
+
+
+def _read_plain_csv(path: Path) -> pd.DataFrame | None:
+    """Every cell as text through Arrow's CSV reader, for the common file: UTF-8 without a
+    byte-order mark, no quotes, no space after a delimiter. It reads the
+    fleet's files several times faster than pandas and never holds a Python string per cell;
+    any other file (or any doubt) returns None and goes to the general reader, which explains
+    what is wrong with it."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pacsv
+
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    end = data.find(b"\n")
+    if (end < 0 or data.startswith((b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff"))
+            or b"\x00" in data or b'"' in data):
+        return None
+    names = data[:end].decode("utf-8", "replace").rstrip("\r").split(",")
+    if len(names) < 2 or len(set(names)) != len(names) or "" in names:
+        return None
+    try:  # a blank line becomes a row of empty cells, dropped as blank by the caller
+        table = pacsv.read_csv(
+            pa.BufferReader(data),
+            parse_options=pacsv.ParseOptions(ignore_empty_lines=False),
+            convert_options=pacsv.ConvertOptions(
+                column_types=dict.fromkeys(names, pa.string()), strings_can_be_null=False))
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+        return None
+    del data
+    if table.num_rows == 0 or table.column_names != names:
+        return None
+    if any(pc.any(pc.starts_with(column, " ")).as_py() for column in table.columns):
+        return None  # space after a delimiter: the general reader skips it
+    return table.to_pandas()
 
 
 def _blank_rows(frame: pd.DataFrame) -> np.ndarray:
@@ -205,12 +253,14 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
     if unit == "um":
         ref["target"] = ref["target"] / 1000.0
         ref["measured"] = ref["measured"] / 1000.0
-    return pd.DataFrame({
+    frame = pd.DataFrame({
         "machine_id": stem, "axis": "A" if rotary else "X", "test_id": path.stem,
         "method": "linear", "target": ref["target"],
         "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
         "deviation_um": ref["deviation_um"], "measured": ref["measured"], ROW: ref["row"],
     })
+    frame.attrs[schema.UNSTATED] = ("machine_id", "axis")  # the header names neither
+    return frame
 
 
 def _check_declared_counts(ref: pd.DataFrame, targets: dict, declared: dict,
@@ -264,6 +314,7 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
                                                       ROW)]
     for col in numeric:
         frame[col] = to_float(frame[col], path, cols[col], frame[ROW])
+    unstated = tuple(c for c in ("machine_id", "axis") if c not in frame)
     frame["machine_id"] = frame.get("machine_id", path.stem)
     frame["axis"] = frame.get("axis", "X")
     frame["visit"] = frame.get("visit", "1")
@@ -287,7 +338,9 @@ def paper_to_long(wide: pd.DataFrame, path: Path, row_base: int) -> pd.DataFrame
     long["test_id"] = (long["method"].str[:3] + "-F" + long["speed_mm_min"].map("{:g}".format)
                        + dwell + "-R" + long["repeat"].astype(str))
     long = long.rename(columns={"position_mm": "target", **PAPER_TO_SCHEMA})
-    return long.sort_values([ROW, "method", "direction"], kind="stable")
+    long = long.sort_values([ROW, "method", "direction"], kind="stable")
+    long.attrs[schema.UNSTATED] = unstated
+    return long
 
 
 def _paper_columns(wide: pd.DataFrame, path: Path) -> dict[str, str]:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError
 from features.readings.validation import finite_number
 
@@ -164,6 +165,9 @@ def read_rtl(path) -> pd.DataFrame:
         "direction": np.where(run % 2 == 1, forward, backward),
         "cycle": (run + 1) // 2, "deviation_um": grid.ravel(),
     })
+    frame.attrs[schema.UNSTATED] = tuple(
+        column for column, key in (("machine_id", "machine"), ("axis", "axis"))
+        if not user.get(key, "").strip())
     return frame
 
 

@@ -101,7 +101,8 @@ class Selection:
         """
         if self.empty:
             return readings
-        keep = self._labels(readings) & self._times(readings, source)
+        readings, named = self._name_unstated(readings, source)
+        keep = self._labels(readings, skip=named) & self._times(readings, source)
         if not keep.any():
             raise InputError(f"no test matches {self.text}; {_holdings(readings)}", file=source)
         out = (readings.copy(deep=False) if keep.all()
@@ -109,13 +110,39 @@ class Selection:
         out.attrs["source"] = f"{source} ({self.text})"
         return out
 
-    def _labels(self, readings):
+    def _name_unstated(self, readings, source):
+        """A file that states no machine or axis (``schema.UNSTATED``) gets the one given:
+        ``--axis Y`` on an ecmc file names its axis Y rather than selecting nothing. A linear
+        file cannot be named a rotary axis nor the reverse: its deviations are in um, a
+        rotary axis's in arcsec."""
+        unstated = readings.attrs.get(schema.UNSTATED, ())
+        named = []
+        for name in ("machine", "axis"):
+            wanted, column = getattr(self, name), _column(name)
+            if wanted is None or column not in unstated:
+                continue
+            if len(wanted) != 1:
+                raise InputError(f"the file states no {name}; expected one --{name} to name "
+                                 f"it, got {', '.join(wanted)}", file=source, parameter=name)
+            if name == "axis":
+                _check_same_kind(readings["axis"], wanted[0], source)
+            if not named:
+                readings = readings.copy(deep=False)
+            readings[column] = wanted[0]
+            named.append(name)
+            note(f"{source}: the file states no {name}; named {wanted[0]} (--{name})")
+        if named:
+            readings.attrs[schema.UNSTATED] = tuple(
+                c for c in unstated if c not in map(_column, named))
+        return readings, tuple(named)
+
+    def _labels(self, readings, skip=()):
         import numpy as np
 
         keep = np.ones(len(readings), dtype=bool)
         for name in ("machine", "axis"):
             wanted = getattr(self, name)
-            if wanted is not None:
+            if wanted is not None and name not in skip:
                 keep &= readings[_column(name)].isin(wanted).to_numpy()
         return keep
 
@@ -139,6 +166,16 @@ class Selection:
         if self.until is not None:
             keep &= started <= self.until
         return keep.to_numpy()
+
+
+def _check_same_kind(axes, named: str, source) -> None:
+    rotary = set(axes.unique()) <= set(schema.ROTARY_AXES)
+    if rotary != (named in schema.ROTARY_AXES):
+        have = "a rotary axis (deviations in arcsec)" if rotary else \
+            "a linear axis (deviations in um)"
+        raise InputError(f"the file holds {have}; --axis {named} is "
+                         f"{'rotary' if named in schema.ROTARY_AXES else 'linear'}",
+                         file=source, parameter="axis")
 
 
 def selection(machine=None, axis=None, since=None, until=None) -> Selection:

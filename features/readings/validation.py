@@ -95,6 +95,8 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     extra = [c for c in frame.columns if c not in ordered and c != ROW]
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
+    if raw.attrs.get(schema.UNSTATED):
+        out.attrs[schema.UNSTATED] = raw.attrs[schema.UNSTATED]
     return out
 
 
@@ -413,6 +415,14 @@ def finite_number(text: str, path, row: int, what: str) -> float:
 CONTRACT = (*schema.REQUIRED, schema.DEVIATION, "visit", "repeat")
 
 
+def _holds_text(series: pd.Series) -> bool:
+    """Every value is a string (categories of strings, as the twin writes names, count)."""
+    if isinstance(series.dtype, pd.CategoricalDtype):
+        return (pd.api.types.infer_dtype(series.cat.categories, skipna=False) == "string"
+                and not series.isna().any())
+    return pd.api.types.infer_dtype(series, skipna=False) == "string"
+
+
 def check_readings(frame, parameter: str = "readings",
                    columns: tuple[str, ...] = CONTRACT) -> pd.DataFrame:
     """Check that ``frame`` is a readings frame as ``validate`` returns it; return it.
@@ -450,7 +460,7 @@ def check_readings(frame, parameter: str = "readings",
     if len(frame) == 0:
         raise InputError("holds no readings; expected at least one test", parameter=parameter)
     for col in ("machine_id", "axis", "test_id", "visit"):
-        if col in columns and pd.api.types.infer_dtype(frame[col], skipna=False) != "string":
+        if col in columns and not _holds_text(frame[col]):
             raise InputError(f"not a validated readings frame: column {col!r} holds values "
                              f"that are not text; {hint}", parameter=parameter)
     for col in schema.DATETIME_OPTIONAL:

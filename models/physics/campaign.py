@@ -219,7 +219,7 @@ def load_config(source=None, preset: str | None = None) -> Campaign:
 
 # Readings of one simulation held in memory at once [bytes per reading], readings and truth
 # frames with their intermediate arrays (measured on the fleet benchmark)
-BYTES_PER_READING = 600
+BYTES_PER_READING = 150
 
 
 def _check(config: Campaign, where) -> None:
@@ -473,7 +473,8 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     tests["pressure_hpa"] = env.pressure_hpa + rng.normal(0, env.pressure_spread_hpa, n)
     tests["humidity_pct"] = np.clip(env.humidity_pct + rng.normal(0, env.humidity_spread_pct, n),
                                     5, 95)
-    readings, truth = [], []
+    # Names as codes: a fleet's readings repeat a few labels millions of times.
+    readings, truth = _tables(tests, plan, targets)
     for method, part in tests.groupby("method", sort=False):
         p = path(method, targets, plan.cycles, float(plan.overrun_mm))
         arrays = {c: part[c].to_numpy(float) for c in
@@ -502,10 +503,11 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
             out = simulate_tests(p, targets, arrays_block, config.effects, config.system,
                                  config.noise.noise_um, config.noise.resolution_um,
                                  rng, compensation=comp)
-            readings.append(_readings_frame(part.iloc[block], out))
-            truth.append(_truth_frame(part.iloc[block], out, config))
-    readings = pd.concat(readings, ignore_index=True)
-    truth = pd.concat(truth, ignore_index=True)
+            _add_readings(readings, part.iloc[block], out)
+            values = _add_truth(truth, part.iloc[block], out, config)
+            del out
+    readings = readings.frame(READING_ORDER)
+    truth = truth.frame((*KEYS, "target", "direction", *values))
     parameters = {"config": as_table(config), "seed": seed, "targets_mm": targets.tolist(),
                   "reference_conditions": {
                       "machine_temp_c": effects.REFERENCE_TEMP_C,
@@ -516,45 +518,131 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     return Simulation(readings, truth, visits, parameters)
 
 
-CHUNK_TESTS = 4096
+CHUNK_TESTS = 2048
 KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
+# Labels held as categories. ``visit`` stays text: visits are compared by order
+# (``readings["visit"] < "08"``), which unordered categories refuse.
+LABELS = ("machine_id", "axis", "test_id", "method")
+ENVIRONMENT = ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct")
+# Narrow types where they lose nothing: cycle and repeat counts are small whole numbers, the
+# environment is written to 3 decimals and the truth's contributions are means of noise-free
+# physics in um (float32 keeps 7 significant digits). They halve a fleet's memory; arithmetic
+# with them promotes to float64 / int64 as usual.
+SMALL = {"repeat": np.int16, "cycle": np.int16, "environment": np.float32,
+         "truth": np.float32}
 
 
-def _readings_frame(tests: pd.DataFrame, out: dict) -> pd.DataFrame:
+class _Table:
+    """A frame's columns allocated once at their final length and filled block of tests after
+    block, so a fleet's rows are never held twice (as blocks and as their concatenation).
+    Label columns hold codes into their ``labels`` until ``frame``: categories for those in
+    ``categorical``, Arrow text for the others."""
+
+    def __init__(self, n_rows: int, labels: dict, categorical):
+        self.n, self.at, self.labels = n_rows, 0, labels
+        self.categorical = set(categorical)
+        self.columns: dict[str, np.ndarray] = {}
+        self.text: dict[str, list] = {}  # Arrow chunks of the text label columns
+
+    def put(self, name: str, values, dtype=None) -> None:
+        values = np.asarray(values)
+        if name not in self.columns:
+            self.columns[name] = np.empty(self.n, dtype or values.dtype)
+        self.columns[name][self.at:self.at + len(values)] = values
+
+    def put_tests(self, tests: pd.DataFrame, columns, times: int) -> None:
+        """Columns of the tests, each test's value repeated ``times``."""
+        import pyarrow as pa
+
+        for column in columns:
+            values = tests[column]
+            if column in self.labels:
+                codes = self.labels[column].get_indexer(values)
+                values = pd.Series(codes, dtype=np.min_scalar_type(-len(self.labels[column])))
+            values = np.repeat(values.to_numpy(), times)
+            if column in self.labels and column not in self.categorical:
+                # Arrow text, block by block: never a Python string per row
+                self.text.setdefault(column, []).append(pa.DictionaryArray.from_arrays(
+                    values, pa.array(self.labels[column].to_numpy(str))).cast(pa.large_string()))
+            else:
+                self.put(column, values, SMALL.get(column, values.dtype))
+
+    def frame(self, order) -> pd.DataFrame:
+        import pyarrow as pa
+
+        columns = {}
+        for name in order:
+            if name in self.text:  # pandas' own text type: large_string, taken without a copy
+                values = pd.Series(pa.chunked_array(self.text.pop(name)).to_pandas(),
+                                   copy=False)
+            else:
+                values = self.columns.pop(name)
+            if name in self.categorical:
+                values = pd.Categorical.from_codes(values, self.labels[name])
+            columns[name] = values
+        return pd.DataFrame(columns, copy=False)
+
+
+def _tables(tests: pd.DataFrame, plan: Plan, targets: np.ndarray) -> tuple[_Table, _Table]:
+    """Empty readings and truth tables of the right length: per test, its path's readings
+    and its (target, direction) pairs."""
+    reads, pairs = {}, {}
+    for method in plan.methods:
+        p = path(method, targets, plan.cycles, float(plan.overrun_mm))
+        reads[method] = int(p.read.sum())
+        pairs[method] = len(set(zip(p.target_index[p.read], p.direction[p.read])))
+    labels = {c: pd.Index(sorted(tests[c].unique())) for c in (*LABELS, "visit")}
+    labels["direction"] = pd.Index(["+", "-"])
+    categorical = (*LABELS, "direction")
+    method = tests["method"].astype(str)
+    return (_Table(int(method.map(reads).sum()), labels, categorical),
+            _Table(int(method.map(pairs).sum()), labels, categorical))
+
+
+READING_ORDER = (*KEYS, "started_at", "operating_hours", "target", "direction", "cycle",
+                 "deviation_um", "measured_at", *ENVIRONMENT)
+
+
+def _add_readings(table: _Table, tests: pd.DataFrame, out: dict) -> None:
     n_tests, n_reads = out["deviation_um"].shape
-    frame = tests.loc[tests.index.repeat(n_reads), [*KEYS, "started_at", "operating_hours"]]
-    frame = frame.reset_index(drop=True)
-    frame["target"] = np.tile(out["target"], n_tests)
-    frame["direction"] = np.tile(np.where(out["direction"] > 0, "+", "-"), n_tests)
-    frame["cycle"] = np.tile(out["cycle"], n_tests)
-    frame["deviation_um"] = out["deviation_um"].ravel()
-    frame["measured_at"] = frame["started_at"] + pd.to_timedelta(out["elapsed_s"].ravel(), "s")
-    for column in ("machine_temp_c", "ambient_temp_c", "pressure_hpa", "humidity_pct"):
-        frame[column] = np.round(out[column].ravel(), 3)
-    return frame
+    table.put_tests(tests, (*KEYS, "started_at", "operating_hours"), n_reads)
+    table.put("target", np.tile(out["target"], n_tests), float)
+    table.put("direction", np.tile(out["direction"] < 0, n_tests), np.int8)  # codes of +, -
+    table.put("cycle", np.tile(out["cycle"], n_tests), SMALL["cycle"])
+    table.put("deviation_um", out["deviation_um"].ravel(), float)
+    started = pd.to_datetime(np.repeat(tests["started_at"].to_numpy(), n_reads))
+    table.put("measured_at", (started + pd.to_timedelta(out["elapsed_s"].ravel(), "s"))
+              .to_numpy(), "datetime64[ns]")
+    for column in ENVIRONMENT:
+        table.put(column, np.round(out[column].ravel(), 3), SMALL["environment"])
+    table.at += n_tests * n_reads
 
 
-def _truth_frame(tests: pd.DataFrame, out: dict, config: Campaign) -> pd.DataFrame:
+def _add_truth(table: _Table, tests: pd.DataFrame, out: dict, config: Campaign) -> list[str]:
     """Mean over cycles per test, target and direction of the true lost motion and of every
-    effect's contribution [um], and the wear (uniform plus local) at the target [um]."""
+    effect's contribution [um], and the wear (uniform plus local) at the target [um]; returns
+    the names of the value columns."""
     key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
     codes, groups = pd.factorize(key)
     onehot = np.zeros((len(codes), len(groups)))
     onehot[np.arange(len(codes)), codes] = 1.0
     onehot /= onehot.sum(axis=0)  # column means over the cycles
-    frame = tests.loc[tests.index.repeat(len(groups)), list(KEYS)].reset_index(drop=True)
-    frame["target"] = np.tile(groups.get_level_values(0), len(tests))
-    frame["direction"] = np.tile(np.where(groups.get_level_values(1) > 0, "+", "-"), len(tests))
+    n = len(tests)
+    table.put_tests(tests, KEYS, len(groups))
+    target = np.tile(groups.get_level_values(0).to_numpy(float), n)
+    table.put("target", target)
+    table.put("direction", np.tile(groups.get_level_values(1).to_numpy() < 0, n), np.int8)
     columns = {"true_backlash_um": "true_backlash_um", "lost_motion_um": "lost_motion_um",
                **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
     for key_name, column in columns.items():
-        frame[column] = (out[key_name] @ onehot).ravel()
+        table.put(column, (out[key_name] @ onehot).ravel(), SMALL["truth"])
     fleet = config.fleet
     hours = np.repeat(tests["operating_hours"].to_numpy(float), len(groups))
     peak = np.repeat(tests["wear_local_um"].to_numpy(float), len(groups))
-    frame["wear_um"] = (fleet.wear_um_per_1000h * hours / 1000
-                        + local_wear_um(frame["target"].to_numpy(float), fleet, peak))
-    return frame
+    table.put("wear_um", fleet.wear_um_per_1000h * hours / 1000
+              + local_wear_um(target, fleet, peak))
+    table.at += n * len(groups)
+    return [*columns.values(), "wear_um"]
 
 
 def paper_table(readings: pd.DataFrame) -> pd.DataFrame:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from features.readings.schema import FORMATS
-from pipeline.commands.data import READINGS_HELP
+from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.ingest import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -13,12 +12,10 @@ FLAGS = {"files": "FILE"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("files", nargs="+", metavar="FILE", help=READINGS_HELP)
+    add_readings_argument(parser, "files", metavar="FILE", nargs="+")
     parser.add_argument("--store", required=True, metavar="STORE",
                         help="store folder (created when new or empty) or postgresql://USER@HOST"
                              "/DB (password in ~/.pgpass or PGPASSWORD, not in the URL)")
-    parser.add_argument("--format", default="auto", choices=FORMATS,
-                        help="input layout of the files (default: detect each)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
@@ -27,10 +24,12 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.fileio import dumps
     from pipeline.commands.common import progress_bar
+    from pipeline.commands.data import readings_arg
     from pipeline.workflows.ingest import ingest
 
+    files = readings_arg(args, "files")  # frames when --machine/--axis/... name or select
     with progress_bar("ingest") as progress:
-        result = ingest(args.files, args.store, format=args.format, progress=progress)
+        result = ingest(files, args.store, format=args.format, progress=progress)
     for f in result.inputs:
         print(f"{f['file']}: {f['tests']} tests, {f['readings']} readings: {f['added']} added, "
               f"{f['unchanged']} already stored", file=sys.stderr)

@@ -140,8 +140,18 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
             raise InputError(f"must be a whole number, got {value!r}", parameter=name)
     campaign = load_config(config, preset=preset)
     sim = run_twin(campaign, seed, compensation=compensation, session_seed=session_seed)
-    return SimulationResult(sim.readings, sim.truth, sim.visits, sim.parameters,
-                            config=campaign)
+    return SimulationResult(_as_text(sim.readings), _as_text(sim.truth), sim.visits,
+                            sim.parameters, config=campaign)
+
+
+def _as_text(frame):
+    """The twin holds names as categories (a fleet's millions of readings repeat a few
+    names); a user gets them as text, as ``read`` gives them, since other tools (MLflow's
+    schema checks, order comparisons) refuse categories."""
+    import pandas as pd
+
+    names = [c for c in frame.columns if isinstance(frame[c].dtype, pd.CategoricalDtype)]
+    return frame.astype(dict.fromkeys(names, "str")) if names else frame
 
 
 WORKFLOW = Workflow(
