@@ -1,5 +1,6 @@
 """Small inline SVG charts for the fleet site: a sparkline per axis for the fleet table and
-the charts of an axis page (history with forecast band, ISO 230-2 chart, wear-rate map).
+the charts of an axis page (history with forecast band and the last recorded forecast, ISO
+230-2 chart, wear-rate map, compensation history).
 
 The fleet site draws up to a few dozen charts per run; matplotlib costs about a quarter of a
 second per figure (``pipeline.report_page.new_figure`` and ``savefig``), which alone would
@@ -22,6 +23,7 @@ import numpy as np
 
 # matplotlib's default colours, so the site reads like the product's other reports
 BLUE, ORANGE, GREEN, RED, GREY = "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#7f7f7f"
+PURPLE = "#9467bd"
 FONT = "font-family='system-ui, sans-serif'"
 CHAR_PX = 6.6  # mean width of a character of the 11 px labels [px], for the legend layout
 
@@ -218,18 +220,38 @@ def _span(*arrays) -> tuple[float, float]:
     return (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
 
 
+def _recorded_span(recorded: dict | None) -> tuple[list, list]:
+    """The day and the values of a recorded forecast, for the chart's ranges."""
+    if recorded is None:
+        return [], []
+    values = [recorded[k] for k in ("fit", "low", "high") if recorded.get(k) is not None]
+    return [recorded["day"]], values
+
+
+def _draw_recorded(plot: Plot, recorded: dict | None, radius: float, width: float) -> None:
+    """A recorded forecast: a purple point at its day with its 95 % interval as a bar."""
+    if recorded is None:
+        return
+    if recorded.get("low") is not None:
+        plot.line([recorded["day"]] * 2, [recorded["low"], recorded["high"]], PURPLE, width)
+    plot.dots([recorded["day"]], [recorded["fit"]], PURPLE, radius)
+
+
 def sparkline(history: dict, forecast: dict | None, *, threshold_um=None,
-              alert: bool = False, label: str = "") -> str:
+              alert: bool = False, label: str = "", recorded: dict | None = None) -> str:
     """A 150 x 36 px sparkline: the backlash per visit [um] over time, change points as
-    ticks, the forecast band ahead and the threshold as a faint line.
+    ticks, the forecast band ahead, the last recorded forecast and the threshold as a faint
+    line.
 
     ``history``: ``days`` (since the first visit), ``backlash_um``, ``change_days``;
-    ``forecast``: ``days``, ``fit``, ``low``, ``high`` [um], or None.
+    ``forecast``: ``days``, ``fit``, ``low``, ``high`` [um], or None; ``recorded``: ``day``,
+    ``fit``, ``low``, ``high`` (bounds may be None), or None.
     """
     days, y = history["days"], history["backlash_um"]
     ahead = forecast or {"days": [], "low": [], "high": [], "fit": []}
-    x_hi = max([*days, *ahead["days"]]) if len(days) else 1.0
-    y_lo, y_hi = _span(y, ahead["low"], ahead["high"])
+    rec_days, rec_values = _recorded_span(recorded)
+    x_hi = max([*days, *ahead["days"], *rec_days]) if len(days) else 1.0
+    y_lo, y_hi = _span(y, ahead["low"], ahead["high"], rec_values)
     if threshold_um is not None and threshold_um <= 1.5 * y_hi:
         y_lo, y_hi = min(y_lo, threshold_um), max(y_hi, threshold_um)
     plot = Plot(150, 36, (0.0, x_hi), (y_lo, y_hi), margins=(3, 4, 3, 3))
@@ -243,24 +265,28 @@ def sparkline(history: dict, forecast: dict | None, *, threshold_um=None,
         plot.vline(d, GREY, "2 2")
     plot.line(days, y, colour, 1.5)
     plot.dots(days[-1:], y[-1:], colour, 2.5)
+    _draw_recorded(plot, recorded, 2.5, 2.0)
     return plot.svg(label or "backlash history", "spark")
 
 
 def history_chart(history: dict, forecast: dict | None, trend: dict | None, origin: dt.date,
                   *, threshold_um=None, crossing: tuple = (None, None, None),
-                  due_days: float | None = None, label: str = "") -> str:
+                  due_days: float | None = None, label: str = "",
+                  recorded: dict | None = None) -> str:
     """The axis's backlash per visit with ±2 sigma bars, the Theil-Sen trend since the last
     change point, change points (dashed), the forecast band, the threshold and the crossing
     interval (shaded) and the day the next visit is due (``due_days``, green). Days are
     counted from ``origin`` (the first visit's date).
 
     ``trend``: ``days`` and ``fit`` of the trend line, or None; ``crossing``: (date, early,
-    late) in days, each None when unknown.
+    late) in days, each None when unknown; ``recorded``: the last recorded forecast (``day``,
+    ``fit``, ``low``, ``high``), drawn in purple with its interval, or None.
     """
     days, y, sigma = (np.asarray(history[k], float) for k in ("days", "backlash_um", "sigma_um"))
     ahead = forecast or {"days": [], "low": [], "high": [], "fit": []}
-    x_hi = max([*days, *ahead["days"], *([] if due_days is None else [due_days])])
-    y_lo, y_hi = _span(y - 2 * sigma, y + 2 * sigma, ahead["low"], ahead["high"])
+    rec_days, rec_values = _recorded_span(recorded)
+    x_hi = max([*days, *ahead["days"], *rec_days, *([] if due_days is None else [due_days])])
+    y_lo, y_hi = _span(y - 2 * sigma, y + 2 * sigma, ahead["low"], ahead["high"], rec_values)
     if threshold_um is not None:
         y_lo, y_hi = min(y_lo, threshold_um), max(y_hi, threshold_um)
     plot = Plot(760, 300, (0.0, x_hi), (min(y_lo, 0.0) if y_lo < 0.5 else y_lo, y_hi),
@@ -287,6 +313,9 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
         items.append(("dash", GREEN, "next visit due"))
     plot.line(days, y, BLUE, 1.0)
     plot.dots(days, y, BLUE, 3.5, err=2 * sigma)
+    if recorded is not None:
+        _draw_recorded(plot, recorded, 4.5, 3.0)
+        items.append(("dot", PURPLE, "last recorded forecast (95 %)"))
     ticks = date_ticks(origin, origin + dt.timedelta(days=float(x_hi)))
     plot.axes([((d - origin).days, d.strftime("%Y-%m")) for d in ticks], "backlash [µm]")
     plot.legend(items)
@@ -327,3 +356,32 @@ def wear_chart(rate_map: dict, label: str = "") -> str:
               "wear rate [µm/1000 h]", "position [mm]")
     plot.legend([("line", GREEN, "wear rate w(x)"), ("band", GREEN, "95 % interval")])
     return plot.svg(label or "wear-rate map")
+
+
+def compensation_chart(records: list[dict], unit: str, position_unit: str,
+                       label: str = "") -> str:
+    """The compensation history of an axis: the correction table of every recorded
+    compensation against the target (correction = -error, per approach direction), the
+    latest in colour (+ blue, − red) over the earlier ones in grey (``records`` oldest first,
+    each with ``table``: ``target``, ``error_up_um``, ``error_down_um``)."""
+    tables = [r["table"] for r in records]
+    x_lo, x_hi = _span(*[t["target"] for t in tables])
+    y_lo, y_hi = _span(*[-np.asarray(t[k], float) for t in tables
+                         for k in ("error_up_um", "error_down_um")], [0.0])
+    plot = Plot(760, 260, (x_lo, x_hi), (y_lo, y_hi), margins=(52, 12, 36, 34))
+    plot.hline(0.0, GREY)
+    for t in tables[:-1]:
+        for k in ("error_up_um", "error_down_um"):
+            plot.line(t["target"], -np.asarray(t[k], float), "#b0b4bb", 1.0)
+    latest = tables[-1]
+    for k, colour in (("error_up_um", BLUE), ("error_down_um", RED)):
+        plot.line(latest["target"], -np.asarray(latest[k], float), colour, 2.2)
+        plot.dots(latest["target"], -np.asarray(latest[k], float), colour, 2.5)
+    plot.axes([(v, tick_text(v)) for v in nice_ticks(x_lo, x_hi, 7)],
+              f"correction [{unit}]", f"target [{position_unit}]")
+    items = [("line", BLUE, f"latest, approach + ({records[-1]['recorded_at'][:10]})"),
+             ("line", RED, "latest, approach −")]
+    if len(tables) > 1:
+        items.append(("line", "#b0b4bb", f"{len(tables) - 1} earlier"))
+    plot.legend(items)
+    return plot.svg(label or "compensation history")

@@ -2,12 +2,14 @@
 
 Files written into the output folder (``write_site``), all or nothing:
 
-- ``index.html``: the fleet table, worst first, a sparkline of each axis's history and
-  forecast band, each row linking to the axis's page;
+- ``index.html``: the fleet table, worst first, a sparkline of each axis's history, forecast
+  band and last recorded forecast, the last recorded forecast and compensation, each row
+  linking to the axis's page;
 - ``<machine>_<axis>.html`` per axis: the history chart with change points, forecast band,
   threshold and crossing interval, the visit table, alerts, the wear-rate map since the last
-  change point, the last visit's ISO 230-2 chart and figures, forecast and compensation
-  history;
+  change point, the last visit's ISO 230-2 chart and figures, the recorded forecasts (with the
+  wear-rate map of the last one's model when it is a wear map) and the compensation history
+  (every recorded correction table against the target, the latest highlighted);
 - ``fleet.json``: what ``backlash fleet --json`` prints.
 
 Pages use the product's one page shell (``pipeline.report_page.page``); charts are inline SVG
@@ -138,11 +140,15 @@ first: axes at or above the threshold, then other alerting axes, then the rest; 
 earliest next visit due, the earliest crossing, the highest backlash. Next visit due: the
 earlier of the last visit + the interval and the early end of the crossing interval (the day a
 future visit's upper prediction bound reaches the threshold); due now when already above it.
-History: backlash per visit, change points dashed, forecast band orange, threshold red.</p>
+History: backlash per visit, change points dashed, forecast band orange, threshold red, last
+recorded forecast purple with its 95 % interval. Last forecast: the mean over its points of the
+recorded forecast [95 % interval] and the day it is for (~ estimated from the axis's operating
+hours); last compensation: its day, controller and reversal compensation.</p>
 {f'<ul>{notes}</ul>' if notes else ''}
 <table class="fleet"><tr><th>#</th><th>machine axis</th><th>visits</th><th>last visit</th>
 <th>backlash [µm]</th><th>history and forecast</th><th>slope [µm/month]</th>
-<th>change points</th><th>crossing [interval]</th><th>next visit due</th><th>alerts</th></tr>
+<th>change points</th><th>crossing [interval]</th><th>next visit due</th>
+<th>last forecast [µm]</th><th>last compensation</th><th>alerts</th></tr>
 {rows}</table>
 <p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
 
@@ -150,7 +156,7 @@ History: backlash per visit, change points dashed, forecast band orange, thresho
 def _index_row(rank: int, view, threshold) -> str:
     j = view.to_json()
     spark = fleet_charts.sparkline(_history(view), view.forecast, threshold_um=threshold,
-                                   alert=bool(view.alerts),
+                                   alert=bool(view.alerts), recorded=recorded_point(view, j),
                                    label=f"{view.machine_id} {view.axis} backlash history")
     low, high = j["slope_interval"]
     slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>[{_fmt(low)}, "
@@ -167,7 +173,55 @@ def _index_row(rank: int, view, threshold) -> str:
             f"</small></td><td>{spark}</td><td class='num'>{slope}</td>"
             f"<td>{_esc(', '.join(j['change_points']) or '–')}</td>"
             f"<td class='nowrap'>{crossing}</td><td class='nowrap'>{_esc(j['next_visit_due'])}"
-            f"</td><td class='alerts'>{'<br>'.join(map(_esc, j['alerts']))}</td></tr>\n")
+            f"</td><td class='nowrap'>{_forecast_cell(j['last_forecast'])}</td>"
+            f"<td class='nowrap'>{_compensation_cell(j['last_compensation'])}</td>"
+            f"<td class='alerts'>{'<br>'.join(map(_esc, j['alerts']))}</td></tr>\n")
+
+
+def _for_text(last: dict) -> str:
+    """The day (``~`` when estimated from operating hours) and hours a forecast is for."""
+    parts = []
+    if last["for_date"]:
+        parts.append(f"{'~' if last['for_date_estimated'] else ''}{last['for_date']}")
+    if last["for_operating_hours"] is not None:
+        parts.append(f"{last['for_operating_hours']:g} h")
+    if last["for_visit"]:
+        parts.append(f"visit {last['for_visit']}")
+    return _esc(", ".join(parts) or "–")
+
+
+def _band_text(last: dict) -> str:
+    band = (f" [{_fmt(last['backlash_low_um'], '.2f')}, {_fmt(last['backlash_high_um'], '.2f')}]"
+            if last["backlash_low_um"] is not None else "")
+    return f"{_fmt(last['backlash_um'], '.2f')}{band}"
+
+
+def _forecast_cell(last) -> str:
+    if last is None:
+        return "–"
+    when = last["for_date"] and f"{'~' if last['for_date_estimated'] else ''}{last['for_date']}"
+    return f"{_band_text(last)}<br><small>for {_esc(when or _for_text(last))}</small>"
+
+
+def _compensation_cell(last) -> str:
+    if last is None:
+        return "–"
+    return (f"{_esc(last['date'])}<br><small>{_esc(last['controller'])}, "
+            f"{_fmt(last['reversal_compensation_um'], '.2f')} {_esc(last['unit'])}</small>")
+
+
+def recorded_point(view, j: dict) -> dict | None:
+    """The last recorded forecast as the charts draw it (days since the first visit), or None
+    when there is none or its day is unknown."""
+    import datetime as dt
+
+    last = j["last_forecast"]
+    if last is None or last["for_date"] is None:
+        return None
+    origin = view.series.visits["date"].iloc[0].date()
+    return {"day": float((dt.date.fromisoformat(last["for_date"]) - origin).days),
+            "fit": last["backlash_um"], "low": last["backlash_low_um"],
+            "high": last["backlash_high_um"]}
 
 
 # --------------------------------------------------------------------------- axis pages
@@ -176,11 +230,12 @@ def axis_body(view, threshold) -> str:
     j = view.to_json()
     return "\n".join([
         f'<nav><a href="{INDEX}">← fleet</a></nav>', _summary(view, j), _alerts(view),
-        "<h2>History and forecast</h2>", _history_chart(view, threshold),
+        "<h2>History and forecast</h2>", _history_chart(view, j, threshold),
         "<h2>Visits</h2>", _visit_table(view),
         "<h2>Wear-rate map since the last change point</h2>", _wear(view),
         "<h2>Last visit: ISO 230-2 chart</h2>", _iso(view),
-        "<h2>Forecasts and compensation</h2>", NOTHING_RECORDED])
+        "<h2>Recorded forecasts</h2>", _forecasts(view),
+        "<h2>Compensation history</h2>", _compensations(view)])
 
 
 def _summary(view, j: dict) -> str:
@@ -209,12 +264,12 @@ def _alerts(view) -> str:
     return f"<div class='alert'><ul>{items}</ul></div>"
 
 
-def _history_chart(view, threshold) -> str:
+def _history_chart(view, j: dict, threshold) -> str:
     origin = view.series.visits["date"].iloc[0].date()
     return fleet_charts.history_chart(
         _history(view), view.forecast, view.trend_line, origin,
         threshold_um=threshold, crossing=view.crossing_days,
-        due_days=float((view.next_visit_due - origin).days),
+        due_days=float((view.next_visit_due - origin).days), recorded=recorded_point(view, j),
         label=f"{view.machine_id} {view.axis}: backlash per visit and forecast")
 
 
@@ -245,9 +300,59 @@ def _wear(view) -> str:
 
 
 FIGURE_KEYS = ("A", "E", "M", "R", "B", "B_mean")
-NOTHING_RECORDED = ("<p>Last forecast: none recorded. Compensation history: none recorded (the "
-                    "readings hold neither; a fleet store that records them will fill this "
-                    "section).</p>")
+NONE_RECORDED = ("<p>None recorded{}: {} records it in a fleet store "
+                 "(see <code>docs/fleet.md</code>).</p>")
+
+
+def _forecasts(view) -> str:
+    """Every recorded forecast, latest first, and the wear-rate map of the last one's model
+    when it is a wear map."""
+    from pipeline.store.records import summary
+
+    if not view.forecasts:
+        return NONE_RECORDED.format("", "<code>backlash predict MODEL DATA --store STORE</code>")
+    rows = "".join(
+        f"<tr><td>{_esc(s['recorded_at'][:19].replace('T', ' '))}</td><td>{_for_text(s)}</td>"
+        f"<td class='num'>{_band_text(s)}</td><td class='num'>{s['points']}</td>"
+        f"<td>{_esc(s['model'])}</td><td>{_esc(s['model_dir'] or '–')}</td></tr>"
+        for s in map(summary, reversed(view.forecasts)))
+    table = ("<table><tr><th>recorded (UTC)</th><th>for</th><th>backlash [µm] [95 %]</th>"
+             "<th>points</th><th>model</th><th>model directory</th></tr>" + rows + "</table>")
+    last = view.forecasts[-1]
+    if last.get("wear_rate") is None:
+        return table + "<p>The last forecast's model has no wear-rate map.</p>"
+    chart = fleet_charts.wear_chart(last["wear_rate"], label=f"{view.machine_id} {view.axis}: "
+                                    "wear-rate map of the last forecast's model")
+    return (f"{table}<h3>Wear-rate map of the last forecast's model</h3>{chart}<p>w(x) [µm per "
+            f"1000 operating hours] with its 95 % interval, as {_esc(last['model'])} learned it "
+            "for this axis.</p>")
+
+
+def _compensations(view) -> str:
+    """The correction tables of every recorded compensation against the target, the latest
+    highlighted, and one row per compensation."""
+    from features.readings.schema import position_unit
+    from pipeline.store.records import summary
+
+    if not view.compensations:
+        return NONE_RECORDED.format(
+            " yet", "<code>backlash compensate DATA --controller C --out DIR --store STORE</code>")
+    unit = view.compensations[-1]["unit"]
+    chart = fleet_charts.compensation_chart(
+        view.compensations, unit, position_unit(view.axis),
+        label=f"{view.machine_id} {view.axis}: compensation history")
+    rows = "".join(
+        f"<tr><td>{_esc(s['recorded_at'][:19].replace('T', ' '))}</td>"
+        f"<td>{_esc(s['controller'])}</td><td>{_esc(s['source'])}</td>"
+        f"<td class='num'>{_fmt(s['reversal_compensation_um'])}</td>"
+        f"<td class='num'>{_fmt(s['max_abs_correction_um'])}</td><td class='num'>{s['points']}"
+        f"</td><td>{_esc(', '.join(s['files']))}</td></tr>"
+        for s in map(summary, reversed(view.compensations)))
+    return (f"{chart}<p>Correction = −error of each approach direction, as the controller "
+            "adds it to the commanded position.</p><table><tr><th>recorded (UTC)</th>"
+            f"<th>controller</th><th>from</th><th>reversal compensation [{_esc(unit)}]</th>"
+            f"<th>max |correction| [{_esc(unit)}]</th><th>points</th><th>files</th></tr>"
+            + rows + "</table>")
 
 
 def _iso(view) -> str:

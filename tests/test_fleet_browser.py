@@ -91,3 +91,48 @@ def test_axis_page_screenshot_shows_history_wear_map_and_iso_chart(site, tmp_pat
     assert _count(pixels, [214, 39, 40]) > 300
     # the alert panel (#fff4f0) is there
     assert _count(pixels, [255, 244, 240], 3) > 2000
+
+
+@pytest.fixture(scope="module")
+def recorded_site(site, tmp_path_factory):
+    """The same fleet in a store with a wear map's forecast of a planned visit and two
+    recorded compensations: the records drawn on the site."""
+    import warnings
+
+    import backlash as bl
+    from pipeline.store.records import record_compensation
+    from pipeline.workflows.compensate import compensate
+    from pipeline.workflows.fleet import fleet
+
+    _, result = site
+    folder = tmp_path_factory.mktemp("recorded_site")
+    store = folder / "fleet"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", bl.BacklashWarning)
+        bl.write(result.readings, folder / "readings.csv")
+        bl.ingest(folder / "readings.csv", store=store)
+        bl.train(store, model="wear-map").write(folder / "model")
+        last = result.readings[result.readings["visit"] == "06"]
+        plan = (last.drop_duplicates(["machine_id", "axis", "target"])
+                [["machine_id", "axis", "target", "feed_mm_min", "dwell_s", "operating_hours"]]
+                .assign(visit="07", operating_hours=lambda f: f["operating_hours"] + 240.0))
+        bl.predict(folder / "model", plan=plan, store=store)
+        record_compensation(store, compensate(bl.read(store, until="2026-03-31")),
+                            recorded_at="2026-04-01T08:00:00.000000Z")
+        record_compensation(store, compensate(store))
+        view = fleet(store, threshold_um=2.2, out=folder / "site")
+    return folder / "site", view
+
+
+def test_axis_page_screenshot_shows_the_recorded_forecast_and_compensations(recorded_site,
+                                                                           tmp_path):
+    out, view = recorded_site
+    worst = view.axes[0]
+    assert worst.forecasts and len(worst.compensations) == 2
+    pixels = _screenshot(out / worst.page, tmp_path, (1200, 3600))
+    # the recorded forecast (#9467bd) on the history chart, larger than its legend key
+    assert _count(pixels, [148, 103, 189]) > 60
+    # the compensation history: the earlier table in grey (#b0b4bb), the latest in blue
+    assert _count(pixels, [176, 180, 187], 6) > 200
+    index = _screenshot(out / "index.html", tmp_path, (1600, 800))
+    assert _count(index, [148, 103, 189]) > 10 * len(view.axes)  # one in each sparkline

@@ -7,6 +7,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import re
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -234,7 +235,7 @@ def test_the_index_lists_axes_worst_first_with_a_sparkline_each(site, mixed):
     assert text.count("<svg class='spark'") == len(mixed.axes)
     page = (site / mixed.axes[0].page).read_text(encoding="utf-8")
     assert page.count("<svg class='chart'") == 3  # history, wear-rate map, ISO chart
-    assert "none recorded" in page
+    assert page.count("None recorded") == 2  # no forecast, no compensation
 
 
 def test_no_page_refers_to_anything_outside_the_folder(site):
@@ -352,3 +353,133 @@ def test_the_command_module_is_ready_to_register():
     args = parser.parse_args(["data.csv", "--threshold-um", "8", "--out", "x"])
     assert (args.threshold_um, args.interval_days, args.out) == (8.0, 90.0, "x")
     assert np.isclose(args.alpha, 0.05)
+
+
+# --------------------------------------------------------------------------- records of a store
+HOURS_PER_DAY = 8.0  # the small twin runs 240 h between visits 30 days apart
+FORECAST_KEYS = {"date", "recorded_at", "for_visit", "for_date", "for_date_estimated",
+                 "for_operating_hours", "backlash_um", "backlash_low_um", "backlash_high_um",
+                 "points", "model", "model_dir"}
+COMPENSATION_KEYS = {"date", "recorded_at", "controller", "source", "reversal_compensation_um",
+                     "max_abs_correction_um", "unit", "points", "files"}
+
+
+@pytest.fixture(scope="module")
+def recorded(twin_file, tmp_path_factory):
+    """The small twin in a store with a wear map's forecast of every measured visit, then of
+    a planned visit 540 h after the last (no date: the fleet estimates it), and two
+    compensations (visits up to 03, then all)."""
+    import warnings
+
+    import backlash as bl
+    from pipeline.store.records import record_compensation
+    from pipeline.workflows.compensate import compensate
+
+    folder = tmp_path_factory.mktemp("recorded")
+    store = folder / "fleet"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", bl.BacklashWarning)
+        bl.ingest(twin_file, store=store)
+        bl.train(store, model="wear-map").write(folder / "model")
+        measured = bl.predict(folder / "model", store, store=store)
+        readings = bl.read(store)
+        last = readings[readings["visit"] == readings["visit"].max()]
+        plan = (last[last["method"] == "linear"]
+                .drop_duplicates(["machine_id", "axis", "target"])
+                [["machine_id", "axis", "target", "feed_mm_min", "dwell_s", "operating_hours"]]
+                .assign(visit="07", operating_hours=lambda f: f["operating_hours"] + 540.0))
+        planned = bl.predict(folder / "model", plan=plan, store=store)
+        early = compensate(bl.read(store, until="2026-04-30"))
+        record_compensation(store, early, recorded_at="2026-05-01T08:00:00.000000Z")
+        latest = compensate(store)
+        record_compensation(store, latest)
+    return store, measured, planned, latest, last
+
+
+def test_the_last_forecast_and_compensation_of_each_axis(recorded):
+    store, _, planned, latest, last = recorded
+    view = fleet(store, threshold_um=QUIET_UM)
+    profiles = {(p.machine_id, p.axis): p for p in latest.profiles}
+    for a in view.to_json()["axes"]:
+        key = (a["machine_id"], a["axis"])
+        f, c = a["last_forecast"], a["last_compensation"]
+        assert set(f) == FORECAST_KEYS and set(c) == COMPENSATION_KEYS
+        points = planned.predictions[(planned.predictions["machine_id"] == key[0])
+                                     & (planned.predictions["axis"] == key[1])]
+        for name in ("backlash_um", "backlash_low_um", "backlash_high_um"):
+            assert f[name] == pytest.approx(points[name].mean(), abs=1e-4)
+        assert f["for_visit"] == "07" and f["model"] == "wear-map" and f["for_date_estimated"]
+        assert f["points"] == len(points)
+        last_day = last[(last["machine_id"] == key[0]) & (last["axis"] == key[1])][
+            "started_at"].min().date()
+        days = (dt.date.fromisoformat(f["for_date"]) - last_day).days
+        assert abs(days - 540.0 / HOURS_PER_DAY) <= 1, (key, f["for_date"], last_day)
+        p = profiles[key]
+        assert c["controller"] == "csv" and c["unit"] == "um" and c["source"] == "measured"
+        assert c["reversal_compensation_um"] == pytest.approx(p.backlash, abs=1e-4)
+        assert c["max_abs_correction_um"] == pytest.approx(
+            np.abs(np.r_[p.mean_up, p.mean_down]).max(), abs=1e-4)
+        assert c["date"] == c["recorded_at"][:10] != "2026-05-01"
+
+
+def test_a_forecast_with_its_own_day_is_shown_for_that_day(recorded, tmp_path):
+    """Without the planned visit's forecasts, the last one is the last measured visit's,
+    which carries that visit's day."""
+    import shutil
+    import sqlite3
+
+    from pipeline.store.records import read_records
+
+    store, measured = recorded[:2]
+    copy = tmp_path / "fleet"
+    shutil.copytree(store, copy)
+    assert {len(v) for v in read_records(copy, "forecast").values()} == {7}  # 6 visits + plan
+    conn = sqlite3.connect(copy / "manifest.sqlite", isolation_level=None)
+    conn.execute("""DELETE FROM forecasts WHERE record LIKE '%"visit":"07"%'""")
+    conn.close()
+    p = measured.predictions
+    for a in fleet(copy, threshold_um=QUIET_UM).to_json()["axes"]:
+        f = a["last_forecast"]
+        assert (f["for_visit"], f["for_date"], f["for_date_estimated"]) == (
+            a["last_visit"], a["last_visit_date"], False)
+        points = p[(p["machine_id"] == a["machine_id"]) & (p["axis"] == a["axis"])
+                   & (p["visit"] == a["last_visit"])]
+        assert f["backlash_um"] == pytest.approx(points["backlash_um"].mean(), abs=1e-4)
+
+
+def test_the_printed_table_shows_the_last_forecast_and_compensation(recorded, capsys):
+    from pipeline.commands.fleet import print_summary
+
+    store = recorded[0]
+    view = fleet(store, threshold_um=QUIET_UM)
+    print_summary(view, file=sys.stdout)
+    lines = capsys.readouterr().out.splitlines()
+    assert "last forecast um" in lines[0] and "compensated" in lines[0]
+    for line, a in zip(lines[1:], view.to_json()["axes"]):
+        f = a["last_forecast"]
+        assert (f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}, "
+                f"{f['backlash_high_um']:.2f}] ~{f['for_date']}") in line
+        assert f"{a['last_compensation']['date']} " in line
+
+
+def test_the_site_shows_the_records(recorded, tmp_path):
+    store = recorded[0]
+    view = fleet(store, threshold_um=QUIET_UM, out=tmp_path / "site")
+    index = (tmp_path / "site" / "index.html").read_text()
+    assert index.count("#9467bd") >= len(view.axes)  # the recorded forecast in each sparkline
+    for a in view.to_json()["axes"]:
+        f = a["last_forecast"]
+        assert f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}" in index
+        page = (tmp_path / "site" / a["page"]).read_text()
+        assert "last recorded forecast (95 %)" in page
+        assert "Wear-rate map of the last forecast&#x27;s model" in page or \
+            "Wear-rate map of the last forecast's model" in page
+        assert page.count("<tr><td>20") >= 7 + 2  # seven forecasts, two compensations
+        assert "compensation history" in page and "1 earlier" in page
+    assert json.loads((tmp_path / "site" / "fleet.json").read_text())["axes"][0][
+        "last_compensation"]["controller"] == "csv"
+
+
+def test_a_file_or_frame_shows_none_recorded(site):
+    page = next(p for p in site.glob("*.html") if p.name != "index.html").read_text()
+    assert "None recorded" in page and "backlash predict MODEL DATA --store STORE" in page

@@ -48,11 +48,13 @@ def run(args: argparse.Namespace) -> int:
     tracking.check_uri()
     with BackgroundRun("fleet", tracking.log_into) as mlflow_run:
         from pipeline.commands.data import readings_arg
+        from pipeline.store import is_store
         from pipeline.workflows.fleet import fleet
 
         result = fleet(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
                        interval_days=args.interval_days, warn_months=args.warn_months,
-                       alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out)
+                       alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out,
+                       store=args.data if is_store(args.data) else None)
         record = result.tracking_record()
         mlflow_run.start(record.run_name)  # the input is valid: the run may start
         mlflow_run.log(tracking.record_data(record))
@@ -64,15 +66,37 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(result, file) -> None:
+    """The fleet table, worst first; the last recorded forecast (mean backlash [low, high]
+    and the day it is for) and compensation (day, reversal compensation) where a store holds
+    them."""
+    records = any(v.forecasts or v.compensations for v in result.axes)
+    extra = f"  {'last forecast um':<28}  {'compensated':<18}" if records else ""
     print(f"{'#':>3} {'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} "
-          f"{'slope um/mo':>11}  {'crossing':<10}  {'next due':<10}  alerts", file=file)
+          f"{'slope um/mo':>11}  {'crossing':<10}  {'next due':<10}{extra}  alerts", file=file)
     for rank, view in enumerate(result.axes, 1):
         j = view.to_json()
         slope = j["slope_um_per_month"]
+        extra = f"  {_forecast(j['last_forecast']):<28}  {_compensation(j['last_compensation']):<18}"
         print(f"{rank:>3} {view.machine_id:<12} {view.axis:<4} {j['visits']:>6} "
               f"{j['backlash_um']:>11.3f} "
               f"{slope if slope is not None else float('nan'):>11.4f}  "
-              f"{j['crossing_date'] or '-':<10}  {j['next_visit_due']:<10}  "
-              f"{', '.join(j['alerts']) or '-'}", file=file)
+              f"{j['crossing_date'] or '-':<10}  {j['next_visit_due']:<10}"
+              f"{extra if records else ''}  {', '.join(j['alerts']) or '-'}", file=file)
     if "index" in result.files:
         print(f"site: {result.files['index']}", file=file)
+
+
+def _forecast(last) -> str:
+    if last is None:
+        return "-"
+    low, high = last["backlash_low_um"], last["backlash_high_um"]
+    band = f" [{low:.2f}, {high:.2f}]" if low is not None else ""
+    when = last["for_date"] or (f"{last['for_operating_hours']:g} h"
+                                if last["for_operating_hours"] is not None else "?")
+    return f"{last['backlash_um']:.2f}{band} {'~' if last['for_date_estimated'] else ''}{when}"
+
+
+def _compensation(last) -> str:
+    if last is None:
+        return "-"
+    return f"{last['date']} {last['reversal_compensation_um']:.2f}"

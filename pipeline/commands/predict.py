@@ -19,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                        "(target and conditions, no deviations)")
     parser.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
     parser.add_argument("--json", action="store_true", help="print the predictions as JSON")
+    parser.add_argument("--store", metavar="STORE",
+                        help="fleet store (folder or postgresql:// URL) to record the forecast "
+                             "in, per machine axis; backlash fleet shows the last one")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,13 +32,15 @@ def run(args: argparse.Namespace) -> int:
 
     if not str(args.out).lower().endswith(".csv"):  # before any work
         raise InputError("expected a .csv file name", file=args.out, parameter="out")
-    result = predict(args.model, readings_arg(args), format=args.format)
+    result = predict(args.model, readings_arg(args), format=args.format, store=args.store)
     result.write(args.out)
     out = result.predictions
     print(f"{len(out)} points, backlash {out['backlash_um'].min():.2f}-"
           f"{out['backlash_um'].max():.2f} um ({result.model}"
           f"{', 95 % interval' if result.has_interval else ''}) -> {args.out}",
           file=sys.stderr)
+    if result.recorded is not None:
+        print(result.recorded.text, file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return 0

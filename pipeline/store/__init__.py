@@ -4,7 +4,8 @@ Two engines behind one interface (``base.Store``): a folder (``folder``: a Parqu
 partitioned by machine and axis with a SQLite manifest; the default, no server) and a
 PostgreSQL database for a team (``postgres``). ``open_store`` picks the engine from the
 location; ``content`` is the store's form of readings and the per-test digest that makes an
-ingest idempotent. See ``docs/store.md``.
+ingest idempotent; ``records`` the forecasts and compensations recorded for its axes (kept in
+the tables of ``tables``). See ``docs/store.md``.
 """
 
 from __future__ import annotations

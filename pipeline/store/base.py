@@ -14,8 +14,10 @@ from features.readings import schema
 from features.readings.errors import InputError
 
 # The version of the store's layout this code writes and reads. A store written by a newer
-# version (a larger number in its manifest or table) is refused, never guessed at.
-FORMAT_VERSION = 1
+# version (a larger number in its manifest or table) is refused, never guessed at. Version 2
+# added the record tables (``records``): a version-1 store reads as having no records and is
+# upgraded by its first record.
+FORMAT_VERSION = 2
 # The embedded store's manifest: a folder holding it is a store.
 MANIFEST = "manifest.sqlite"
 KEYS = list(schema.TEST_KEYS)
@@ -72,6 +74,20 @@ class Store:
 
     def axes(self) -> list[tuple[str, str]]:
         """(machine_id, axis) of every machine axis in the store, sorted."""
+        raise NotImplementedError
+
+    def exists(self) -> bool:
+        """Whether the store has been made (by its first ingest)."""
+        raise NotImplementedError
+
+    def put_records(self, kind: str, rows: list[tuple]) -> int:
+        """Add record rows of ``kind`` (``records.rows_of``) in one transaction under the
+        store's write lock, upgrading a store of an older format; return how many were new
+        (a row whose digest is stored already is left as it is)."""
+        raise NotImplementedError
+
+    def get_records(self, kind: str) -> list[tuple]:
+        """Every stored row of ``kind`` (``records.COLUMNS``); none in an older store."""
         raise NotImplementedError
 
     def add(self, table, digests) -> Added:

@@ -8,7 +8,8 @@ STORE/
 
 The dataset under ``readings/`` is Hive-partitioned by machine and axis (partition values
 percent-encoded), so pyarrow, DuckDB, Dask and Spark read it as it is. The manifest is the
-truth: a part counts once its row is committed. An ingest takes the manifest's write lock
+truth: a part counts once its row is committed. The manifest also holds the forecasts and
+compensations recorded for the store's axes (``records``). An ingest takes the manifest's write lock
 (``BEGIN IMMEDIATE``: concurrent ingests wait for each other), writes its parts under
 hidden temporary names, renames them into place, records parts and tests, and commits. A
 process killed before the commit leaves a rolled-back manifest and, at worst, parts no
@@ -29,6 +30,7 @@ from urllib.parse import quote
 
 from features.readings.errors import InputError
 from features.readings.fileio import TEMP_MARK, atomic_path
+from pipeline.store import tables
 from pipeline.store.base import FORMAT_VERSION, KEYS, MANIFEST, Store, Transaction
 
 DATA = "readings"
@@ -157,6 +159,8 @@ class FolderStore(Store):
         try:
             with contextlib.closing(sqlite3.connect(tmp, isolation_level=None)) as conn:
                 conn.executescript(_SCHEMA)
+                for table in _record_tables():
+                    conn.execute(tables.create_sql(table))
                 conn.execute("INSERT INTO meta VALUES ('format_version', ?)",
                              (str(FORMAT_VERSION),))
             with contextlib.suppress(FileExistsError):
@@ -177,6 +181,26 @@ class FolderStore(Store):
             return conn.execute("SELECT DISTINCT machine_id, axis FROM tests "
                                 "ORDER BY machine_id, axis").fetchall()
 
+    def exists(self) -> bool:
+        return self.manifest.is_file()
+
+    def put_records(self, kind: str, rows: list[tuple]) -> int:
+        with self.transaction() as tx:
+            tables.upgrade(tx.conn, "meta", _record_tables(), "?")
+            added = tables.write_rows(tx.conn, tables.TABLES[kind][0], "?", rows)
+            if added:
+                tx.commit()
+        return added
+
+    def get_records(self, kind: str) -> list[tuple]:
+        table = tables.TABLES[kind][0]
+        with self._connection(write=False) as conn:
+            check_version(conn, self.location)
+            if conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
+                            (table,)).fetchone() is None:
+                return []  # a store of format 1: no records yet
+            return conn.execute(f"SELECT {', '.join(tables.COLUMNS)} FROM {table}").fetchall()
+
     def read_table(self, selection):
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -189,7 +213,7 @@ class FolderStore(Store):
             parts = conn.execute(
                 "SELECT part, machine_id, axis FROM parts WHERE part IN "
                 f"(SELECT part FROM tests {where}) ORDER BY part", args).fetchall()
-        tables = []
+        found = []
         for part, machine, axis in parts:
             try:
                 table = pq.read_table(self.root / DATA / part)
@@ -197,10 +221,10 @@ class FolderStore(Store):
                 raise self._error(f"cannot read part {part} of the store: {err}") from None
             n = table.num_rows
             table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
-            tables.append(table.append_column("axis", pa.array([axis] * n, pa.string())))
-        if not tables:
+            found.append(table.append_column("axis", pa.array([axis] * n, pa.string())))
+        if not found:
             return None
-        return pa.concat_tables([t.select(SCHEMA.names).cast(SCHEMA) for t in tables])
+        return pa.concat_tables([t.select(SCHEMA.names).cast(SCHEMA) for t in found])
 
 
 class _FolderTransaction(Transaction):
@@ -262,6 +286,10 @@ class _FolderTransaction(Transaction):
             if path.relative_to(folder).as_posix() not in known:
                 with contextlib.suppress(OSError):
                     path.unlink()
+
+
+def _record_tables() -> list[str]:
+    return [embedded for embedded, _ in tables.TABLES.values()]
 
 
 def check_version(conn, location: str) -> None:

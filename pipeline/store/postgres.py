@@ -1,10 +1,11 @@
-"""The fleet store of a team: three tables in a PostgreSQL database.
+"""The fleet store of a team: five tables in a PostgreSQL database.
 
 ``backlash_store`` holds the format version, ``backlash_tests`` one row per test (its key,
 digest, number of readings, start) and ``backlash_readings`` every reading in the store's
 columns (``content.SCHEMA``). An ingest is one transaction that first takes an advisory lock,
 so concurrent ingests run one after the other and each sees what the others committed; the
-readings travel by ``COPY`` as CSV both ways. The tables are created by the first ingest.
+readings travel by ``COPY`` as CSV both ways. The tables are created by the first ingest;
+``backlash_forecasts`` and ``backlash_compensations`` hold the records (``records``).
 The password is never part of a message: give it in ``~/.pgpass`` or ``PGPASSWORD``.
 """
 
@@ -14,6 +15,7 @@ import contextlib
 import io
 
 from features.readings.errors import InputError
+from pipeline.store import tables
 from pipeline.store.base import FORMAT_VERSION, KEYS, Store, Transaction
 from pipeline.store.folder import refuse_newer
 
@@ -119,6 +121,25 @@ class PostgresStore(Store):
             return conn.execute(f"SELECT DISTINCT machine_id, axis FROM {TESTS} "
                                 "ORDER BY machine_id, axis").fetchall()
 
+    def exists(self) -> bool:
+        with self._connection() as conn:
+            return self._check_version(conn)
+
+    def put_records(self, kind: str, rows: list[tuple]) -> int:
+        with self.transaction() as tx:
+            tables.upgrade(tx.conn, META, _record_tables(), "%s")
+            added = tables.write_rows(tx.conn, tables.TABLES[kind][1], "%s", rows)
+            tx.commit()
+        return added
+
+    def get_records(self, kind: str) -> list[tuple]:
+        table = tables.TABLES[kind][1]
+        with self._connection() as conn:
+            if not self._check_version(conn) or conn.execute(
+                    "SELECT to_regclass(%s)", (table,)).fetchone()[0] is None:
+                return []  # no store yet, or one of format 1: no records
+            return conn.execute(f"SELECT {', '.join(tables.COLUMNS)} FROM {table}").fetchall()
+
     def read_table(self, selection):
         import pyarrow as pa
         import pyarrow.csv as pcsv
@@ -189,6 +210,12 @@ def _create(conn) -> None:
                  f"ingested_at timestamptz NOT NULL DEFAULT now(), PRIMARY KEY ({keys}))")
     conn.execute(f"CREATE TABLE {READINGS} ({columns}, PRIMARY KEY ({keys}, seq), "
                  f"FOREIGN KEY ({keys}) REFERENCES {TESTS})")
+    for table in _record_tables():
+        conn.execute(tables.create_sql(table))
+
+
+def _record_tables() -> list[str]:
+    return [team for _, team in tables.TABLES.values()]
 
 
 def _select(selection):

@@ -60,6 +60,7 @@ def _parameters() -> dict:
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
         "min_jump_sigma": [positive],
         "out": [str, os.PathLike, None],
+        "store": [str, os.PathLike, None],
     }
 
 
@@ -95,6 +96,10 @@ class AxisView:
         ``targets`` and the figures of every test of the visit (``figures``).
     page : str
         File name of the axis's page in the site.
+    forecasts, compensations : list of dict
+        The forecasts and compensations a fleet store recorded for the axis, oldest first
+        (``pipeline.store.records``; a forecast without a day but with operating hours gets
+        the day the axis's hours reach them, ``for_date_estimated``); empty for a file.
     """
 
     series: object
@@ -106,6 +111,8 @@ class AxisView:
     wear_note: str = ""
     iso: dict | None = None
     page: str = ""
+    forecasts: list = field(default_factory=list)
+    compensations: list = field(default_factory=list)
 
     @property
     def machine_id(self) -> str:
@@ -133,6 +140,8 @@ class AxisView:
 
     def to_json(self) -> dict:
         """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
+        from pipeline.store.records import summary
+
         s, v = self.series, self.series.visits
         trend = s.trend
         return {
@@ -154,7 +163,8 @@ class AxisView:
             "next_visit_reason": self.next_visit_reason,
             "alerts": [a["kind"] for a in s.alerts],
             "alert_messages": [a["message"] for a in s.alerts],
-            "last_forecast": None, "last_compensation": None,
+            "last_forecast": summary(self.forecasts[-1]) if self.forecasts else None,
+            "last_compensation": summary(self.compensations[-1]) if self.compensations else None,
             "history": {"visits": v["visit"].astype(str).tolist(),
                         "dates": [_day(d).isoformat() for d in v["date"]],
                         "backlash_um": [_round(x) for x in v["backlash_um"]],
@@ -241,7 +251,8 @@ class FleetResult(Result):
 # --------------------------------------------------------------------------- the workflow
 def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
           interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
-          alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None) -> FleetResult:
+          alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None,
+          store=None) -> FleetResult:
     """One view of every machine axis of the fleet, worst first.
 
     Parameters
@@ -264,6 +275,10 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         A change point must move the level by this many standard errors.
     out : str or path, optional
         Folder to write the site into (``FleetResult.write``).
+    store : str or path, optional
+        The fleet store (folder or ``postgresql://`` URL) whose recorded forecasts and
+        compensations to show (``AxisView.forecasts``, ``compensations``); default ``data``
+        when it names a store.
 
     Returns
     -------
@@ -278,7 +293,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     """
     values = {"format": format, "threshold_um": threshold_um, "interval_days": interval_days,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
-              "out": out}
+              "out": out, "store": store}
     check_params(_parameters(), values, "fleet")
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
@@ -296,34 +311,80 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
              if len(s.visits) < 2]
     for text in notes:
         note(text)
-    views = axis_views(series, readings, stats, interval_days)
+    views = axis_views(series, readings, stats, interval_days,
+                       store_records(data if store is None else store))
+    if store is not None:  # the result names a store without its password
+        from pipeline.store import redact
+
+        values["store"] = redact(store)
     result = FleetResult(views, source_of(data, readings), readings, values, notes=notes)
     if out is not None:
         result.write(out)
     return result
 
 
-def axis_views(series: list, readings, stats, interval_days: float) -> list[AxisView]:
+def store_records(data) -> dict:
+    """The records of a fleet store by kind and machine axis (``pipeline.store.records``);
+    none for a file or a frame."""
+    from pipeline.store import is_store, open_store
+    from pipeline.store.records import read_records
+    from pipeline.store.tables import TABLES
+
+    if not isinstance(data, (str, os.PathLike)) or not is_store(data):
+        return {}
+    store = open_store(data, parameter="store")
+    return {kind: read_records(store, kind) for kind in TABLES}
+
+
+def axis_views(series: list, readings, stats, interval_days: float,
+               records: dict | None = None) -> list[AxisView]:
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
-    the readings' per-target ISO statistics (``features.iso230.per_target``)."""
+    the readings' per-target ISO statistics (``features.iso230.per_target``), ``records``
+    what ``store_records`` found."""
     from features import iso230
     from features.targets import targets_of
 
     parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
                    iso230.axis_figures(readings, stats))
-    views = [_view(s, parts, interval_days) for s in series]
+    views = [_view(s, parts, interval_days, records or {}) for s in series]
     views.sort(key=worst_first)
     for view, name in zip(views, page_names(views)):
         view.page = name
     return views
 
 
-def _view(s, parts: _Parts, interval_days: float) -> AxisView:
+def _view(s, parts: _Parts, interval_days: float, records: dict) -> AxisView:
     due, reason = next_visit(s, interval_days)
     end = _forecast_end(s, interval_days)
     wear, why = wear_map(s, parts)
+    key = (s.machine_id, s.axis)
+    forecasts = [dated(f, s, parts) for f in records.get("forecast", {}).get(key, [])]
     return AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
-                    last_iso(s, parts))
+                    last_iso(s, parts), forecasts=forecasts,
+                    compensations=records.get("compensation", {}).get(key, []))
+
+
+def dated(record: dict, s, parts: _Parts) -> dict:
+    """A forecast with the day it is for: its own, else the day the axis's operating hours
+    reach the forecast's hours, by the least-squares line of hours against time over the
+    visits since the last change point (two visits with different hours at least)."""
+    import numpy as np
+
+    if record["for_date"] is not None or record["operating_hours"] is None or parts.hours is None:
+        return record
+    seg = s.visits.iloc[s.segment_start:]
+    hours = np.array([parts.hours.get((s.machine_id, s.axis, str(v)), np.nan)
+                      for v in seg["visit"]])
+    days = (seg["date"] - s.visits["date"].iloc[0]).dt.total_seconds().to_numpy() / 86400
+    keep = np.isfinite(hours)
+    if keep.sum() < 2 or np.ptp(hours[keep]) <= 0:
+        return record
+    per_hour, start = np.polyfit(hours[keep], days[keep], 1)
+    if per_hour <= 0:
+        return record
+    when = s.visits["date"].iloc[0] + dt.timedelta(days=float(start + per_hour
+                                                              * record["operating_hours"]))
+    return {**record, "for_date": _day(when).isoformat(), "for_date_estimated": True}
 
 
 def worst_first(view: AxisView) -> tuple:

@@ -30,6 +30,7 @@ PARAMETERS = {
     "data": [str, os.PathLike, pd.DataFrame, None],
     "plan": [str, os.PathLike, pd.DataFrame, None],
     "format": [StrOptions(set(FORMATS))],
+    "store": [str, os.PathLike, None],
 }
 
 
@@ -45,10 +46,13 @@ class PredictionResult(Result):
         predictions are clipped at 0 (backlash is a magnitude).
     model : str
         Registry name of the predictor.
+    recorded : pipeline.store.records.Recorded or None
+        What was recorded in the fleet store (``store``), else None.
     """
 
     predictions: pd.DataFrame
     model: str
+    recorded: object = None
 
     @property
     def has_interval(self) -> bool:
@@ -85,7 +89,8 @@ class PredictionResult(Result):
             artifacts=list(self.files.values()))
 
 
-def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionResult:
+def predict(model, data=None, *, plan=None, format: str = "auto",
+            store=None) -> PredictionResult:
     """Backlash [um] from a trained model at the points of new tests or of a plan.
 
     Parameters
@@ -100,12 +105,24 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
         (``features.readings.plan``). Give ``data`` or ``plan``.
     format : str
         Input layout of ``data`` (default: detect).
+    store : str or path-like, optional
+        A fleet store (folder or ``postgresql://`` URL) to record the forecast in, one record
+        per machine axis and visit (``pipeline.store.records.forecast_records``): the points,
+        the day (``started_at``) and operating hours it is for, the model and, for a wear map,
+        its wear-rate map. Recording the same forecast again changes nothing.
 
     Returns
     -------
     PredictionResult
         A plan far beyond the training span of operating hours gets a note (the forecast
         extrapolates the wear rate that far).
+
+    Raises
+    ------
+    InputError
+        Neither or both of ``data`` and ``plan``; a ``store`` that does not exist or cannot be
+        written, or points without ``machine_id`` and ``axis`` to record them by (nothing is
+        recorded).
     """
     from features.readings.plan import is_plan, read_plan
     from features.table import prediction_inputs
@@ -116,6 +133,10 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
                  "predict")
     if (data is None) == (plan is None):
         raise InputError("give the readings (data) or a plan, not both", parameter="data")
+    if store is not None:  # before any work: a store that cannot take the records
+        from pipeline.store.records import open_for_records
+
+        store = open_for_records(store)
     trained = model if isinstance(model, TrainedModel) else load_model(model)
     if plan is None and isinstance(data, (str, os.PathLike)) and format in (
             "auto", "canonical") and is_plan(data):
@@ -140,7 +161,62 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
              "wear maps (a wider interval)")
     predicted = prediction_frame(trained, inputs, source)
     out = pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1)
-    return PredictionResult(predictions=out, model=trained.name)
+    result = PredictionResult(predictions=out, model=trained.name)
+    if store is not None:
+        points = out.copy()
+        if "operating_hours" not in points and "operating_hours" in inputs:
+            points["operating_hours"] = inputs["operating_hours"].to_numpy(float)
+        if plan is None and "started_at" in readings:
+            points["started_at"] = _visit_starts(readings, inputs)
+        result.recorded = record_forecast(store, points, trained, model, source)
+    return result
+
+
+def _visit_starts(readings: pd.DataFrame, inputs: pd.DataFrame):
+    """Per point of ``inputs``, the start of its visit (the earliest ``started_at`` of the
+    machine axis's tests of that visit)."""
+    keys = ["machine_id", "axis", "visit"]
+    starts = readings.groupby(keys, observed=True)["started_at"].min()
+    first = {tuple(map(str, k)): v for k, v in starts.items()}
+    return [first.get(k) for k in inputs[keys].astype(str).itertuples(index=False, name=None)]
+
+
+def record_forecast(store, points: pd.DataFrame, trained, model, source: str):
+    """Record the forecast ``points`` in ``store`` (``pipeline.store.records``), naming the model by
+    its registry name, its directory and the SHA-256 of its ``model.json``; a wear map's
+    wear-rate map per machine axis goes with it."""
+    from pipeline.store.records import forecast_records, record
+
+    model_dir, sha = None, None
+    if isinstance(model, (str, os.PathLike)):
+        from models.persistence import digest
+        from models.registry import MODEL_FILE
+
+        model_dir, sha = str(model), digest(Path(model) / MODEL_FILE)
+    records = forecast_records(points, model=trained.name, source=source, model_dir=model_dir,
+                               model_sha256=sha, wear_rates=wear_rates(trained))
+    return record(store, "forecast", records)
+
+
+def wear_rates(trained) -> dict | None:
+    """The wear-rate map w(x) [um per 1000 h] of a wear-map model by (machine_id, axis) (key
+    None: a single map for any axis), or None for a model without one."""
+    import numpy as np
+
+    estimator = trained.estimator
+    if not hasattr(estimator, "wear_rate_map") or not getattr(estimator, "use_hours_", True):
+        return None
+    frame = estimator.wear_rate_map()
+    groups = (frame.groupby(["machine_id", "axis"], sort=True) if "machine_id" in frame
+              else [(None, frame)])
+
+    def plain(values):
+        return [float(v) if np.isfinite(v) else None for v in np.asarray(values, float)]
+
+    return {None if key is None else tuple(map(str, key)): {
+        "position_mm": plain(g["position_mm"]), "rate": plain(g["wear_rate_um_per_1000h"]),
+        "low": plain(g["wear_rate_low"]), "high": plain(g["wear_rate_high"])}
+        for key, g in groups}
 
 
 def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:

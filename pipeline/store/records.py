@@ -1,0 +1,421 @@
+"""What the store remembers besides readings: the forecasts made for a machine axis and the
+compensations written to its controller.
+
+A record is one JSON object per machine axis (a forecast: per visit it is for; a
+compensation: per controller), checked field by field when it is made and again when it is
+read back (``check_forecast``, ``check_compensation``), and named by the SHA-256 of its canonical text (``digest``): recording
+the same content twice adds nothing. Both engines keep them in two tables of the same columns
+(``machine_id``, ``axis``, ``sha256``, ``recorded_at``, ``record``) through ``Store.put_records``
+and ``Store.get_records``, with the same SQL (``pipeline.store.tables``).
+
+>>> from pipeline.store.records import record_compensation, read_records   # doctest: +SKIP
+>>> record_compensation("fleet/", bl.compensate("fleet/", controller="csv"))  # doctest: +SKIP
+>>> read_records("fleet/", "compensation")[("M01", "X")][-1]["controller"]    # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+
+from features.readings import schema
+from features.readings.errors import InputError
+
+# The record's own layout: part of every record, so a future change can never be misread.
+RECORD_FORMAT = 1
+AXES = (*schema.LINEAR_AXES, *schema.ROTARY_AXES)
+
+
+@dataclass
+class Recorded:
+    """What one recording did: ``added`` new records, ``unchanged`` ones already stored."""
+
+    kind: str
+    added: int
+    unchanged: int
+    location: str
+
+    @property
+    def text(self) -> str:
+        """One line for the command's summary."""
+        what = f"{self.kind}{'s' if self.added != 1 else ''}"
+        same = f" ({self.unchanged} already recorded)" if self.unchanged else ""
+        return f"{self.added} {what} recorded in {self.location}{same}"
+
+
+# --------------------------------------------------------------------------- content
+def canonical(record: dict) -> str:
+    """The record's text: keys sorted, no spaces, numbers as Python writes them (exact)."""
+    return json.dumps(record, sort_keys=True, separators=(",", ":"), allow_nan=False,
+                      ensure_ascii=False)
+
+
+def digest(record: dict) -> str:
+    return hashlib.sha256(canonical(record).encode("utf-8")).hexdigest()
+
+
+def _fail(where: str, message: str):
+    raise InputError(f"{message}; expected a {where}")
+
+
+def _number(value, name: str, kind: str, optional: bool = False, minimum=None):
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
+            value) or (minimum is not None and value < minimum):
+        _fail(kind, f"{name} is {value!r}, not a finite number"
+              + ("" if minimum is None else f" >= {minimum:g}"))
+    return float(value)
+
+
+def _text(value, name: str, kind: str, optional: bool = False):
+    if value is None and optional:
+        return None
+    if not isinstance(value, str) or not value.strip():
+        _fail(kind, f"{name} is {value!r}, not a non-empty text")
+    return value
+
+
+def _numbers(values, name: str, kind: str, n: int | None, optional_items: bool = False,
+             minimum=None) -> list:
+    if not isinstance(values, list) or not values or (n is not None and len(values) != n):
+        _fail(kind, f"{name} is not a list of {n or 'one or more'} numbers")
+    return [_number(v, f"{name}[{i}]", kind, optional_items, minimum)
+            for i, v in enumerate(values)]
+
+
+def _date(value, name: str, kind: str):
+    if value is None:
+        return None
+    try:
+        dt.date.fromisoformat(value)
+    except (TypeError, ValueError):
+        _fail(kind, f"{name} is {value!r}, not a date YYYY-MM-DD")
+    return value
+
+
+def _head(record, kind: str, keys: set) -> None:
+    if not isinstance(record, dict) or record.get("kind") != kind.split()[0]:
+        _fail(kind, "the record is not a " + kind.split()[0])
+    if record.get("format") != RECORD_FORMAT:
+        _fail(kind, f"record format {record.get('format')!r} is not {RECORD_FORMAT}")
+    unknown = sorted(set(record) - keys)
+    if unknown:
+        _fail(kind, f"unknown field(s) {', '.join(unknown)}")
+    _text(record.get("machine_id"), "machine_id", kind)
+    if record.get("axis") not in AXES:
+        _fail(kind, f"axis is {record.get('axis')!r}, not one of {', '.join(AXES)}")
+
+
+FORECAST_KEYS = {"kind", "format", "machine_id", "axis", "visit", "for_date", "operating_hours",
+                 "model", "model_dir", "model_sha256", "points", "wear_rate"}
+POINT_KEYS = ("target", "backlash_um", "backlash_low_um", "backlash_high_um", "operating_hours")
+WEAR_KEYS = ("position_mm", "rate", "low", "high")
+COMPENSATION_KEYS = {"kind", "format", "machine_id", "axis", "controller", "source", "unit",
+                     "reversal_compensation_um", "table", "files", "interpolation_error_um"}
+TABLE_KEYS = ("target", "error_up_um", "error_down_um")
+
+
+def check_forecast(record) -> dict:
+    """``record`` if it is a forecast this version can interpret, else one ``InputError``."""
+    kind = "forecast record"
+    _head(record, kind, FORECAST_KEYS)
+    _text(record.get("visit"), "visit", kind, optional=True)
+    _date(record.get("for_date"), "for_date", kind)
+    _number(record.get("operating_hours"), "operating_hours", kind, optional=True, minimum=0)
+    _text(record.get("model"), "model", kind)
+    for key in ("model_dir", "model_sha256"):
+        _text(record.get(key), key, kind, optional=True)
+    points = record.get("points")
+    if not isinstance(points, dict) or set(points) - set(POINT_KEYS) or not {
+            "target", "backlash_um"} <= set(points):
+        _fail(kind, "points must hold target and backlash_um lists (and optionally "
+                    f"{', '.join(POINT_KEYS[2:])})")
+    n = len(_numbers(points["target"], "points.target", kind, None))
+    _numbers(points["backlash_um"], "points.backlash_um", kind, n, minimum=0)
+    if ("backlash_low_um" in points) != ("backlash_high_um" in points):
+        _fail(kind, "points give one bound of the interval only")
+    for key in POINT_KEYS[2:]:
+        if key in points:
+            _numbers(points[key], f"points.{key}", kind, n, optional_items=key ==
+                     "operating_hours")
+    wear = record.get("wear_rate")
+    if wear is not None:
+        if not isinstance(wear, dict) or set(wear) != set(WEAR_KEYS):
+            _fail(kind, f"wear_rate must hold {', '.join(WEAR_KEYS)}")
+        m = len(_numbers(wear["position_mm"], "wear_rate.position_mm", kind, None))
+        for key in WEAR_KEYS[1:]:
+            _numbers(wear[key], f"wear_rate.{key}", kind, m, optional_items=True)
+    return record
+
+
+def check_compensation(record) -> dict:
+    """``record`` if it is a compensation this version can interpret, else one
+    ``InputError``."""
+    kind = "compensation record"
+    _head(record, kind, COMPENSATION_KEYS)
+    _text(record.get("controller"), "controller", kind)
+    if record.get("source") not in ("measured", "predicted"):
+        _fail(kind, f"source is {record.get('source')!r}, not measured or predicted")
+    if record.get("unit") != schema.deviation_unit(record["axis"]):
+        _fail(kind, f"unit is {record.get('unit')!r}, not that of axis {record['axis']}")
+    _number(record.get("reversal_compensation_um"), "reversal_compensation_um", kind,
+            minimum=0)
+    _number(record.get("interpolation_error_um"), "interpolation_error_um", kind, optional=True)
+    table = record.get("table")
+    if not isinstance(table, dict) or set(table) != set(TABLE_KEYS):
+        _fail(kind, f"table must hold {', '.join(TABLE_KEYS)}")
+    n = len(_numbers(table["target"], "table.target", kind, None))
+    if any(b <= a for a, b in zip(table["target"], table["target"][1:])):
+        _fail(kind, "table.target is not ascending")
+    for key in TABLE_KEYS[1:]:
+        _numbers(table[key], f"table.{key}", kind, n)
+    files = record.get("files")
+    if not isinstance(files, list) or not all(isinstance(f, str) and f for f in files):
+        _fail(kind, "files is not a list of file names")
+    return record
+
+
+CHECKS = {"forecast": check_forecast, "compensation": check_compensation}
+
+
+def rows_of(kind: str, records: list[dict], recorded_at: str | None = None) -> list[tuple]:
+    """Table rows of checked records, all stamped ``recorded_at`` (default now, UTC)."""
+    stamp = recorded_at or now()
+    return [(r["machine_id"], r["axis"], digest(r), stamp, canonical(CHECKS[kind](r)))
+            for r in records]
+
+
+def now() -> str:
+    """The time of recording as fixed-width ISO text in UTC (sorts as it compares)."""
+    return dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def parse(kind: str, row: tuple, location: str) -> dict:
+    """A stored row back as its record (plus ``recorded_at``), checked as when it was made
+    and against its digest; one line naming the store and the row otherwise."""
+    machine, axis, sha, recorded_at, text = row
+    where = f"{kind} record {sha[:12]} of machine {machine} axis {axis}"
+    try:
+        record = json.loads(text)
+        CHECKS[kind](record)
+    except ValueError as err:
+        raise InputError(f"{where} cannot be read: {err}", file=location) from None
+    except InputError as err:
+        raise InputError(f"{where} cannot be read: {err.message}", file=location) from None
+    if digest(record) != sha or (record["machine_id"], record["axis"]) != (machine, axis):
+        raise InputError(f"{where} does not match its digest: the table was changed outside "
+                         "backlash", file=location)
+    return {**record, "recorded_at": recorded_at}
+
+
+# --------------------------------------------------------------------------- summaries
+def summary(record: dict) -> dict:
+    """A record as ``backlash fleet --json`` shows it (``last_forecast``,
+    ``last_compensation``; docs/fleet.md lists the keys).
+
+    A forecast: the mean over its points of the predicted backlash and of its 95 % bounds
+    [um], the visit, day and operating hours [h] it is for, the model. A compensation: the
+    controller, the reversal compensation and the largest correction of its table
+    (correction = -error, either direction) [um].
+    """
+    import numpy as np
+
+    head = {"date": record["recorded_at"][:10], "recorded_at": record["recorded_at"]}
+    if record["kind"] == "compensation":
+        table = record["table"]
+        errors = np.r_[table["error_up_um"], table["error_down_um"]]
+        return {**head, "controller": record["controller"], "source": record["source"],
+                "reversal_compensation_um": _rounded(record["reversal_compensation_um"]),
+                "max_abs_correction_um": _rounded(np.abs(errors).max()),
+                "unit": record["unit"], "points": len(table["target"]), "files": record["files"]}
+    points = record["points"]
+
+    def mean(key):
+        return _rounded(np.mean(points[key])) if key in points else None
+
+    return {**head, "for_visit": record["visit"], "for_date": record["for_date"],
+            "for_date_estimated": bool(record.get("for_date_estimated", False)),
+            "for_operating_hours": _rounded(record["operating_hours"], 1),
+            "backlash_um": mean("backlash_um"), "backlash_low_um": mean("backlash_low_um"),
+            "backlash_high_um": mean("backlash_high_um"), "points": len(points["target"]),
+            "model": record["model"], "model_dir": record["model_dir"]}
+
+
+def _rounded(value, digits: int = 4):
+    return None if value is None else round(float(value), digits)
+
+
+# --------------------------------------------------------------------------- the API
+def open_for_records(store):
+    """An open store for recording: a ``Store`` as it is, else the store at a location
+    (which must exist: records belong to the tests of an existing store)."""
+    from pipeline.store import open_store
+    from pipeline.store.base import Store
+
+    opened = store if isinstance(store, Store) else open_store(store, write=True,
+                                                                 parameter="store")
+    if not opened.exists():
+        raise InputError("holds no store yet; records belong to a store made by backlash "
+                         "ingest", file=opened.location, parameter="store")
+    return opened
+
+
+def record(store, kind: str, records: list[dict], recorded_at: str | None = None) -> Recorded:
+    """Record ``records`` of ``kind`` (``forecast`` or ``compensation``) in one transaction:
+    all or none; those already stored with the same content are left as they are.
+
+    Raises
+    ------
+    InputError
+        A record this version cannot interpret, a store that does not exist or cannot be
+        written; nothing is recorded.
+    """
+    rows = rows_of(kind, records, recorded_at)  # every record checked before the store
+    opened = open_for_records(store)
+    added = opened.put_records(kind, rows)
+    return Recorded(kind, added, len({r[:3] for r in rows}) - added, opened.location)
+
+
+def read_records(store, kind: str) -> dict[tuple[str, str], list[dict]]:
+    """Every record of ``kind`` by (machine_id, axis), oldest first (by ``recorded_at``);
+    empty for a store written before records existed."""
+    from pipeline.store import open_store
+    from pipeline.store.base import Store
+
+    opened = store if isinstance(store, Store) else open_store(store)
+    out: dict[tuple[str, str], list[dict]] = {}
+    for row in opened.get_records(kind):
+        out.setdefault((row[0], row[1]), []).append(parse(kind, row, opened.location))
+    return {key: sorted(found, key=_order) for key, found in sorted(out.items())}
+
+
+def _order(record: dict) -> tuple:
+    """Oldest first: by time of recording; records of one recording by the day (else visit)
+    a forecast is for, or by controller."""
+    return (record["recorded_at"], record.get("for_date") or "", record.get("visit") or "",
+            record.get("controller") or "", canonical(record))
+
+
+def forecast_records(predictions, *, model: str, source: str, model_dir: str | None = None,
+                     model_sha256: str | None = None, wear_rates: dict | None = None
+                     ) -> list[dict]:
+    """One forecast record per machine axis (and visit, when the points name one) of a
+    predictions frame (``pipeline.workflows.predict.PredictionResult.predictions``).
+
+    Parameters
+    ----------
+    predictions : DataFrame
+        ``machine_id``, ``axis``, ``target`` [mm or deg], ``backlash_um`` and, where known,
+        ``backlash_low_um``/``backlash_high_um`` [um], ``visit``, ``operating_hours`` [h] and
+        ``started_at`` (the day the forecast is for).
+    model, model_dir, model_sha256 : str
+        The predictor's registry name, its directory and the SHA-256 of its ``model.json``.
+    source : str
+        Where the points came from, for errors.
+    wear_rates : dict, optional
+        (machine_id, axis) -> the model's wear-rate map (``position_mm``, ``rate``, ``low``,
+        ``high`` [um per 1000 h]); key None for a map that holds for any axis.
+    """
+    missing = [c for c in ("machine_id", "axis") if c not in predictions]
+    if missing:
+        raise InputError("a forecast is recorded per machine axis: the points need machine_id "
+                         "and axis", file=source, column=missing[0])
+    keys = ["machine_id", "axis"] + (["visit"] if "visit" in predictions else [])
+    wear_rates = wear_rates or {}
+    records = []
+    for key, part in predictions.groupby(keys, sort=True, dropna=False):
+        machine, axis = str(key[0]), str(key[1])
+        points = {c: _plain(part[c].to_numpy(float)) for c in POINT_KEYS if c in part}
+        hours = part["operating_hours"].mean() if "operating_hours" in part else None
+        records.append({
+            "kind": "forecast", "format": RECORD_FORMAT, "machine_id": machine, "axis": axis,
+            "visit": None if len(key) < 3 or _missing(key[2]) else str(key[2]),
+            "for_date": _day(part["started_at"].min()) if "started_at" in part else None,
+            "operating_hours": _plain(hours), "model": model, "model_dir": model_dir,
+            "model_sha256": model_sha256, "points": points,
+            "wear_rate": wear_rates.get((machine, axis), wear_rates.get(None))})
+    return records
+
+
+def _missing(value) -> bool:
+    import pandas as pd
+
+    return value is None or bool(pd.isna(value))
+
+
+def _day(stamp) -> str | None:
+    """The UTC day of a time (naive: taken as UTC), None when unknown."""
+    import pandas as pd
+
+    if _missing(stamp):
+        return None
+    stamp = pd.Timestamp(stamp)
+    return (stamp.tz_convert("UTC") if stamp.tzinfo else stamp).date().isoformat()
+
+
+def compensation_records(result) -> list[dict]:
+    """One record per machine axis and controller of a compensate workflow's result
+    (``pipeline.workflows.compensate.CompensationResult``): the per-target error of each
+    approach direction [um] (the correction is its negative), the reversal compensation [um],
+    the files written (paths under the output folder once written)."""
+    profiles = {(p.machine_id, p.axis): p for p in getattr(result, "profiles", [])}
+    written = getattr(result, "written", None)
+    if not profiles or not written:
+        raise InputError("holds no compensation; expected the result of compensate",
+                         parameter="result")
+    records = []
+    for w in written:
+        p = profiles.get((w.get("machine_id"), w.get("axis")))
+        if p is None:
+            raise InputError(f"names machine {w.get('machine_id')} axis {w.get('axis')} "
+                             "without a profile; expected the result of compensate",
+                             parameter="result")
+        files = [str(result.path(name)) for name in w.get("files", {}).values()]
+        backlash = w.get("backlash", p.backlash)
+        records.append({
+            "kind": "compensation", "format": RECORD_FORMAT, "machine_id": str(p.machine_id),
+            "axis": str(p.axis), "controller": w.get("controller"), "source": p.source,
+            "unit": schema.deviation_unit(str(p.axis)),
+            "reversal_compensation_um": _plain(backlash),
+            "interpolation_error_um": _plain(w.get("interpolation_error_um")),
+            "table": {"target": _plain(p.target), "error_up_um": _plain(p.mean_up),
+                      "error_down_um": _plain(p.mean_down)},
+            "files": files})
+    return records
+
+
+def record_compensation(store, result, recorded_at: str | None = None) -> Recorded:
+    """Record what a compensate workflow's result writes, per machine axis and controller.
+
+    Parameters
+    ----------
+    store : str, path-like or Store
+        An existing fleet store (folder or ``postgresql://`` URL).
+    result : CompensationResult
+        What ``pipeline.workflows.compensate.compensate`` returned (written or not: the
+        files are named as ``result.path`` names them).
+    recorded_at : str, optional
+        ISO time of recording (UTC); default now.
+
+    Returns
+    -------
+    Recorded
+        ``added`` new records; recording the same compensation again adds none.
+    """
+    return record(store, "compensation", compensation_records(result), recorded_at)
+
+
+def _plain(value):
+    """Numbers and arrays as JSON values (numpy scalars to floats; NaN to None)."""
+    import numpy as np
+
+    if value is None:
+        return None
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in np.asarray(value, dtype=float).tolist()]
+    value = float(value)
+    return value if math.isfinite(value) else None
