@@ -159,6 +159,7 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         # the numeric inputs only
         self.axes_ = sorted({tuple(k) for k in labels}) if labels is not None else []
         self.pooled_ = len(self.axes_) > 1
+        self.visit_hours_ = _visit_hours(frame, labels, self.axes_)
         if self.pooled_:
             return self._fit_fleet(frame, y, labels, hours_origin or {})
         return self._fit_axis(frame, y)
@@ -283,6 +284,18 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
                 frame[name] = np.nan
         return frame
 
+    def visit_hours(self, key: tuple[str, str] | None = None) -> np.ndarray:
+        """Operating hours [h] of the visits the model was fitted on (since each axis's wear
+        clock restarted; visits told apart by their hours), ascending: of machine axis ``key``
+        = (machine_id, axis) when the model knows its axes, else of its one axis. Empty for
+        an axis it does not know, or a model saved without them."""
+        check_is_fitted(self, "coef_")
+        known = getattr(self, "visit_hours_", None) or []
+        if key is not None and self.axes_:
+            index = {tuple(k): i for i, k in enumerate(self.axes_)}.get(tuple(map(str, key)))
+            known = [known[index]] if index is not None and index < len(known) else []
+        return np.asarray(known[0] if known else [], float)
+
     def chosen_params(self) -> dict:
         """The parameters cross-validation chose (the control points), to refit the same model
         on other rows (a backtest) without choosing again."""
@@ -375,7 +388,7 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         params = self.get_params()
         params["features"] = list(params["features"]) if params["features"] else None
         state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE},
-                 **{name: _jsonable(getattr(self, name)) for name in FLEET_STATE
+                 **{name: _jsonable(getattr(self, name)) for name in (*FLEET_STATE, *_OPTIONAL)
                     if hasattr(self, name)}}
         return write_state(directory / FILE_NAME, self, state)
 
@@ -394,7 +407,7 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
             model = checked_params(cls(**params), path)
             for name in _STATE:
                 setattr(model, name, _restore(name, state[name]))
-            for name in FLEET_STATE:
+            for name in (*FLEET_STATE, *_OPTIONAL):
                 if name in state:
                     setattr(model, name, _restore(name, state[name]))
         except (TypeError, ValueError) as err:
@@ -415,6 +428,8 @@ _STATE = ("use_position_", "use_hours_", "conditions_", "condition_means_", "con
           "used_features_", "range_mm_", "knots_mm_", "hours_range_", "cv_scores_",
           "n_control_", "coef_", "sigma_um_", "dof_", "covariance_", "can_forecast_",
           "visit_sd_um_")
+# state a model saved by an earlier version may lack (loaded when present)
+_OPTIONAL = ("visit_hours_",)
 _ARRAYS = ("knots_mm_", "coef_", "covariance_", *FLEET_ARRAYS)
 
 
@@ -444,3 +459,15 @@ def _unit_term(effect: str, amplitude: str, name: str, values) -> np.ndarray:
     values = np.asarray(values, float)
     return effects.contribution(effect, np.zeros(len(values)), 0, {name: values},
                                 **{amplitude: 1.0})
+
+
+def _visit_hours(frame: pd.DataFrame, labels, axes: list) -> list[list[float]]:
+    """The distinct operating hours [h] (the visits) of every machine axis in ``axes``, or of
+    the one axis when the inputs name none: what a forecast's default point is made from."""
+    hours = frame[HOURS].to_numpy(float) if HOURS in frame else np.zeros(0)
+    if not axes:
+        return [np.unique(hours).tolist()]
+    if not len(hours):
+        return [[] for _ in axes]
+    keys = np.array([f"{m}\x00{a}" for m, a in labels])
+    return [np.unique(hours[keys == f"{m}\x00{a}"]).tolist() for m, a in axes]

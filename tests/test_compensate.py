@@ -301,7 +301,10 @@ def test_python_api_writes_what_the_cli_writes(ess_file, tmp_path, capsys):
 
     result = bl.compensate(ess_file, controller="linuxcnc,sinumerik")
     assert result.controllers == ["linuxcnc", "siemens"] and result.files == {}
-    assert result.notes == ["ess_mcu1025 X: 2 flagged outlier reading(s) not used"]
+    assert result.notes[0] == "ess_mcu1025 X: 2 flagged outlier reading(s) not used"
+    assert result.notes[1].startswith("ess_mcu1025 X: the reversal value varies along the axis")
+    assert result.notes[1].endswith("; a table per direction for linuxcnc; the scalar 13.692 um "
+                                    "for siemens, which leaves reversal values up to 29.768 um")
     assert capsys.readouterr() == ("", "")  # the library never prints
     files = result.write(tmp_path / "api")
     assert sorted(p.name for p in (tmp_path / "api").iterdir()) == sorted(files)
@@ -363,3 +366,41 @@ def test_python_api_refuses_a_hand_made_frame_and_verify_on_a_frame(ess_file):
     with pytest.raises(bl.InputError, match="not a frame") as err:
         bl.compensate(bl.read(ess_file), controller="csv", verify=True)
     assert err.value.parameter == "verify"
+
+
+# --------------------------------------------------------------------------- residual vs U(B)
+
+BUDGET = Path(__file__).resolve().parents[1] / "experiments" / "data" / "paper_uncertainty.toml"
+
+
+def test_residual_against_the_measurement_uncertainty(ess_file, tmp_path, capsys):
+    """The ESS axis's per-direction table leaves no reversal (within U(B)); the scalar of a
+    one-table format leaves 29.77 um (beyond it). U(B) is the budget's at the axis's own
+    measuring length and runs per direction."""
+    from features.uncertainty import expanded_at_length_um, read_budget
+
+    readings = read_readings(ess_file)
+    length = float(readings["target"].max() - readings["target"].min())
+    kept = readings[~iso230.outliers(readings)]  # the 2 flagged readings lower n
+    cycles = int(iso230.per_target(kept)[["n_up", "n_down"]].min().min())
+    u_b = expanded_at_length_um(read_budget(BUDGET), length, cycles)["B"]
+    assert main(["compensate", str(ess_file), "--controller", "linuxcnc,sinumerik", "--out",
+                 str(tmp_path / "out"), "--uncertainty", str(BUDGET), "--json"]) == 0
+    out = capsys.readouterr()
+    found = {f["controller"]: f["resolution"] for f in json.loads(out.out)["files"]}
+    assert found["linuxcnc"]["U_B_um"] == pytest.approx(u_b, abs=1e-4)
+    assert found["linuxcnc"]["resolvable"] is False and found["linuxcnc"]["residual_um"] < 1e-3
+    assert found["siemens"]["resolvable"] is True
+    assert found["siemens"]["residual_um"] == pytest.approx(29.767, abs=2e-3)
+    assert "29.767 um (reversal left at the targets) beyond what the measurement can resolve" \
+        in out.err
+
+
+def test_bad_budget_writes_nothing(ess_file, tmp_path, capsys):
+    bad = tmp_path / "budget.toml"
+    bad.write_text(BUDGET.read_text().replace("laser_accuracy_ppm", "laser_accuracy_um"))
+    for budget in (bad, tmp_path / "missing.toml"):
+        assert main(["compensate", str(ess_file), "--controller", "csv", "--out",
+                     str(tmp_path / "out"), "--uncertainty", str(budget)]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+        assert not (tmp_path / "out").exists()

@@ -99,3 +99,19 @@ def test_unknown_controller_names_the_parameter_and_the_records():
 
 def test_the_names_users_type_for_their_controllers():
     assert resolve("840D,828d,TNC640,0i,tnc7,840dsl") == ["siemens", "heidenhain", "fanuc"]
+    assert resolve("SINUMERIK, 840D-sl, Fanuc, 0i-F, 31i-B, heidenhain, lcnc, emc2") == [
+        "siemens", "fanuc", "heidenhain", "linuxcnc"]
+
+
+@pytest.mark.parametrize("name", list(CONTROLLERS))
+def test_each_written_file_is_recognised_as_its_controllers_own(name, tmp_path):
+    """``--active`` tells a file's controller and role from its text: each file written is
+    recognised as its own role, and as no other controller's (Marlin and RepRapFirmware share
+    ``M425``, and one reader)."""
+    files = CONTROLLERS[name].writer(profile(), tmp_path, Options())["files"]
+    for role, path in files.items():
+        text = path.read_text()
+        found = {n: r for n, record in CONTROLLERS.items() for r, pattern in record.recognise
+                 if re.search(pattern, text, re.MULTILINE)}
+        assert found[name] == role
+        assert set(found) == ({"marlin", "reprap"} if name in ("marlin", "reprap") else {name})

@@ -88,10 +88,18 @@ def flipped(comp: Compensation) -> Compensation:
                         comp.source + " (flipped)")
 
 
+def table_flipped(comp: Compensation) -> Compensation:
+    """The same compensation with the table's sign reversed and the backlash kept: a table
+    file read with the other sign convention (``error`` <-> ``correction``)."""
+    return Compensation(comp.nominal_mm, -comp.plus_mm, -comp.minus_mm, comp.backlash_mm,
+                        comp.source + " (table sign reversed)")
+
+
 # --------------------------------------------------------------------------- parsers
 
 
-def _text(path) -> str:
+def file_text(path) -> str:
+    """The text of a compensation file (UTF-8, else Latin-1, as controls write it)."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -113,7 +121,7 @@ def linuxcnc(comp_path, ini_path=None) -> Compensation:
     """LinuxCNC joint compensation: a ``COMP_FILE_TYPE 0`` table and/or ``BACKLASH`` (INI)."""
     backlash, comp_file, comp_type = 0.0, None, 0
     if ini_path is not None:
-        for row, line in enumerate(_text(ini_path).splitlines(), start=1):
+        for row, line in enumerate(file_text(ini_path).splitlines(), start=1):
             line = line.split("#")[0].strip()
             if line.startswith(";") or "=" not in line:
                 continue
@@ -127,10 +135,12 @@ def linuxcnc(comp_path, ini_path=None) -> Compensation:
         if comp_type != 0:
             raise InputError(f"COMP_FILE_TYPE {comp_type}: only type 0 is modelled",
                              file=ini_path)
+    if comp_path is None and comp_file is not None:
+        raise InputError(f"COMP_FILE {comp_file} is set but not given", file=ini_path)
     if comp_path is None or (ini_path is not None and comp_file is None):
         return Compensation(backlash_mm=backlash, source="linuxcnc BACKLASH")
     rows = []
-    for line in _text(comp_path).splitlines():
+    for line in file_text(comp_path).splitlines():
         parts = line.split()
         if len(parts) < 3:  # LinuxCNC: sscanf("%lf %lf %lf") != 3 ends the table
             break
@@ -155,9 +165,13 @@ _EEC = re.compile(
 
 
 def siemens(eec_path, md_path=None) -> Compensation:
-    """SINUMERIK EEC table (``%_N_AX_EEC_INI``) and ``MD32450 BACKLASH``."""
+    """SINUMERIK EEC table (``%_N_AX_EEC_INI``) and/or ``MD32450 BACKLASH``."""
+    backlash = 0.0 if md_path is None else _last_setting(
+        md_path, r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", "MD32450 BACKLASH")
+    if eec_path is None:
+        return Compensation(backlash_mm=backlash, source="siemens MD32450")
     values, meta = {}, {}
-    for row, line in enumerate(_text(eec_path).splitlines(), start=1):
+    for row, line in enumerate(file_text(eec_path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := _EEC.fullmatch(line):
             kind, _, index, _, value = m.groups()
@@ -177,8 +191,6 @@ def siemens(eec_path, md_path=None) -> Compensation:
                          f"got {len(values)}", file=eec_path)
     nominal = meta["_MIN"] + meta["_STEP"] * np.arange(n)
     error = np.array([values[i] for i in range(n)])
-    backlash = 0.0 if md_path is None else _last_setting(
-        md_path, r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", "MD32450 BACKLASH")
     # the EEC value is the error: the control takes it off the position
     return Compensation(nominal, -error, -error, backlash, "siemens EEC")
 
@@ -186,7 +198,7 @@ def siemens(eec_path, md_path=None) -> Compensation:
 def fanuc(path) -> Compensation:
     """Fanuc parameter sheet: 1851 backlash, 3620-3624 and incremental pitch-error values."""
     params, pitch, unit_um, reference = {}, {}, None, None
-    for row, line in enumerate(_text(path).splitlines(), start=1):
+    for row, line in enumerate(file_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := re.fullmatch(r"(\d{4})\s+\w+\s*=\s*(\S+)", line):
             params[int(m[1])] = finite_number(m[2], path, row, f"parameter {m[1]}")
@@ -220,9 +232,13 @@ def fanuc(path) -> Compensation:
 
 
 def heidenhain(com_path, mp_path=None) -> Compensation:
-    """Heidenhain ``.COM`` error table (``NR position error`` [mm]) and ``MP710`` backlash."""
+    """Heidenhain ``.COM`` error table (``NR position error`` [mm]) and/or ``MP710`` backlash."""
+    backlash = 0.0 if mp_path is None else _last_setting(
+        mp_path, r"MP710\.\d+\s*=\s*(\S+)", "MP710")
+    if com_path is None:
+        return Compensation(backlash_mm=backlash, source="heidenhain MP710")
     rows = []
-    for row, line in enumerate(_text(com_path).splitlines(), start=1):
+    for row, line in enumerate(file_text(com_path).splitlines(), start=1):
         parts = line.split(";")[0].split()
         if len(parts) == 3 and parts[0].isdigit():
             rows.append([finite_number(p, com_path, row, "compensation value") for p in parts[1:]])
@@ -230,8 +246,6 @@ def heidenhain(com_path, mp_path=None) -> Compensation:
         raise InputError("no 'NR position error' lines", file=com_path)
     table = np.asarray(rows)
     _ascending(table[:, 0], com_path)
-    backlash = 0.0 if mp_path is None else _last_setting(
-        mp_path, r"MP710\.\d+\s*=\s*(\S+)", "MP710")
     return Compensation(table[:, 0], -table[:, 1], -table[:, 1], backlash, "heidenhain .COM")
 
 
@@ -265,23 +279,34 @@ def _last_setting(path, pattern: str, what: str) -> float:
 def _settings(path, pattern: str, what: str):
     """In file order, the value of each line ``pattern`` matches whole once ``;`` comments are
     cut (group 1, a finite number)."""
-    for row, line in enumerate(_text(path).splitlines(), start=1):
+    for row, line in enumerate(file_text(path).splitlines(), start=1):
         if m := re.fullmatch(pattern, line.split(";")[0].strip()):
             yield finite_number(m[1], path, row, what)
 
 
 def csv_table(path) -> Compensation:
     """The product's CSV: ``target_mm``, ``correction_plus_um``, ``correction_minus_um``."""
+    import io
+
     import pandas as pd
 
-    frame = pd.read_csv(path, comment="#")
+    try:
+        frame = pd.read_csv(io.StringIO(file_text(path)), comment="#")
+    except (ValueError, pd.errors.ParserError) as err:
+        raise InputError(f"not a CSV table: {str(err).splitlines()[0]}", file=path) from None
     need = ("target_mm", "correction_plus_um", "correction_minus_um")
+    values = {}
     for column in need:
         if column not in frame:
             raise InputError(f"missing column {column}", file=path, column=column)
-    return Compensation(frame["target_mm"].to_numpy(float),
-                        frame["correction_plus_um"].to_numpy(float) / 1000.0,
-                        frame["correction_minus_um"].to_numpy(float) / 1000.0, 0.0, "csv")
+        values[column] = pd.to_numeric(frame[column], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values[column])
+        if bad.any():
+            raise InputError("expected a finite number", file=path,
+                             row=int(np.argmax(bad)) + 2, column=column)
+    _ascending(values["target_mm"], path)
+    return Compensation(values["target_mm"], values["correction_plus_um"] / 1000.0,
+                        values["correction_minus_um"] / 1000.0, 0.0, "csv")
 
 
 # Controller name -> reader of the files written for one machine axis: ``files`` maps a role

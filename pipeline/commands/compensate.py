@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from pipeline.commands.data import add_readings_argument
-from pipeline.compensation import CONTROLLERS
+from pipeline.compensation import CONTROLLERS, SIGNS
 from pipeline.workflows.compensate import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -29,7 +29,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--conditions", metavar="NAME=VALUE,...",
                         help="conditions for a predictor, e.g. feed_mm_min=500,machine_temp_c=21")
     parser.add_argument("--axis", help="axis name: a predictor's axis (default X), or only this "
-                                       "axis's tests of DATA")
+                                       "axis's tests of DATA or a wear map's axes")
+    parser.add_argument("--at-hours", type=float, metavar="H",
+                        help="wear map: forecast the table for this reading of the axis's "
+                             "operating-hours counter (default: the middle of the next "
+                             "maintenance interval)")
+    parser.add_argument("--at-date", metavar="YYYY-MM-DD",
+                        help="wear map: forecast the table for this day, through the axis's "
+                             "usage rate when the model records it")
     parser.add_argument("--spacing", type=float, metavar="MM",
                         help="table spacing of equidistant formats (default: a quarter of the "
                              "smallest target interval, rounded down to 1/2/2.5/5 x 10^k)")
@@ -38,6 +45,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: the table point nearest 0)")
     parser.add_argument("--fanuc-unit-um", type=float, default=1.0,
                         help="Fanuc detection unit [um] (default 1)")
+    parser.add_argument("--active", action="append", metavar="FILE",
+                        help="DATA was measured with this compensation file active (one "
+                             "controller's file for one machine axis; repeat for its table and "
+                             "its parameter file): write the active file plus the measured "
+                             "residual, and the change per target")
+    parser.add_argument("--sign", choices=SIGNS,
+                        help="what a positive table value means at this site (SINUMERIK, Fanuc, "
+                             "Heidenhain tables; default: each controller's documented "
+                             "convention); also how --active is read")
+    parser.add_argument("--store", metavar="STORE",
+                        help="fleet store (folder or postgresql:// URL, made by backlash ingest) "
+                             "to record this compensation in; backlash fleet shows the last one")
+    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
+                        help="uncertainty budget of the measurement (as backlash iso takes): "
+                             "say whether each file set's residual is within or beyond U(B)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
     parser.add_argument("--verify", action="store_true",
                         help="twin data only: re-run the ISO tests with the written files "
@@ -48,22 +70,35 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.common import progress_bar
 
-    source = _source(args)
+    store = None
+    if args.store:  # refused before any work: one line, nothing written
+        from pipeline.store.records import open_for_records
+
+        store = open_for_records(args.store)
+    source, machine = _source(args)
     with progress_bar("compensate") as progress:
         result = WORKFLOW.function(
             source, controller=args.controller, format=args.format,
-            conditions=args.conditions, axis=args.axis or "X", spacing=args.spacing,
+            conditions=args.conditions, at_hours=args.at_hours, at_date=args.at_date,
+            machine=machine, axis=args.axis, spacing=args.spacing,
             reference_mm=args.reference_mm, fanuc_unit_um=args.fanuc_unit_um,
-            verify=args.verify, progress=progress)
+            active=args.active, sign=args.sign, verify=args.verify,
+            uncertainty=args.uncertainty, progress=progress)
     result.write(args.out)
-    _print_summary(result)
+    print("\n".join(result.summary()), file=sys.stderr)
+    if store is not None:  # after writing: the record names the files written
+        from pipeline.store.records import record_compensation
+
+        print(record_compensation(store, result).text, file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return 0 if result.passed else 3
 
 
 def _source(args):
-    """A model directory as given (only --axis applies to it), else the selected readings."""
+    """(DATA, machine): a model directory as given with the machines --machine selects of a
+    wear map (--axis is passed on as it is), else the selected readings and None (--at-hours
+    and --at-date apply to a model only)."""
     import os
 
     from features.readings.errors import InputError
@@ -71,30 +106,13 @@ def _source(args):
     from pipeline.store import is_store
 
     if not os.path.isdir(args.source) or is_store(args.source):
-        return readings_arg(args, "source")
-    given = selected(args, skip=("axis",))
+        for option in ("at_hours", "at_date"):
+            if getattr(args, option) is not None:
+                raise InputError(f"--{option.replace('_', '-')}: applies to a wear-map model "
+                                 f"directory; {args.source} holds readings")
+        return readings_arg(args, "source"), None
+    given = selected(args, skip=("axis", "machine"))
     if given:
         raise InputError(f"--{next(iter(given))} selects tests of readings; {args.source} is a "
                          "model directory")
-    return args.source
-
-
-def _print_summary(result) -> None:
-    for p in result.profiles:
-        print(f"{p.machine_id} {p.axis} ({p.source}): backlash {p.backlash:.3f} um, "
-              f"{len(p.target)} targets", file=sys.stderr)
-        for note in p.notes:
-            print(f"  note: {note}", file=sys.stderr)
-    for w in result.written:
-        files = ", ".join(w["files"].values())
-        interp = w["interpolation_error_um"]
-        extra = "" if interp is None else f"; interpolation error at targets {interp:.4f} um"
-        unconfirmed = (f"; not confirmed: {'; '.join(w['unconfirmed'])}"
-                       if w["unconfirmed"] else "")
-        print(f"{w['controller']} {w['machine_id']} {w['axis']}: {files}{extra}{unconfirmed}",
-              file=sys.stderr)
-    for c in result.checks():
-        print(f"verify {c['controller']} {c['machine_id']} {c['axis']}: "
-              f"{'passed' if c['passed'] else 'FAILED'}; B {c['before']['B']:.3f} -> "
-              f"{c['after']['B']:.3f} um, E {c['before']['E']:.3f} -> {c['after']['E']:.3f} um "
-              f"-> {c['report']}", file=sys.stderr)
+    return args.source, selected(args).get("machine")

@@ -14,6 +14,10 @@ never import the pipeline. So the model holds the readers by name and each recor
 through the model's reader of its own name; ``tests/test_controllers.py`` checks that both
 name the same controllers. Writers and readers are imported on first call: the CLI reads the
 records for its help on every start, which must not pay for numpy and pandas.
+
+``read(name, files, sign)`` reads files back with a site's table sign convention; each record's
+``recognise`` and ``axis_patterns`` tell a file's controller, role and axis from its text, for
+recalibration with an active file (``pipeline.compensation.active``).
 """
 
 from __future__ import annotations
@@ -52,6 +56,19 @@ class Controller:
         What is written per machine axis.
     description : str
         One line for help texts and the docs' table.
+    sign : str or None
+        What a positive table value means in the controller's documented convention:
+        ``"error"`` (measured - nominal) or ``"correction"`` (added to the command); None
+        when the format fixes it (positions, named columns) or there is no table.
+    per_direction : bool
+        Whether the files carry one table per approach direction, so that a reversal value
+        varying along the axis is compensated.
+    recognise : tuple of (str, str)
+        ``(role, regular expression)``: a file whose text the expression finds (multi-line
+        mode) is this controller's file of that role (``--active``).
+    axis_patterns : tuple of str
+        Expressions naming the axis a file is for: group ``axis`` a letter, ``joint`` the
+        0-based index (X=0 ... C=5) or ``ax`` the 1-based ``AXn``.
     """
 
     name: str
@@ -64,6 +81,10 @@ class Controller:
     axes: tuple[str, ...]
     files: str
     description: str
+    sign: str | None = None
+    per_direction: bool = False
+    recognise: tuple[tuple[str, str], ...] = ()
+    axis_patterns: tuple[str, ...] = ()
 
 
 def _writer(module: str, function: str = "write") -> Callable:
@@ -88,37 +109,75 @@ def _reader(name: str) -> Callable:
 
 
 BOTH = ("linear", "rotary")
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_M425 = ((("parameters", r"^\s*M425\s+[XYZ]"),), (r"^\s*M425\s+(?P<axis>[XYZ])",))
 
 CONTROLLERS = {c.name: c for c in (
-    Controller("linuxcnc", "LinuxCNC", ("emc2",), _writer("linuxcnc"), _reader("linuxcnc"),
+    Controller("linuxcnc", "LinuxCNC", ("emc2", "lcnc"), _writer("linuxcnc"), _reader("linuxcnc"),
                kind="table", units="mm (deg)", axes=BOTH, files="`.comp` table, INI snippet",
-               description="COMP_FILE_TYPE 0 table per direction (the reversal included)"),
-    Controller("siemens", "Siemens SINUMERIK", ("sinumerik", "840d", "840dsl", "828d"),
+               description="COMP_FILE_TYPE 0 table per direction (the reversal included)",
+               per_direction=True,
+               recognise=(("table", rf"\A[ \t]*{_NUMBER}[ \t]+{_NUMBER}[ \t]+{_NUMBER}[ \t]*$"),
+                          ("parameters", r"^\s*(COMP_FILE_TYPE\s*=|\[JOINT_\d+\])")),
+               axis_patterns=(r"^\s*\[JOINT_(?P<joint>\d)\]",)),
+    Controller("siemens", "Siemens SINUMERIK", ("sinumerik", "840d", "840dsl", "840d-sl", "828d"),
                _writer("siemens"),
                _reader("siemens"), kind="table", units="mm (deg)", axes=BOTH,
                files="EEC `.INI`, MD32450 `.INI`",
-               description="EEC table of the mean error and MD32450 BACKLASH"),
-    Controller("fanuc", "Fanuc", ("0i", "30i", "31i"), _writer("fanuc"), _reader("fanuc"), kind="table",
+               description="EEC table of the mean error and MD32450 BACKLASH", sign="error",
+               recognise=(("table", r"^\s*\$AA_ENC_COMP\["),
+                          ("parameters", r"^\s*\$MA_BACKLASH\[")),
+               axis_patterns=(r"^\s*\$(?:AA_ENC_COMP\w*|MA_BACKLASH)\[\d+,(?:\d+,)?AX(?P<ax>\d+)\]",)),
+    Controller("fanuc", "Fanuc", ("0i", "0i-d", "0i-f", "30i", "30i-b", "31i", "31i-b"),
+               _writer("fanuc"), _reader("fanuc"), kind="table",
                units="detection units (`fanuc_unit_um`)", axes=BOTH, files="parameter sheet",
-               description="pitch-error increments (3620-3624) and 1851 backlash"),
+               description="pitch-error increments (3620-3624) and 1851 backlash",
+               sign="correction",
+               recognise=(("parameters", r"^\s*(PITCH\s+\d+|1851\s+\w+)\s*="),),
+               axis_patterns=(r"^\s*\d{4}\s+(?P<axis>[XYZABC])\s*=",)),
     Controller("heidenhain", "Heidenhain TNC", ("tnc", "tnc640", "tnc530", "tnc7"),
                _writer("heidenhain"),
                _reader("heidenhain"), kind="table", units="mm (deg)", axes=BOTH,
                files="`.COM` table, MP list",
-               description="nonlinear axis-error table and MP710 backlash"),
+               description="nonlinear axis-error table and MP710 backlash", sign="error",
+               recognise=(("table", r"^\s*BEGIN\s+\S+\.COM\b"),
+                          ("parameters", r"^\s*MP7[15]0\.\d+\s*=")),
+               axis_patterns=(r"^\s*NR\s+(?P<axis>[XYZABC])-POS",
+                              r"^\s*MP7[15]0\.(?P<joint>\d)\s*=")),
     Controller("marlin", "Marlin", (), _writer("scalar", "write_marlin"), _reader("marlin"),
                kind="scalar", units="mm", axes=("linear",), files="G-code",
-               description="M425 backlash distance"),
+               description="M425 backlash distance", recognise=_M425[0],
+               axis_patterns=_M425[1]),
     Controller("reprap", "RepRapFirmware", ("rrf", "reprapfirmware"),
                _writer("scalar", "write_reprap"), _reader("reprap"), kind="scalar", units="mm",
-               axes=("linear",), files="G-code", description="M425 backlash (RRF 3.5 or later)"),
+               axes=("linear",), files="G-code", description="M425 backlash (RRF 3.5 or later)",
+               recognise=_M425[0], axis_patterns=_M425[1]),
     Controller("grblhal", "grblHAL", (), _writer("scalar", "write_grblhal"), _reader("grblhal"),
                kind="scalar", units="mm", axes=("linear",), files="settings",
-               description="$160-$162 backlash"),
+               description="$160-$162 backlash",
+               recognise=(("parameters", r"^\s*\$16[0-2]\s*="),),
+               axis_patterns=(r"^\s*\$16(?P<joint>[0-2])\s*=",)),
     Controller("csv", "CSV", (), _writer("csvtable"), _reader("csv"), kind="table",
                units="um, mm", axes=BOTH, files="`.csv` table",
-               description="everything per target, signs in the column names"),
+               description="everything per target, signs in the column names",
+               per_direction=True,
+               recognise=(("table", r"^[^#\n]*\btarget_mm\b[^\n]*\bcorrection_plus_um\b"),),
+               axis_patterns=(r"^[^,#\n]*,(?P<axis>[XYZABC]),(?:measured|predicted),",)),
 )}
+SIGNS = ("error", "correction")
+
+
+def read(name: str, files: dict, sign: str | None = None):
+    """The files of one machine axis read back as controller ``name`` applies them
+    (``models.physics.controller.Compensation``), the table's values taken with ``sign``
+    (``"error"`` or ``"correction"``; default the controller's documented convention)."""
+    record = CONTROLLERS[name]
+    comp = record.reader(files)
+    if sign is not None and record.sign is not None and sign != record.sign:
+        from models.physics.controller import table_flipped
+
+        comp = table_flipped(comp)
+    return comp
 
 
 def names() -> list[str]:
@@ -154,13 +213,17 @@ def help_text() -> str:
 
 def markdown_table() -> str:
     """The docs' table of controllers (``docs/controllers.md`` holds it verbatim)."""
-    rows = ["| name | controller | aliases | writes | values in | axes | compensates |",
-            "|---|---|---|---|---|---|---|"]
+    rows = [("| name | controller | aliases | writes | values in | table sign (`--sign`) | "
+            "axes | compensates |"),
+            "|---|---|---|---|---|---|---|---|"]
     for c in CONTROLLERS.values():
         compensates = ("position error and reversal" if c.kind == "table" else
                        "reversal (backlash) only")
+        reversal = ("per direction" if c.per_direction else
+                    "one table + scalar reversal" if c.kind == "table" else "scalar")
         aliases = ", ".join(f"`{a}`" for a in c.aliases) or "-"
+        sign = c.sign or ("fixed by the format" if c.kind == "table" else "-")
         rows.append(f"| `{c.name}` | {c.label} | {aliases} | "
-                    f"{c.files} | {c.units} | {', '.join(c.axes)} | {compensates}: "
-                    f"{c.description} |")
+                    f"{c.files} | {c.units} | {sign} | {', '.join(c.axes)} | {compensates} "
+                    f"({reversal}): {c.description} |")
     return "\n".join(rows) + "\n"

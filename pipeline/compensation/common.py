@@ -12,6 +12,15 @@ class Options:
     spacing_mm: float | None = None      # table spacing of equidistant formats
     reference_mm: float | None = None    # where a table is 0 (reference point), default: see below
     fanuc_unit_um: float = 1.0           # Fanuc detection unit
+    sign: str | None = None              # "error" | "correction": table sign; None: documented
+
+
+def table_sign(documented: str, options: Options) -> tuple[float, str]:
+    """Factor turning values in the ``documented`` convention into the convention the site
+    asked for (``options.sign``), and that convention's name: -1 when they differ (an error
+    table written as corrections, or the reverse), else +1."""
+    wanted = options.sign or documented
+    return (1.0 if wanted == documented else -1.0), wanted
 
 
 def reference_position(points, reference_mm: float | None) -> float:
@@ -29,3 +38,11 @@ def header(profile, controller: str, comment: str, lines: list[str]) -> str:
             f"machine {profile.machine_id}, axis {profile.axis}, from {profile.source} data",
             *lines, *profile.notes]
     return "".join(f"{comment} {line}\n" for line in head)
+
+
+def units(profile) -> tuple[str, str]:
+    """(position unit, deviation unit) of the profile's axis: ("mm", "um") for a linear axis,
+    ("deg", "arcsec") for a rotary one (``features.readings.schema.ROTARY_AXES``)."""
+    from features.readings import schema
+
+    return schema.position_unit(profile.axis), schema.deviation_unit(profile.axis)

@@ -20,12 +20,13 @@ import numpy as np
 
 from features.readings.errors import InputError
 from features.readings.fileio import write_text
-from pipeline.compensation.common import header, reference_position
+from pipeline.compensation.common import header, reference_position, table_sign
 from pipeline.compensation.profile import grid, resample
 
 MAX_POINTS = 1024
 FIRST_POINT = 1
 VALUE_LIMIT = 127
+SIGN_TEXT = {"correction": "corrections, -error", "error": "errors, the site's convention"}
 
 
 def write(profile, out_dir, options) -> dict:
@@ -36,7 +37,8 @@ def write(profile, out_dir, options) -> dict:
     error, interp_error = resample(profile.target, profile.position_error, points)
     ref = reference_position(points, options.reference_mm)
     ref_index = int(np.flatnonzero(points == ref)[0])
-    correction = -(error - error[ref_index])                       # [um], 0 at the reference
+    factor, sign = table_sign("correction", options)
+    correction = -factor * (error - error[ref_index])              # [um], 0 at the reference
     cumulative = np.round(correction / unit_um).astype(int)        # detection units
     increment = np.r_[0, np.diff(cumulative)]
     magnification = max(1, int(np.ceil(np.max(np.abs(increment)) / VALUE_LIMIT)))
@@ -52,7 +54,7 @@ def write(profile, out_dir, options) -> dict:
                          "choose a coarser detection unit", parameter="fanuc_unit_um")
     numbers = FIRST_POINT + np.arange(len(points))
     ref_number = int(numbers[ref_index])
-    unconfirmed = ["sign of the pitch-error values (written as corrections, -error)",
+    unconfirmed = [f"sign of the pitch-error values (written as {SIGN_TEXT[sign]})",
                    f"value range per point (checked as -{VALUE_LIMIT}..{VALUE_LIMIT})",
                    "distribution of an increment within its section"]
     a = profile.axis
@@ -75,4 +77,4 @@ def write(profile, out_dir, options) -> dict:
     return {"files": {"parameters": sheet}, "interpolation_error_um": interp_error,
             "quantisation_error_um": quantisation, "points": len(points),
             "spacing_mm": float(points[1] - points[0]) if len(points) > 1 else None,
-            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed}
+            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed, "sign": sign}

@@ -16,22 +16,26 @@ loading), its spacing rules on your control, and the sign of the ``.COM`` values
 from __future__ import annotations
 
 from features.readings.fileio import write_text
-from pipeline.compensation.common import AXIS_INDEX, header, reference_position
+from pipeline.compensation.common import AXIS_INDEX, header, reference_position, table_sign, units
 from pipeline.compensation.profile import grid, resample
 
 MAX_POINTS = 256
+SIGN_TEXT = {"error": "error (measured - nominal)",
+             "correction": "correction (nominal - measured, the site's sign convention)"}
 
 
 def write(profile, out_dir, options) -> dict:
     points = grid(profile.target, options.spacing_mm, MAX_POINTS)
     error, interp_error = resample(profile.target, profile.position_error, points)
     ref = reference_position(points, options.reference_mm)
-    error = (error - error[points == ref][0]) / profile.scale
+    factor, sign = table_sign("error", options)
+    error = factor * (error - error[points == ref][0]) / profile.scale
     unconfirmed = [".COM column layout", ".COM spacing rules", "sign of the .COM values (error)"]
     a = profile.axis
+    pos, dev = units(profile)
     head = header(profile, "Heidenhain TNC", ";", [
-        (f"{a} = F({a}): error (measured - nominal) [mm], 0 at {ref:g} mm; {len(points)} points; "
-        f"interpolation error at the measured targets {interp_error:.4f} um"),
+        (f"{a} = F({a}): {SIGN_TEXT[sign]} [{pos}], 0 at {ref:g} {pos}; {len(points)} points; "
+        f"interpolation error at the measured targets {interp_error:.4f} {dev}"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
     body = [f"BEGIN {profile.stem}.COM MM", f"NR    {a}-POS           {a}-ERROR"]
     body += [f"{i:<5d} {x:+.4f} {v:+.5f}" for i, (x, v) in enumerate(zip(points, error))]
@@ -41,10 +45,10 @@ def write(profile, out_dir, options) -> dict:
     b_mm = profile.backlash / profile.scale
     mp = write_text(out_dir / f"{profile.stem}_heidenhain_MP.txt", header(
         profile, "Heidenhain TNC machine parameters", ";",
-        ["MP710: backlash with a rotary encoder (outside the control loop) [mm]",
+        [f"MP710: backlash with a rotary encoder (outside the control loop) [{pos}]",
          "MP750 (iTNC 530): reversal error with a linear encoder; use instead of MP710 then"])
         + f"MP710.{index} = {b_mm:+.4f}\n; MP750.{index} = {b_mm:+.4f}\n")
     return {"files": {"table": com, "parameters": mp}, "interpolation_error_um": interp_error,
             "points": len(points),
             "spacing_mm": float(points[1] - points[0]) if len(points) > 1 else None,
-            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed}
+            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed, "sign": sign}

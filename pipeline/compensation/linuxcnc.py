@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from features.readings.errors import InputError
 from features.readings.fileio import write_text
-from pipeline.compensation.common import AXIS_INDEX, header
+from pipeline.compensation.common import AXIS_INDEX, header, units
 
 MAX_LINES = 256
 
@@ -36,6 +36,7 @@ def write(profile, out_dir, options) -> dict:
         ("COMP_FILE columns: nominal, actual position moving +, actual position moving - "
         "(actual = nominal + measured deviation)"),
         "BACKLASH is ignored when COMP_FILE is set: the table carries the reversal",
+        *_rotary_notes(profile),
     ]) + (f"[JOINT_{joint}]\nCOMP_FILE = {comp.name}\nCOMP_FILE_TYPE = 0\n"
           f"; scalar-only alternative (without COMP_FILE):\n"
           f"; BACKLASH = {profile.backlash / profile.scale:.6f}\n")
@@ -45,3 +46,13 @@ def write(profile, out_dir, options) -> dict:
             "points": len(x), "spacing_mm": None,
             "backlash": round(profile.backlash, 4), "unconfirmed": []}
 
+
+def _rotary_notes(profile) -> list[str]:
+    """What a rotary joint needs: the table and BACKLASH in degrees (an angular joint's machine
+    units); the table's nominals ascend within the measured range and are not wrapped."""
+    pos, dev = units(profile)
+    if pos != "deg":
+        return []
+    return [(f"rotary joint {profile.axis}: TYPE = ANGULAR; nominal, actual and BACKLASH in "
+             f"degrees (deviations measured in {dev}, divided by 3600)"),
+            "the table covers the measured range only: LinuxCNC does not wrap it at 360 deg"]

@@ -22,6 +22,8 @@ import pandas as pd
 from features.readings import schema
 from features.readings.errors import InputError
 
+REVERSAL_ALPHA = 0.01  # significance of the reversal test: a false alarm once in 100 axes
+
 
 @dataclass
 class AxisProfile:
@@ -34,6 +36,8 @@ class AxisProfile:
     u_down: np.ndarray
     source: str                 # "measured" or "predicted"
     notes: list = field(default_factory=list)
+    at_hours: float | None = None  # operating hours [h] a wear map's forecast is for
+    cycles: int | None = None      # runs per direction of one test (fewest at any target)
 
     @property
     def scale(self) -> float:
@@ -53,6 +57,40 @@ class AxisProfile:
     def backlash(self) -> float:
         """Scalar backlash [um] >= 0: the mean lost motion over the targets."""
         return max(0.0, -float(np.mean(self.reversal)))
+
+    def reversal_variation(self, alpha: float = REVERSAL_ALPHA) -> dict:
+        """Whether the reversal value varies along the axis by more than its uncertainty, so
+        that no scalar backlash can compensate it.
+
+        With u(B_i)^2 = u_up,i^2 + u_down,i^2 and weights w_i = 1 / u(B_i)^2, the statistic
+
+            chi2 = sum_i w_i (B_i - B_w)^2,   B_w = sum_i w_i B_i / sum_i w_i
+
+        follows a chi-square distribution with n - 1 degrees of freedom when B_i is one
+        value everywhere (the reversal test of a constant against its mean); ``p`` below
+        ``alpha`` says it is not.
+
+        Returns
+        -------
+        dict
+            ``chi2``, ``dof``, ``p``, ``direction_dependent`` (bool; None when untestable:
+            fewer than two targets, or a target without an uncertainty, e.g. a predictor),
+            ``scalar_um`` (the scalar backlash b [um]) and ``scalar_leaves_um``: the largest
+            reversal value a scalar b leaves, max_i |B_i + b| [um].
+        """
+        from scipy import stats
+
+        u = np.sqrt(self.u_up ** 2 + self.u_down ** 2)
+        leaves = float(np.max(np.abs(self.reversal + self.backlash)))
+        out = {"chi2": None, "dof": len(u) - 1, "p": None, "direction_dependent": None,
+               "scalar_um": self.backlash, "scalar_leaves_um": leaves}
+        if self.source != "measured" or len(u) < 2 or not np.all(np.isfinite(u) & (u > 0)):
+            return out
+        w = 1.0 / u ** 2
+        mean = float(np.sum(w * self.reversal) / np.sum(w))
+        chi2 = float(np.sum(w * (self.reversal - mean) ** 2))
+        p = float(stats.chi2.sf(chi2, len(u) - 1))
+        return {**out, "chi2": chi2, "p": p, "direction_dependent": bool(p < alpha)}
 
     @property
     def stem(self) -> str:
@@ -115,9 +153,11 @@ def _pool(per: pd.DataFrame, machine: str, axis: str, notes: list) -> AxisProfil
     t = pd.DataFrame(rows)
     if len(per["test_id"].unique()) > 1:
         notes.append(f"{per['test_id'].nunique()} tests pooled")
+    counts = per[["n_up", "n_down"]].to_numpy(float)
+    cycles = int(counts[counts > 0].min()) if (counts > 0).any() else None
     return AxisProfile(machine, axis, t["target"].to_numpy(), t["mean_up"].to_numpy(),
                        t["mean_down"].to_numpy(), t["u_up"].to_numpy(), t["u_down"].to_numpy(),
-                       "measured", notes)
+                       "measured", notes, cycles=cycles)
 
 
 def parse_conditions(conditions) -> dict[str, float]:
@@ -154,18 +194,23 @@ def parse_conditions(conditions) -> dict[str, float]:
     return out
 
 
-def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | None
-                      ) -> AxisProfile:
-    """A profile from a trained predictor at ``conditions`` over its training target range."""
+def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | None,
+                      key: tuple[str, str] | None = None, travel=None) -> AxisProfile:
+    """A profile from a trained predictor at ``conditions`` over its training target range
+    (``travel`` = (low, high) [mm] instead); ``key`` = (machine_id, axis) names the machine
+    axis of a model that knows several (a fleet's wear map)."""
     features = list(model.feature_names_)
     ranges = model.input_ranges_
     if "target" not in ranges:
         raise InputError("the model has no 'target' input range; cannot choose positions",
                          parameter="data")
-    low, high = (float(v) for v in ranges["target"])
+    low, high = (float(v) for v in (travel or ranges["target"]))
     step = spacing_mm or (high - low) / 10 or 1.0
     target = np.arange(low, high + step / 2, step)
     plan = pd.DataFrame({"target": target})
+    if key is not None:
+        plan.insert(0, "axis", key[1])
+        plan.insert(0, "machine_id", key[0])
     notes = []
     for name in features:
         if name == "target":
@@ -184,8 +229,9 @@ def predicted_profile(model, conditions: dict, axis: str, spacing_mm: float | No
     u = np.full_like(b, float(model.validation_rmse_) / 2 if np.isfinite(
         model.validation_rmse_) else np.nan)
     notes.append(f"predicted by {model.name}: backlash only, no position error")
-    return AxisProfile(model.meta.get("machine_id", model.name), axis, target, -b / 2, b / 2, u, u,
-                       "predicted", notes)
+    machine, axis = key or (model.meta.get("machine_id", model.name), axis)
+    hours = conditions.get("operating_hours") if "operating_hours" in features else None
+    return AxisProfile(machine, axis, target, -b / 2, b / 2, u, u, "predicted", notes, hours)
 
 
 # --------------------------------------------------------------------------- resampling

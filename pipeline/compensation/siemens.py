@@ -18,7 +18,7 @@ machine-data file.
 from __future__ import annotations
 
 from features.readings.fileio import write_text
-from pipeline.compensation.common import AXIS_INDEX, header, reference_position
+from pipeline.compensation.common import AXIS_INDEX, header, reference_position, table_sign, units
 from pipeline.compensation.profile import grid, resample
 
 MAX_POINTS = 2000
@@ -30,14 +30,20 @@ def write(profile, out_dir, options) -> dict:
     error, interp_error = resample(profile.target, profile.position_error, points)
     ref = reference_position(points, options.reference_mm)
     error = (error - error[points == ref][0]) / profile.scale  # 0 at the reference point
+    factor, sign = table_sign("error", options)
+    error = factor * error
     step = points[1] - points[0] if len(points) > 1 else 1.0
     unconfirmed = ["$MA_BACKLASH[0,AXn] syntax of the machine-data file"]
+    pos, dev = units(profile)
     head = header(profile, "SINUMERIK EEC", ";", [
-        (f"$AA_ENC_COMP = bidirectional mean error (measured - nominal) [mm], 0 at the "
-        f"reference point {ref:g} mm (a positive value moves the axis negative); machine "
-        f"axis {axis}"),
-        (f"{len(points)} points every {step:g} mm; linear interpolation error at the measured "
-        f"targets {interp_error:.4f} um; needs MD38000 MM_ENC_COMP_MAX_POINTS >= {len(points)}"),
+        (f"$AA_ENC_COMP = bidirectional mean error (measured - nominal) [{pos}], 0 at the "
+        f"reference point {ref:g} {pos} (a positive value moves the axis negative); machine "
+        f"axis {axis}") if sign == "error" else
+        (f"$AA_ENC_COMP = bidirectional mean correction (nominal - measured) [{pos}], 0 at "
+         f"the reference point {ref:g} {pos} (the site's sign convention, not the manual's); machine "
+         f"axis {axis}"),
+        (f"{len(points)} points every {step:g} {pos}; linear interpolation error at the "
+        f"measured targets {interp_error:.4f} {dev}; needs MD38000 MM_ENC_COMP_MAX_POINTS >= {len(points)}"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
     lines = ["%_N_AX_EEC_INI", "CHANDATA(1)", head.rstrip("\n")]  # %_N_ must be line 1
     lines += [f"$AA_ENC_COMP[0,{i},{axis}]={v:.6f}" for i, v in enumerate(error)]
@@ -48,9 +54,9 @@ def write(profile, out_dir, options) -> dict:
     eec = write_text(out_dir / f"{profile.stem}_AX_EEC.INI", "\n".join(lines) + "\n")
     md = write_text(out_dir / f"{profile.stem}_MD32450.INI", header(
         profile, "SINUMERIK machine data", ";",
-        ["MD32450 BACKLASH [mm]: mean lost motion, added at every reversal",
+        [f"MD32450 BACKLASH [{pos}]: mean lost motion, added at every reversal",
          *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
         + f"$MA_BACKLASH[0,{axis}]={profile.backlash / profile.scale:.6f}\nM17\n")
     return {"files": {"table": eec, "parameters": md}, "interpolation_error_um": interp_error,
             "points": len(points), "spacing_mm": float(step),
-            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed}
+            "backlash": round(profile.backlash, 4), "unconfirmed": unconfirmed, "sign": sign}

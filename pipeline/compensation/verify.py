@@ -38,23 +38,27 @@ def twin_parameters(data_path) -> dict:
         raise InputError(f"not a twin parameters file: {err}", file=path) from None
 
 
-def uncompensated(data_path) -> pd.DataFrame:
-    """The twin's readings re-simulated without compensation (the 'before' of every check)."""
+def uncompensated(data_path, active: dict | None = None) -> pd.DataFrame:
+    """The twin's readings re-simulated as the data were measured (the 'before' of every
+    check): without compensation, or with the ``active`` one ((machine, axis) ->
+    ``Compensation``) applied."""
     from models.physics.campaign import simulate
 
     params = twin_parameters(data_path)
-    return simulate(params["config"], params["seed"], session_seed=SESSION).readings
+    return simulate(params["config"], params["seed"], compensation=active,
+                    session_seed=SESSION).readings
 
 
 def closed_loop(data_path, profiles, controller: str, written: dict,
-                before: pd.DataFrame | None = None) -> list[dict]:
+                before: pd.DataFrame | None = None, sign: str | None = None) -> list[dict]:
     """ISO figures before and after per machine axis; ``written`` maps (machine, axis) to the
-    writer's ``files``. Returns one dict per axis with ``before``/``after`` per-target tables."""
-    from models.physics import controller as model
+    writer's ``files``, read with the table ``sign`` convention (default the controller's).
+    Returns one dict per axis with ``before``/``after`` per-target tables."""
     from models.physics.campaign import simulate
+    from pipeline.compensation import read
 
     params = twin_parameters(data_path)
-    comps = {key: model.load(controller, files) for key, files in written.items()}
+    comps = {key: read(controller, files, sign) for key, files in written.items()}
     before = uncompensated(data_path) if before is None else before
     after = simulate(params["config"], params["seed"], compensation=comps,
                      session_seed=SESSION).readings

@@ -1,0 +1,72 @@
+"""Rotary axes in compensation files: degrees and arcsec, never mm or um.
+
+A rotary table C measured over 0-315 deg: deviations (arcsec) are a 30 arcsec/turn pitch error
+plus a 20 arcsec lost motion (indirect: mean_up = e - b/2, mean_down = e + b/2).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.workflows.compensate import compensate
+
+LOST_ARCSEC = 20.0
+LINEAR_UNITS = re.compile(r"\b(mm|um)\b|\[mm\]|\[um\]")
+
+
+def rotary_readings() -> pd.DataFrame:
+    target = np.arange(0.0, 360.0, 45.0)
+    error = 30.0 * target / 360.0
+    rows = []
+    for cycle in range(1, 6):
+        for direction, side in (("+", -1), ("-", 1)):
+            for x, e in zip(target, error):
+                wobble = 0.2 * ((cycle * 7 + int(x)) % 3 - 1)  # repeatability, arcsec
+                rows.append({"machine_id": "R1", "axis": "C", "test_id": "R1-C-1",
+                             "method": "linear", "target": x, "direction": direction,
+                             "cycle": cycle, "deviation_um": e + side * LOST_ARCSEC / 2 + wobble})
+    return pd.DataFrame(rows)
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rotary") / "rotary.csv"  # a canonical readings file
+    rotary_readings().to_csv(path, index=False)
+    return compensate(path, controller="linuxcnc,sinumerik,heidenhain")
+
+
+def test_files_speak_degrees_and_arcsec(result):
+    for name, content in result.contents.items():
+        text = content.decode()
+        lines = (text.splitlines() if not name.endswith(".COM")
+                 else [line for line in text.splitlines() if line.startswith(";")])
+        assert not [line for line in lines if LINEAR_UNITS.search(line)], name
+    eec = result.contents["R1_C_AX_EEC.INI"].decode()
+    assert "[deg], 0 at the reference point 0 deg" in eec
+    assert "points every 45 deg" in eec and "arcsec; needs MD38000" in eec
+    ini = result.contents["R1_C_linuxcnc.ini"].decode()
+    assert "rotary joint C: TYPE = ANGULAR" in ini and "[JOINT_5]" in ini
+
+
+def test_values_are_in_degrees(result):
+    """MD32450 and LinuxCNC's BACKLASH hold b / 3600 deg; the LinuxCNC nominals are the
+    targets in degrees and its actual columns differ by the lost motion in degrees."""
+    b_deg = LOST_ARCSEC / 3600
+    md = result.contents["R1_C_MD32450.INI"].decode()
+    assert float(re.search(r"\$MA_BACKLASH\[0,AX6\]=(\S+)", md)[1]) == pytest.approx(b_deg,
+                                                                                     abs=1e-6)
+    table = np.loadtxt(result.contents["R1_C.comp"].decode().splitlines())
+    assert np.allclose(table[:, 0], np.arange(0.0, 360.0, 45.0))
+    assert np.allclose(table[:, 2] - table[:, 1], b_deg, atol=2e-5)
+    linuxcnc = next(w for w in result.written if w["controller"] == "linuxcnc")
+    assert linuxcnc["reversal_left_um"] < 0.01  # arcsec: the table carries the reversal
+
+
+def test_summary_in_arcsec(result):
+    lines = result.summary()
+    assert lines[0] == "R1 C (measured): backlash 20.000 arcsec, 8 targets"
+    assert all(not LINEAR_UNITS.search(line) for line in lines)
