@@ -31,6 +31,19 @@ suspected), ``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`
 prediction of the segment before it; one visit cannot confirm a change point) and, with a
 monitored model (``models.monitoring``), ``retrain``, ``input_out_of_range``, ``input_drift``.
 
+With a measurement uncertainty budget (ISO/TR 230-9; the series then carries
+``backlash_U_um``, the expanded uncertainty of each visit's value, and ``backlash_u_visit_um``,
+the standard uncertainty of the parts that change from visit to visit) a step counts only when
+it exceeds the expanded uncertainty of the difference of the two visits it compares (beside a
+change point, the last visit and the one before it, a trend segment's first and last),
+
+.. math:: U(\\Delta) = k \\sqrt{u_{v,a}^2 + u_{v,b}^2}
+
+(GUM 5.2.2 with the setup's systematic part fully correlated between visits, r = +1, so it
+cancels; docs/uncertainty.md). A change point, a last-visit jump or a trend's rise within
+U(Δ) is listed in ``within_uncertainty`` instead of raising ``level_jump``, ``last_visit_jump``
+or ``increasing_trend``.
+
 References: Sen (1968), Theil (1950); Mann (1945), Kendall (1975); Jackson et al. (2005),
 "An algorithm for optimal partitioning of data on an interval", IEEE SPL 12(2).
 """
@@ -46,6 +59,9 @@ from scipy import stats
 from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between, visit_backlash
 
 MIN_VISITS_FOR_SCATTER = 7
+# What each kind of change within the measurement uncertainty is, in words.
+WITHIN_KINDS = {"change_point": "the step", "last_visit": "the last visit's departure from "
+                "the trend", "trend": "the rise of the trend"}
 # Per-visit columns of the series that its JSON carries when present, each a quantity of its own.
 OPTIONAL_JSON = ("target_kind", "n_points", "reversal_mean_um", "reversal_max_um")
 
@@ -254,6 +270,10 @@ class DriftSeries:
     alerts: list = field(default_factory=list)
     model: dict | None = None
     alpha: float = 0.05
+    # steps no larger than the expanded uncertainty of the difference (with a budget only):
+    # {"visit", "kind" ('change_point', 'last_visit' or 'trend'), "jump_um", "U_um"}
+    within_uncertainty: list = field(default_factory=list)
+    coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
 
     @property
     def origin(self):
@@ -284,18 +304,34 @@ class DriftSeries:
             "threshold_crossing": self.date_at(self.crossing[0]),
             "crossing_interval": [self.date_at(self.crossing[1]), self.date_at(self.crossing[2])],
             "alerts": self.alerts,
+            **(self._uncertainty_json() if self.coverage_factor is not None else {}),
             **({"model": self.model} if self.model is not None else {}),
         }
+
+    def _uncertainty_json(self) -> dict:
+        """The budget's keys: per-visit ``backlash_U_um``, the U(Δ) of each change point
+        (``change_U_um``) and the steps ``within_uncertainty`` [um]."""
+        v = self.visits
+        return {"coverage_factor": self.coverage_factor,
+                "backlash_U_um": v["backlash_U_um"].round(4).tolist(),
+                "change_U_um": [round(step_uncertainty_um(v, c["index"], self.coverage_factor),
+                                      4) for c in self.change_points],
+                "within_uncertainty": [{**w, "jump_um": round(w["jump_um"], 4),
+                                        "U_um": round(w["U_um"], 4)}
+                                       for w in self.within_uncertainty]}
 
 
 def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
                    alpha: float = 0.05, min_jump_sigma: float = 3.0,
                    penalty: float | None = None, warn_months: float = 6.0,
-                   horizon_months: float = 120.0) -> DriftSeries:
+                   horizon_months: float = 120.0,
+                   coverage_factor: float | None = None) -> DriftSeries:
     """Change points, trend since the last one, threshold forecast and alerts of one series.
 
     ``visits`` holds one machine axis: ``visit``, ``date``, ``backlash_um`` [um] and its
     standard uncertainty ``backlash_u_um`` [um] (``u_um``, the name before, is read too).
+    With ``coverage_factor`` k (a budget was given) it also holds ``backlash_U_um`` and
+    ``backlash_u_visit_um`` [um], and steps within U(Δ) do not alert (module docstring).
     """
     v = visits.sort_values("date", kind="stable").reset_index(drop=True).copy()
     v["t_month"] = months_between(v["date"], v["date"].iloc[0])
@@ -308,9 +344,13 @@ def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
     sigma = v["sigma_um"].to_numpy()
 
     cps = change_points(t, y, sigma, penalty=penalty, min_jump_sigma=min_jump_sigma)
+    within = []
+    if coverage_factor is not None:
+        cps, within = resolved_changes(t, y, sigma, v, cps, coverage_factor)
     start = cps[-1]["index"] if cps else 0
     result = DriftSeries(str(v["machine_id"].iloc[0]), str(v["axis"].iloc[0]), v, cps,
-                         trend(t[start:], y[start:], alpha), start, threshold_um, alpha=alpha)
+                         trend(t[start:], y[start:], alpha), start, threshold_um, alpha=alpha,
+                         within_uncertainty=within, coverage_factor=coverage_factor)
     if threshold_um is not None:
         result.crossing = crossing_forecast(
             t[start:], y[start:], sigma[start:], threshold_um, slope=result.trend["slope"],
@@ -318,6 +358,42 @@ def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
     result.alerts = series_alerts(result, alpha=alpha, min_jump_sigma=min_jump_sigma,
                                   warn_months=warn_months)
     return result
+
+
+def step_uncertainty_um(visits: pd.DataFrame, index: int, k: float,
+                        before: int | None = None) -> float:
+    """Expanded uncertainty U(Δ) [um] of the change between visit ``before`` (default
+    ``index - 1``) and visit ``index``.
+
+    .. math:: U(\\Delta) = k \\sqrt{u_{v,b}^2 + u_{v,i}^2}
+
+    with u_v = ``backlash_u_visit_um``, the standard uncertainty of the parts of each visit's
+    value that change from visit to visit; the systematic part common to both cancels in the
+    difference ([GUM] 5.2.2, r = +1).
+    """
+    u = visits["backlash_u_visit_um"].to_numpy(float)
+    return float(k * np.hypot(u[index - 1 if before is None else before], u[index]))
+
+
+def resolved_changes(t, y, sigma, visits, cps, k):
+    """Split change points into those larger than U(Δ) and those within it.
+
+    The change points within U(Δ) are removed one at a time, smallest ratio first, and the
+    jumps of the rest re-estimated on the merged segments (as ``change_points`` does with
+    weak ones). Returns (kept, within); ``within`` as ``DriftSeries.within_uncertainty``.
+    """
+    within = []
+    while cps:
+        ratios = [abs(c["jump_um"]) / step_uncertainty_um(visits, c["index"], k) for c in cps]
+        i = int(np.argmin(ratios))
+        if ratios[i] > 1.0:
+            break
+        c = cps[i]
+        within.append({"visit": str(visits["visit"].iloc[c["index"]]), "kind": "change_point",
+                       "jump_um": c["jump_um"],
+                       "U_um": step_uncertainty_um(visits, c["index"], k)})
+        cps = _jumps(t, y, sigma, [x["index"] for x in cps if x is not c])
+    return cps, sorted(within, key=lambda w: w["visit"])
 
 
 def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
@@ -335,7 +411,7 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
             alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} um "
                                  f"from {s.date_at(s.crossing[1])} (within {warn_months:g} "
                                  "months of the last visit)"))
-    elif tr["p_value"] < alpha and tr["low"] > 0:
+    elif tr["p_value"] < alpha and tr["low"] > 0 and not _trend_within(s):
         alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} um/month "
                              f"[{tr['low']:.3f}, {tr['high']:.3f}] since visit "
                              f"{v['visit'].iloc[s.segment_start]} (Mann-Kendall p = "
@@ -346,7 +422,7 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
                              f"({c['jump_sigma']:.1f} sigma) at visit {v['visit'].iloc[c['index']]}"
                              ": failure or loosened preload suspected"))
     jump = _last_visit_jump(s)
-    if jump is not None and jump > min_jump_sigma:
+    if jump is not None and jump > min_jump_sigma and not _last_within(s):
         alerts.append(_alert("last_visit_jump", f"visit {last_visit} lies {jump:.1f} sigma above "
                              "the trend of the visits before it (unconfirmed change)"))
     return alerts
@@ -360,6 +436,39 @@ def _last_visit_jump(s: DriftSeries) -> float | None:
     t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
     level, slope, _ = _line(t[:-1], y[:-1])
     return float((y[-1] - level - slope * t[-1]) / v["sigma_um"].iloc[-1])
+
+
+def _trend_within(s: DriftSeries) -> bool:
+    """With a budget: whether the rise of the trend line over its segment is within U(Δ) of
+    the segment's first and last visits (then listed in ``within_uncertainty``)."""
+    if s.coverage_factor is None:
+        return False
+    t = s.visits["t_month"].to_numpy(float)
+    first, last = s.segment_start, len(t) - 1
+    rise = float(s.trend["slope"] * (t[last] - t[first]))
+    u_rise = step_uncertainty_um(s.visits, last, s.coverage_factor, before=first)
+    if abs(rise) > u_rise:
+        return False
+    s.within_uncertainty.append({"visit": str(s.visits["visit"].iloc[last]), "kind": "trend",
+                                 "jump_um": rise, "U_um": u_rise})
+    return True
+
+
+def _last_within(s: DriftSeries) -> bool:
+    """With a budget: whether the last visit's departure from the trend of the visits before it
+    is within U(Δ) of the last two visits (then listed in ``within_uncertainty``)."""
+    if s.coverage_factor is None:
+        return False
+    v = s.visits.iloc[s.segment_start:]
+    t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
+    level, slope, _ = _line(t[:-1], y[:-1])
+    step = float(y[-1] - level - slope * t[-1])
+    u_step = step_uncertainty_um(s.visits, len(s.visits) - 1, s.coverage_factor)
+    if abs(step) > u_step:
+        return False
+    s.within_uncertainty.append({"visit": str(v["visit"].iloc[-1]), "kind": "last_visit",
+                                 "jump_um": step, "U_um": u_step})
+    return True
 
 
 def _alert(kind: str, message: str) -> dict:

@@ -114,6 +114,41 @@ def scores(y_true, y_pred) -> dict[str, float]:
     }
 
 
+def against_uncertainty(y_true, y_pred, U_um: float) -> dict[str, float]:
+    """A predictor's error against U(B), what the measurement can resolve.
+
+    The expanded uncertainty U(B) (k = 2, about 95 %; ISO/TR 230-9, ``features.uncertainty``)
+    bounds how far a measured backlash may lie from the true one. A predictor whose 95th
+    percentile of |error| against the measured values is within U(B) is as close as the
+    measurement can tell; beyond it, its error is resolvable and the predictor can improve.
+
+    Parameters
+    ----------
+    y_true, y_pred : array-like
+        Measured and predicted backlash [um].
+    U_um : float
+        U(B) of the measurement [um], > 0.
+
+    Returns
+    -------
+    dict
+        ``U_B_um`` [um], ``test_abs_error_p95_um`` (95th percentile of |y_pred - y_true|)
+        [um], ``test_rmse_over_U_B`` and ``test_abs_error_p95_over_U_B`` (ratios; <= 1:
+        within what the measurement can resolve).
+    """
+    error = np.abs(np.asarray(y_pred, float) - np.asarray(y_true, float))
+    rmse, p95 = float(np.sqrt(np.mean(error ** 2))), float(np.percentile(error, 95))
+    return {"U_B_um": float(U_um), "test_abs_error_p95_um": p95,
+            "test_rmse_over_U_B": rmse / U_um, "test_abs_error_p95_over_U_B": p95 / U_um}
+
+
+def resolution_verdict(metrics: dict) -> str:
+    """'within ...' or 'beyond what the measurement can resolve', from ``against_uncertainty``'s
+    95th percentile of |error| against U(B)."""
+    within = metrics["test_abs_error_p95_um"] <= metrics["U_B_um"]
+    return f"{'within' if within else 'beyond'} what the measurement can resolve"
+
+
 def true_backlash(meta: pd.DataFrame, truth: pd.DataFrame, kind: str | None = None) -> np.ndarray:
     """The twin's true backlash at each feature-table point, mean over the tests that show it.
 

@@ -3,8 +3,9 @@
 Files written to the output folder (the page refers to the image by relative name, so the
 folder can be moved or logged to MLflow as is): ``drift.png``, ``drift.html``, ``drift.json``.
 Each panel shows the axis's backlash at each visit (``features.visits.visit_backlash``:
-``backlash_um``, its lost motion by the axis's measuring system) with its ±2 sigma bars, the Theil-Sen trend since the last change
-point, the change points (dashed), the threshold and the forecast band of the crossing.
+``backlash_um``, its lost motion by the axis's measuring system) with its ±2 sigma bars (and,
+with an uncertainty budget, a band of ± its expanded uncertainty ``backlash_U_um``), the
+Theil-Sen trend since the last change point, the change points (dashed), the threshold and the forecast band of the crossing.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pandas as pd
 
 from features.readings import fileio
 from features.visits import DAYS_PER_MONTH
-from models.drift import prediction_band
+from models.drift import WITHIN_KINDS, prediction_band
 from pipeline.report_page import new_figure, save_figure, write_page
 
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
@@ -37,9 +38,14 @@ def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
 
 def plot_series(series, path) -> None:
     """One panel per series: visits, trend, change points, threshold and forecast band."""
-    fig, axes = new_figure(8, 3.2 * len(series), nrows=len(series), ncols=1, squeeze=False)
-    for ax, s in zip(axes[:, 0], series):
+    # Fixed margins draw the figure once (constrained layout draws it twice), and one legend
+    # serves every panel: text is most of a fleet's drawing time.
+    fig, axes = new_figure(8, 3.2 * len(series), nrows=len(series), ncols=1, squeeze=False,
+                           fixed_margins=True, gridspec_kw={"hspace": 0.55})
+    for i, (ax, s) in enumerate(zip(axes[:, 0], series)):
         _panel(ax, s)
+        if i == 0:
+            ax.legend(fontsize=7, loc="upper left")
     save_figure(fig, path)
 
 
@@ -50,6 +56,10 @@ def _panel(ax, s) -> None:
     def dates(t_month):
         return to_date + pd.to_timedelta(np.asarray(t_month) * DAYS_PER_MONTH, unit="D")
 
+    if "backlash_U_um" in v:  # a budget was given: the expanded uncertainty of each visit
+        ax.fill_between(dates(v["t_month"]), v["backlash_um"] - v["backlash_U_um"],
+                        v["backlash_um"] + v["backlash_U_um"], color="C0", alpha=0.12, lw=0,
+                        label=f"± U, measurement uncertainty (k = {s.coverage_factor:g})")
     ax.errorbar(dates(v["t_month"]), v["backlash_um"], yerr=2 * v["sigma_um"], fmt="o",
                 ms=4, capsize=2, color="C0", label=f"backlash per visit, {_kinds(v)} (±2σ)")
     seg = v.iloc[s.segment_start:]
@@ -60,7 +70,7 @@ def _panel(ax, s) -> None:
     if np.isfinite(tr.get("slope", np.nan)):
         tt = np.linspace(seg["t_month"].iloc[0], t_end, 50)
         ax.plot(dates(tt), tr["intercept"] + tr["slope"] * tt, color="C1",
-                label=f"Theil-Sen {tr['slope']:+.3f} µm/month")
+                label="Theil-Sen trend since the last change point")
         ahead = np.linspace(seg["t_month"].iloc[-1], t_end, 50)
         if len(seg) >= 2 and ahead[-1] > ahead[0]:
             _, lo, hi = prediction_band(seg["t_month"], seg["backlash_um"], seg["sigma_um"],
@@ -75,9 +85,11 @@ def _panel(ax, s) -> None:
             hi = s.crossing[2] if s.crossing[2] is not None else t_end
             ax.axvspan(dates(s.crossing[1]), dates(max(hi, s.crossing[1])), color="C3",
                        alpha=0.15, label="crossing interval")
-    ax.set_title(f"{s.machine_id} axis {s.axis}" + (" — ALERT" if s.alerts else ""))
+    slope = tr.get("slope", np.nan)
+    ax.set_title(f"{s.machine_id} axis {s.axis}"
+                 + (f", trend {slope:+.3f} µm/month" if np.isfinite(slope) else "")
+                 + (" — ALERT" if s.alerts else ""), fontsize=10)
     ax.set_ylabel("backlash [µm]")
-    ax.legend(fontsize=7, loc="upper left")
     ax.tick_params(axis="x", labelrotation=20, labelsize=8)
 
 
@@ -106,9 +118,23 @@ def _visit_row(r: dict) -> str:
     u = r.get("backlash_u_um", r.get("u_um"))
     cells = (num("n_tests", "d"), num("n_points", "d"),
              html.escape(KIND_NAMES.get(r.get("target_kind"), "–")), num("backlash_um"),
-             _fmt(u, ".3f"), num("sigma_um"), num("reversal_mean_um"), num("reversal_max_um"))
+             _fmt(u, ".3f"), *((num("backlash_U_um"),) if "backlash_U_um" in r else ()),
+             num("sigma_um"), num("reversal_mean_um"), num("reversal_max_um"))
     return (f"<tr><td>{html.escape(str(r['visit']))}</td><td>{r['date'].date().isoformat()}</td>"
             + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
+
+
+def _uncertainty_text(series) -> str:
+    """What U means, when a budget was given (else nothing)."""
+    k = next((s.coverage_factor for s in series if s.coverage_factor is not None), None)
+    if k is None:
+        return ""
+    return (f"<p>U: the expanded measurement uncertainty (k = {k:g}) of each visit's backlash, "
+            "the budget's U(B) (ISO/TR 230-9) combined with the repeatability u(backlash); "
+            "shown as a band in the figure. A step between visits counts only when it exceeds "
+            "the expanded uncertainty of the difference U(Δ), which leaves out the setup's "
+            "systematic part common to every visit; smaller steps are listed as within the "
+            "measurement uncertainty.</p>")
 
 
 def render_body(series, *, source: str = "", notes=()) -> str:
@@ -132,6 +158,14 @@ def render_body(series, *, source: str = "", notes=()) -> str:
         items = "".join(f"<li>{html.escape(a['kind'])}: {html.escape(a['message'])}</li>"
                         for a in s.alerts)
         alerts = f"<div class='alert'><ul>{items}</ul></div>" if items else "<p>No alert.</p>"
+        within = "".join(
+            f"<li>{html.escape(WITHIN_KINDS[w['kind']])} of {w['jump_um']:+.3f} µm at visit "
+            f"{html.escape(w['visit'])}: within the measurement "
+            f"uncertainty U(Δ) = {w['U_um']:.3f} µm, not an alert</li>"
+            for w in s.within_uncertainty)
+        if within:
+            alerts += f"<ul>{within}</ul>"
+        big_u = "<th>U [µm]</th>" if "backlash_U_um" in v else ""
         model = ""
         if s.model:
             m = s.model
@@ -143,7 +177,7 @@ def render_body(series, *, source: str = "", notes=()) -> str:
         details.append(
             f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2>{alerts}"
             f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>points</th>"
-            f"<th>target</th><th>backlash [µm]</th><th>u(backlash) [µm]</th><th>σ [µm]</th>"
+            f"<th>target</th><th>backlash [µm]</th><th>u(backlash) [µm]</th>{big_u}<th>σ [µm]</th>"
             f"<th>mean reversal B_i [µm]</th><th>B = max|B_i| [µm]</th></tr>{body}</table>")
     note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
     level = f"{100 * (1 - series[0].alpha):g} %" if series else ""
@@ -156,6 +190,7 @@ scatter between visits. The mean signed ISO reversal value and B = max|B_i| (mea
 visit's tests) are shown for reference: with a direct system they are not the lost motion. Slope: Theil-Sen since the last change point ({level} interval); change points by
 optimal partitioning into straight-line segments; crossing: Theil-Sen line, interval from the
 OLS prediction band of a future visit.</p>
+{_uncertainty_text(series)}
 {f'<ul>{note_html}</ul>' if note_html else ''}
 <table><tr><th>machine</th><th>axis</th><th>visits</th><th>last backlash [µm]</th>
 <th>slope [µm/month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>

@@ -37,14 +37,17 @@ def plot_training(info: dict, path: Path) -> Path:
     return save_figure(fig, path)
 
 
-def plot_error_histogram(fit, path: Path) -> Path:
-    """Fig. 11: histogram of prediction errors (predicted - target) on training and test."""
+def plot_error_histogram(fit, path: Path, U_um: float | None = None) -> Path:
+    """Fig. 11: histogram of prediction errors (predicted - target) on training and test;
+    with ``U_um`` [um] the band ±U(B), what the measurement can resolve."""
     error = fit.predicted_um - fit.table.y.to_numpy(float)
     fig, ax = new_figure(6.5, 4, nrows=1, ncols=1, fixed_margins=True)
     bins = np.histogram_bin_edges(error, bins=20)
     ax.hist(error[fit.train_index], bins=bins, alpha=0.6, label="training")
     ax.hist(error[fit.test_index], bins=bins, alpha=0.6, label="test")
     ax.axvline(0, color="black", lw=0.8)
+    if U_um is not None:
+        ax.axvspan(-U_um, U_um, color="0.5", alpha=0.15, label=f"±U(B) = {U_um:.2f} um")
     ax.set_xlabel("error = predicted - target [um]")
     ax.set_ylabel("points")
     ax.legend()
@@ -91,9 +94,10 @@ def plot_regression(fit, path: Path) -> Path:
     return save_figure(fig, path)
 
 
-def write_figures(fit, directory) -> list[Path]:
+def write_figures(fit, directory, U_um: float | None = None) -> list[Path]:
+    """The figures of ``fit`` in ``directory``; ``U_um``: U(B) [um] drawn on the histogram."""
     directory = Path(directory)
-    paths = [plot_error_histogram(fit, directory / "error_histogram.png"),
+    paths = [plot_error_histogram(fit, directory / "error_histogram.png", U_um),
              plot_predictions(fit, directory / "predictions.png"),
              plot_regression(fit, directory / "regression.png")]
     info = training_history(fit.estimator)

@@ -28,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-jump-sigma", type=float, default=3.0,
                         help="a change point must move the level by this many standard "
                              "errors (default 3)")
+    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
+                        help="ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
+                             "each visit's backlash; steps within it do not alert")
     parser.add_argument("--json", action="store_true", help="print the series as JSON")
 
 
@@ -42,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     tracking.check_uri()
     result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
                    model=args.model, warn_months=args.warn_months, alpha=args.alpha,
-                   min_jump_sigma=args.min_jump_sigma)
+                   min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
     result.write(args.out)
     tracking.log_result(result)
     print_summary(result.series, result.files["html"], file=sys.stderr)
@@ -52,16 +55,27 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(series, html_path, file) -> None:
-    print(f"{'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} {'target':>6} "
-          f"{'slope um/mo':>12} {'changes':>7}  crossing", file=file)
+    """One line per axis (with a budget also the last visit's U), its alerts and the changes
+    within the measurement uncertainty."""
+    from models.drift import WITHIN_KINDS
+
+    budget = any(s.coverage_factor is not None for s in series)
+    print(f"{'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} "
+          + (f"{'U um':>6} " if budget else "")
+          + f"{'target':>6} {'slope um/mo':>12} {'changes':>7}  crossing", file=file)
     for s in series:
         j = s.to_json()
         slope = j["slope_um_per_month"]
         kind = (j.get("target_kind") or ["-"])[-1]
+        u = f"{j['backlash_U_um'][-1]:>6.2f} " if budget else ""
         print(f"{s.machine_id:<12} {s.axis:<4} {len(j['visits']):>6} "
-              f"{j['backlash_um'][-1]:>11.3f} {kind:>6} "
+              f"{j['backlash_um'][-1]:>11.3f} {u}{kind:>6} "
               f"{slope if slope is not None else float('nan'):>12.4f} "
               f"{len(j['change_points']):>7}  {j['threshold_crossing'] or '-'}", file=file)
         for a in s.alerts:
             print(f"  ALERT {a['kind']}: {a['message']}", file=file)
+        for w in s.within_uncertainty:
+            print(f"  within the measurement uncertainty: {WITHIN_KINDS[w['kind']]} of "
+                  f"{w['jump_um']:+.2f} um at visit {w['visit']} (U = {w['U_um']:.2f} um)",
+                  file=file)
     print(f"report: {html_path}", file=file)

@@ -20,6 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", metavar="NAME",
                         help=f"predictor (default: {RECOMMENDED}): {', '.join(names())}; "
                              "backlash compare lists what each does")
+    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
+                        help="ISO/TR 230-9 uncertainty budget: score the test error against "
+                             "U(B), what the measurement can resolve")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -33,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     with BackgroundRun("train", tracking.log_into) as mlflow_run:
         from pipeline.workflows.train import train
 
-        result = train(readings_arg(args), model=args.model, split=args.split, **data_params(args))
+        result = train(readings_arg(args), model=args.model, split=args.split,
+                       uncertainty=args.uncertainty, **data_params(args))
         mlflow_run.start(f"train {result.model}")  # the input is valid: the run may start
         print(f"{result.n_points} backlash points, target {result.target_kind}: "
               f"{result.target_reason}", file=sys.stderr)
@@ -55,3 +59,9 @@ def print_metrics(name: str, metrics: dict, file) -> None:
     if "noise_floor_um" in metrics:
         line += f" (noise floor of one target {metrics['noise_floor_um']:.3f} um)"
     print(line, file=file)
+    if "U_B_um" in metrics:
+        from models.evaluation import resolution_verdict
+
+        print(f"  test |error| 95th percentile {metrics['test_abs_error_p95_um']:.3f} um, RMSE "
+              f"{metrics['test_rmse_um']:.3f} um against U(B) {metrics['U_B_um']:.3f} um "
+              f"(k = 2): {resolution_verdict(metrics)}", file=file)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from numbers import Real
 from pathlib import Path
 
+from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord, axis_alerts
@@ -31,6 +32,7 @@ def _parameters() -> dict:
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
         "min_jump_sigma": [Interval(Real, 0, None, closed="neither")],
+        "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
     }
 
 
@@ -47,7 +49,8 @@ class DriftResult(Result):
         One per machine axis: the visits (the axis's backlash ``backlash_um`` [um] by its
         measuring system, ``backlash_u_um`` and sigma [um], ``target_kind``; see
         ``features.visits.visit_backlash``), change points, Theil-Sen trend [um/month] since the
-        last change point, threshold crossing and alerts.
+        last change point, threshold crossing and alerts; with a budget also each visit's
+        expanded uncertainty ``backlash_U_um`` [um] and the changes ``within_uncertainty``.
     source : str
         Where the readings came from.
     readings : DataFrame
@@ -89,13 +92,18 @@ class DriftResult(Result):
                   "model": "" if model is None else str(model) if isinstance(
                       model, (str, os.PathLike)) else type(model).__name__,
                   "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
-                  "warn_months": p.get("warn_months"), "n_series": len(self.series)}
+                  "warn_months": p.get("warn_months"), "n_series": len(self.series),
+                  "uncertainty": "" if p.get("uncertainty") is None else str(
+                      p["uncertainty"]) if isinstance(p["uncertainty"], (str, os.PathLike))
+                  else "given"}
         metrics = {"n_alerts": float(sum(len(s.alerts) for s in self.series))}
         for s in self.series:
             key = f"{s.machine_id}_{s.axis}"  # any id: the adapter makes valid metric names
             metrics[f"backlash_um_{key}"] = float(s.visits["backlash_um"].iloc[-1])
             metrics[f"slope_um_per_month_{key}"] = s.trend.get("slope", float("nan"))
             metrics[f"n_change_points_{key}"] = float(len(s.change_points))
+            if s.coverage_factor is not None:
+                metrics[f"backlash_U_um_{key}"] = float(s.visits["backlash_U_um"].iloc[-1])
         return TrackingRecord("drift", f"drift {os.path.basename(self.source)}", params=params,
                               metrics=metrics, artifacts=list(self.files.values()),
                               artifact_path="drift")
@@ -103,7 +111,7 @@ class DriftResult(Result):
 
 def drift(data, *, format: str = "auto", threshold_um: float | None = None, model=None,
           warn_months: float = 6.0, alpha: float = 0.05,
-          min_jump_sigma: float = 3.0) -> DriftResult:
+          min_jump_sigma: float = 3.0, uncertainty=None) -> DriftResult:
     """Follow backlash across maintenance visits.
 
     The series of each machine axis is its backlash at each visit
@@ -127,15 +135,30 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         Significance level of the trend tests and intervals, in (0, 0.5).
     min_jump_sigma : float, default 3.0
         A change point must move the level by this many standard errors.
+    uncertainty : str, path-like, dict or UncertaintyBudget, optional
+        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): every visit gets
+        ``backlash_U_um``, the expanded uncertainty of its backlash (``backlash_uncertainty``),
+        and a step within the expanded uncertainty of the difference of two visits is a note,
+        not an alert (``models.drift``). Linear axes only.
 
     Returns
     -------
     DriftResult
         Its ``alerts`` are empty when nothing needs attention.
+
+    Raises
+    ------
+    InputError
+        Bad readings or parameters, an unreadable or non-physical budget, a budget for a rotary
+        axis.
     """
     values = {"format": format, "threshold_um": threshold_um, "model": model,
-              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma}
+              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
+              "uncertainty": uncertainty}
     check_params(_parameters(), values, "drift")
+    from pipeline.workflows.iso import _budget
+
+    budget = None if uncertainty is None else _budget(uncertainty)
     from features.visits import SERIES_KEYS, visit_backlash
     from models import drift as drift_model
     from models import monitoring
@@ -147,22 +170,111 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         predictor = load_model(model)
     readings = readings_of(data, format)
     visits = visit_backlash(readings)
+    k = None
+    if budget is not None:
+        visits, k = backlash_uncertainty(visits, readings, budget), budget.coverage_factor
     counts = visits.groupby(list(SERIES_KEYS)).size()
     notes = [f"{m} axis {a}: a single visit, no drift analysis"
              for (m, a), c in counts.items() if c < 2]
     for text in notes:
         note(text)
     series = [drift_model.analyse_series(g, threshold_um=threshold_um, alpha=alpha,
-                                         min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+                                         min_jump_sigma=min_jump_sigma, warn_months=warn_months,
+                                         coverage_factor=k)
               for _, g in visits.groupby(list(SERIES_KEYS), sort=True) if len(g) >= 2]
     if predictor is not None:
         drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
+    for s in series:
+        for w in s.within_uncertainty:
+            text = (f"{s.machine_id} axis {s.axis}: {drift_model.WITHIN_KINDS[w['kind']]} of "
+                    f"{w['jump_um']:+.2f} um at visit "
+                    f"{w['visit']} is within the measurement uncertainty (U = "
+                    f"{w['U_um']:.2f} um, k = {k:g}): not an alert")
+            notes.append(text)
+            note(text)
     source = source_of(data, readings)
     return DriftResult(series, source, readings, values, notes=notes)
 
 
+def figures_with_uncertainty(readings, budget: unc.UncertaintyBudget):
+    """The ISO 230-2 figures of every test with the budget's expanded uncertainties ``U_*_um``
+    [um] at its own measuring length (``pipeline.workflows.iso.with_uncertainty``).
+
+    Raises
+    ------
+    InputError
+        Readings of a rotary axis: a budget holds lengths, not angles.
+    """
+    from features import iso230
+    from pipeline.workflows.iso import with_uncertainty
+
+    stats = iso230.per_target(readings)
+    return with_uncertainty(iso230.axis_figures(readings, stats), stats, budget)
+
+
+def backlash_uncertainty(visits, readings, budget: unc.UncertaintyBudget):
+    """``visits`` with the expanded uncertainty of each visit's backlash.
+
+    The budget's U(B) of each test (``pipeline.workflows.iso.with_uncertainty``: at the test's
+    measuring length, the travel of its targets, and its runs per direction; the largest of
+    the visit's tests) splits by [ISO230-9]'s U(B) = k √((2u_S)² + (2u_EVE)²/n) into the
+    setup's Abbe part k·2u_S, systematic for one setup of the axis, and the environmental part,
+    random from visit to visit. With the repeatability of the visit's value u_r
+    (``backlash_u_um``), uncorrelated with both ([GUM] 5.1.2):
+
+    .. math::
+
+        U_{visit} = k \\sqrt{(U(B)/k)^2 + u_r^2},  \\qquad
+        u_v = \\sqrt{U(B)^2/k^2 - (2u_S)^2 + u_r^2}
+
+    Parameters
+    ----------
+    visits : DataFrame
+        ``features.visits.visit_backlash`` of ``readings``.
+    readings : DataFrame
+        The validated readings.
+    budget : UncertaintyBudget
+        The contributors and k.
+
+    Returns
+    -------
+    DataFrame
+        ``visits`` plus ``backlash_U_um`` [um] (k of the budget) and ``backlash_u_visit_um``
+        [um], the standard uncertainty of the parts that change between visits.
+
+    Raises
+    ------
+    InputError
+        Readings of a rotary axis (``with_uncertainty``).
+
+    References
+    ----------
+    .. [ISO230-9] ISO/TR 230-9:2005, basic equations of the measurement uncertainty of machine
+       tool tests; the U(B) form of the backlash paper's Table 4 (``features.uncertainty``).
+    .. [GUM] JCGM 100:2008, 5.1.2 (uncorrelated inputs) and 5.2.2 (correlated inputs).
+    """
+    import numpy as np
+
+    from features.visits import VISIT_KEYS
+
+    figures = figures_with_uncertainty(readings, budget)
+    keys = list(VISIT_KEYS)
+    k = budget.coverage_factor
+    nominal = unc.expanded_at_length_um(budget, budget.length_mm, budget.cycles)["B"]
+    u_b = (figures.groupby(keys, sort=False)["U_B_um"].max().fillna(nominal) / k).rename("u_b")
+    u_setup = 2.0 * unc.budget_values(budget, "iso").contributors_um["u_S"]
+    out = visits.merge(u_b.reset_index(), on=keys, how="left")
+    u_r = out["backlash_u_um"].fillna(0.0)
+    out["backlash_U_um"] = k * np.hypot(out["u_b"], u_r)
+    out["backlash_u_visit_um"] = np.sqrt(np.maximum(out["u_b"] ** 2 - u_setup ** 2, 0.0)
+                                         + u_r ** 2)
+    out = out.drop(columns="u_b")
+    out.attrs.update(visits.attrs)
+    return out
+
+
 WORKFLOW = Workflow(
-    name="drift", function=drift, inputs=("data", "model"),
+    name="drift", function=drift, inputs=("data", "model", "uncertainty"),
     summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
              "it crosses a threshold, and (with --model) residual and input drift of a trained "
              "model. Exit 3 when an alert fires."))

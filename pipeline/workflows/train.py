@@ -19,6 +19,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
+from features.uncertainty import UncertaintyBudget
 from models import registry
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params, each_once, readings_of, source_of
@@ -37,7 +38,8 @@ DATA_PARAMETERS = {
     "seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
 }
 PARAMETERS = {**DATA_PARAMETERS, "model": [str, None],  # names checked by the registry
-              "split": [StrOptions(set(SPLITS))]}
+              "split": [StrOptions(set(SPLITS))],
+              "uncertainty": [str, os.PathLike, dict, UncertaintyBudget, None]}
 
 
 @dataclass
@@ -98,8 +100,9 @@ class TrainResult(Result):
     trained : models.registry.TrainedModel
         What ``write`` saves as a model directory (and ``predict`` takes).
     metrics : dict
-        ``test_*``, ``train_*`` (RMSE and MAE [um], R^2, MAPE [%]) and, on twin data,
-        ``truth_*`` and ``noise_floor_um``.
+        ``test_*``, ``train_*`` (RMSE and MAE [um], R^2, MAPE [%]), on twin data
+        ``truth_*`` and ``noise_floor_um`` and, with an uncertainty budget, the test error
+        against U(B) (``models.evaluation.against_uncertainty``).
     params : dict
         What the run logs as MLflow parameters (model, split, target, features, data hash...).
     """
@@ -121,12 +124,18 @@ class TrainResult(Result):
         from pipeline.model_report import write_figures
 
         model_dir = registry.save_model(self.trained, out)
-        self.figures = write_figures(self.fit, model_dir / model_tracking.FIGURES)
+        self.figures = write_figures(self.fit, model_dir / model_tracking.FIGURES,
+                                     U_um=self.metrics.get("U_B_um"))
         self.files = {"model": model_dir, **{p.stem: p for p in self.figures}}
         return self.files
 
     def to_json(self) -> dict:
+        from models.evaluation import resolution_verdict
+
+        verdict = ({"resolution": resolution_verdict(self.metrics)}
+                   if "U_B_um" in self.metrics else {})
         return {"model": self.model, "target_kind": self.target_kind, "metrics": self.metrics,
+                **verdict,
                 **({"model_dir": str(self.files["model"])} if "model" in self.files else {})}
 
     def tracking_record(self):
@@ -148,7 +157,7 @@ class TrainResult(Result):
 
 def train(data, *, model: str | None = None, format: str = "auto", target: str = "auto",
           features: list[str] | None = None, split: str = "random", truth=None,
-          seed: int = 0) -> TrainResult:
+          seed: int = 0, uncertainty=None) -> TrainResult:
     """Fit one predictor on the backlash points of paired tests and score it on a hold-out.
 
     Parameters
@@ -171,20 +180,33 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
         The twin's truth table (``simulate``): also score against the true backlash.
     seed : int
         Random seed of the split and of the estimator.
+    uncertainty : str, path-like or dict, optional
+        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): score the test
+        error against U(B), the median over the data's tests at each one's measuring length
+        (``measurement_U_B_um``). Linear axes only.
 
     Returns
     -------
     TrainResult
         Notes say which visits a wear map's clock uses (it restarts at an adjustment).
+
+    Raises
+    ------
+    InputError
+        Bad data or parameters, an unreadable or non-physical budget, a budget for a rotary
+        axis's data.
     """
     from models.training import fit_model, since_adjustment
+    from pipeline.workflows.iso import _budget
 
     check_params(PARAMETERS, {"data": data, "model": model, "format": format, "target": target,
                               "features": features, "split": split, "truth": truth,
-                              "seed": seed}, "train")
+                              "seed": seed, "uncertainty": uncertainty}, "train")
     name = model or registry.RECOMMENDED
     registry.check_name(name)
+    budget = None if uncertainty is None else _budget(uncertainty)
     loaded = model_data(data, format, target, features, truth)
+    U_B = None if budget is None else measurement_U_B_um(loaded.readings, budget)
     table, clock, origins = loaded.table, None, {}
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
         from models.training import hours_origins
@@ -199,17 +221,48 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
                     loaded.source, hours_origin=origins)
     for line in borrowing_lines(fit.trained_model().meta.get("axes", [])):
         note(line)
+    metrics = fit.metrics
+    resolution = {}
+    if U_B is not None:
+        from models.evaluation import against_uncertainty, resolution_verdict
+
+        y, test = fit.table.y.to_numpy(float), fit.test_index
+        metrics = {**metrics, **against_uncertainty(y[test], fit.predicted_um[test], U_B)}
+        resolution = {"uncertainty": {
+            "U_B_um": U_B, "test_abs_error_p95_um": metrics["test_abs_error_p95_um"],
+            "test_rmse_um": metrics["test_rmse_um"], "verdict": resolution_verdict(metrics)}}
     digest = loaded.digest
     meta = {"split": split, "data_sha256": digest, "data": loaded.source,
             "noise_floor_um": loaded.noise_floor_um, "target_reason": table.reason,
-            "seed": seed, **({"wear_clock": clock} if clock else {})}
+            "seed": seed, **({"wear_clock": clock} if clock else {}), **resolution}
     params = {"model": name, "split": split, "target_kind": table.target_kind,
               "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
               "n_test": len(fit.test_index), "data": loaded.source, "data_sha256": digest,
               "seed": seed}
     return TrainResult(model=name, fit=fit, trained=fit.trained_model(meta),
-                       metrics=fit.metrics, params=params, n_points=len(loaded.table.y),
+                       metrics=metrics, params=params, n_points=len(loaded.table.y),
                        target_kind=table.target_kind, target_reason=table.reason)
+
+
+def measurement_U_B_um(readings, budget) -> float:
+    """U(B) [um] of the data's backlash measurement: the median over its tests of the budget's
+    expanded uncertainty of B at each test's measuring length and runs per direction
+    (``pipeline.workflows.drift.figures_with_uncertainty``).
+
+    Raises
+    ------
+    InputError
+        Readings of a rotary axis, or no test with a measuring length (one target only).
+    """
+    import numpy as np
+
+    from pipeline.workflows.drift import figures_with_uncertainty
+
+    U = figures_with_uncertainty(readings, budget)["U_B_um"].to_numpy(float)
+    if not np.isfinite(U).any():
+        raise InputError("no test has two targets: the budget has no measuring length to be "
+                         "evaluated at", parameter="uncertainty")
+    return float(np.nanmedian(U))
 
 
 def borrowing_lines(axes: list[dict]) -> list[str]:
@@ -229,4 +282,4 @@ WORKFLOW = Workflow(
     name="train", function=train,
     summary="Train a backlash predictor on paired tests and save it (default: the recommended "
             "model).",
-    inputs=("data", "truth"))
+    inputs=("data", "truth", "uncertainty"))
