@@ -36,7 +36,7 @@ def rotary_readings() -> pd.DataFrame:
 def result(tmp_path_factory):
     path = tmp_path_factory.mktemp("rotary") / "rotary.csv"  # a canonical readings file
     rotary_readings().to_csv(path, index=False)
-    return compensate(path, controller="linuxcnc,sinumerik,heidenhain")
+    return compensate(path, controller="linuxcnc,sinumerik,heidenhain,csv")
 
 
 def test_files_speak_degrees_and_arcsec(result):
@@ -70,3 +70,20 @@ def test_summary_in_arcsec(result):
     lines = result.summary()
     assert lines[0] == "R1 C (measured): backlash 20.000 arcsec, 8 targets"
     assert all(not LINEAR_UNITS.search(line) for line in lines)
+
+
+def test_csv_columns_are_degrees_and_arcsec_and_read_back(result, tmp_path):
+    """The CSV names its columns target_deg, *_arcsec; read back, its offsets are degrees:
+    the indirect lost motion of 20 arcsec is 20 / 3600 deg between the two directions."""
+    from models.physics.controller import csv_table
+
+    text = result.contents["R1_C_compensation.csv"].decode()
+    header = text.splitlines()[0].split(",")
+    assert "target_deg" in header and "correction_plus_arcsec" in header
+    assert not [name for name in header if LINEAR_UNITS.search(name.replace("_", " "))]
+    path = tmp_path / "R1_C_compensation.csv"
+    path.write_text(text)
+    comp = csv_table(path)
+    x = np.arange(0.0, 360.0, 45.0)
+    gap = comp.offset_mm(x, -1) - comp.offset_mm(x, 1)  # correction minus - plus [deg]
+    np.testing.assert_allclose(gap, -LOST_ARCSEC / 3600, atol=2e-4 / 3600 * 1000)

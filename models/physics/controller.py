@@ -285,7 +285,9 @@ def _settings(path, pattern: str, what: str):
 
 
 def csv_table(path) -> Compensation:
-    """The product's CSV: ``target_mm``, ``correction_plus_um``, ``correction_minus_um``."""
+    """The product's CSV: ``target_mm``, ``correction_plus_um``, ``correction_minus_um`` (a
+    rotary axis's ``target_deg``, ``correction_plus_arcsec``, ``correction_minus_arcsec``:
+    offsets in the table's position unit, arcsec / 3600 deg)."""
     import io
 
     import pandas as pd
@@ -294,7 +296,9 @@ def csv_table(path) -> Compensation:
         frame = pd.read_csv(io.StringIO(file_text(path)), comment="#")
     except (ValueError, pd.errors.ParserError) as err:
         raise InputError(f"not a CSV table: {str(err).splitlines()[0]}", file=path) from None
-    need = ("target_mm", "correction_plus_um", "correction_minus_um")
+    rotary = "target_deg" in frame and "target_mm" not in frame
+    need = (("target_deg", "correction_plus_arcsec", "correction_minus_arcsec") if rotary
+            else ("target_mm", "correction_plus_um", "correction_minus_um"))
     values = {}
     for column in need:
         if column not in frame:
@@ -304,9 +308,10 @@ def csv_table(path) -> Compensation:
         if bad.any():
             raise InputError("expected a finite number", file=path,
                              row=int(np.argmax(bad)) + 2, column=column)
-    _ascending(values["target_mm"], path)
-    return Compensation(values["target_mm"], values["correction_plus_um"] / 1000.0,
-                        values["correction_minus_um"] / 1000.0, 0.0, "csv")
+    target, plus, minus = (values[c] for c in need)
+    _ascending(target, path)
+    scale = 3600.0 if rotary else 1000.0
+    return Compensation(target, plus / scale, minus / scale, 0.0, "csv")
 
 
 # Controller name -> reader of the files written for one machine axis: ``files`` maps a role

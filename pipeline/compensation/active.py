@@ -28,7 +28,7 @@ import pandas as pd
 
 from features.readings.errors import InputError, note
 from pipeline.compensation import CONTROLLERS, read
-from pipeline.compensation.common import AXIS_INDEX
+from pipeline.compensation.common import AXIS_INDEX, in_units
 
 AXES = {i: a for a, i in AXIS_INDEX.items()}
 MIN_COVER = 0.5  # share of the tests' travel an active table must cover
@@ -100,7 +100,7 @@ def changes(profile, active, new) -> pd.DataFrame:
         after = profile.scale * new.offset_mm(x, d)
         out |= {f"active_{side}_um": before, f"new_{side}_um": after,
                 f"change_{side}_um": after - before}
-    return pd.DataFrame(out)
+    return pd.DataFrame({in_units(name, profile): values for name, values in out.items()})
 
 
 def _text(path: Path) -> str:

@@ -46,3 +46,11 @@ def units(profile) -> tuple[str, str]:
     from features.readings import schema
 
     return schema.position_unit(profile.axis), schema.deviation_unit(profile.axis)
+
+
+def in_units(name: str, profile) -> str:
+    """A column name in the profile's axis's units: ``_mm`` -> ``_deg`` and ``_um`` ->
+    ``_arcsec`` for a rotary axis, unchanged for a linear one."""
+    position, error = units(profile)
+    return "_".join(position if p == "mm" else error if p == "um" else p
+                    for p in name.split("_"))

@@ -4,7 +4,8 @@
 that, what a controller must add to the commanded position; ``actual_*_mm`` = target +
 deviation (LinuxCNC's type-0 columns); ``reversal_um_up_minus_down`` = B_i (negative for lost
 motion); ``position_error_um_bidirectional`` = (up + down) / 2; ``reversal_compensation_um`` the scalar a controller adds at each reversal (not the axis's
-backlash, docs/backlash.md).
+backlash, docs/backlash.md). A rotary axis's columns say ``deg`` and ``arcsec`` instead of
+``mm`` and ``um``.
 """
 
 from __future__ import annotations
@@ -12,10 +13,11 @@ from __future__ import annotations
 import pandas as pd
 
 from features.readings.fileio import atomic_path
+from pipeline.compensation.common import in_units
 
 
 def write(profile, out_dir, options) -> dict:
-    frame = pd.DataFrame({
+    columns = {
         "machine_id": profile.machine_id, "axis": profile.axis, "source": profile.source,
         "target_mm": profile.target,
         "deviation_up_um_measured_minus_target": profile.mean_up,
@@ -27,10 +29,12 @@ def write(profile, out_dir, options) -> dict:
         "actual_plus_mm": profile.target + profile.mean_up / profile.scale,
         "actual_minus_mm": profile.target + profile.mean_down / profile.scale,
         "reversal_compensation_um": profile.backlash,
-    })
+    }
+    frame = pd.DataFrame({in_units(name, profile): values for name, values in columns.items()})
     path = out_dir / f"{profile.stem}_compensation.csv"
     with atomic_path(path) as tmp:
         frame.to_csv(tmp, index=False, float_format="%.6f")
     return {"files": {"table": path}, "interpolation_error_um": 0.0,
             "points": len(frame), "spacing_mm": None,
             "backlash": round(profile.backlash, 4), "unconfirmed": []}
+

@@ -204,10 +204,10 @@ def _written_lines(w: dict) -> list[str]:
                      f"resolve: U(B) {r['U_B_um']:.3f} um")
     if "changes" in w:
         c = w["changes"]
+        plus, minus = (c[f"change_{side}_{u}"] for side in ("plus", "minus"))
         lines.append(f"  change from the active file [{u}]: moving + "
-                     f"{c['change_plus_um'].min():+.3f} to {c['change_plus_um'].max():+.3f}, "
-                     f"moving - {c['change_minus_um'].min():+.3f} to "
-                     f"{c['change_minus_um'].max():+.3f} ({len(c)} targets)")
+                     f"{plus.min():+.3f} to {plus.max():+.3f}, moving - {minus.min():+.3f} to "
+                     f"{minus.max():+.3f} ({len(c)} targets)")
     return lines
 
 
