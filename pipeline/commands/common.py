@@ -79,3 +79,16 @@ def progress_bar(what: str = ""):
 def remove_created(folders: list[Path]) -> None:
     for folder in folders:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def add_trend_arguments(parser) -> None:
+    """The options of the trend analysis per machine axis (``models.drift``), the same for
+    ``drift`` and ``fleet``: ``--warn-months``, ``--alpha``, ``--min-jump-sigma``."""
+    parser.add_argument("--warn-months", type=float, default=6.0,
+                        help="alert when the crossing may come within this many months of "
+                             "the last visit (default 6)")
+    parser.add_argument("--alpha", type=float, default=0.05,
+                        help="significance level of trend tests and intervals (default 0.05)")
+    parser.add_argument("--min-jump-sigma", type=float, default=3.0,
+                        help="a change point must move the level by this many standard "
+                             "errors (default 3)")

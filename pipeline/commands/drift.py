@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.common import add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.drift import WORKFLOW
 
@@ -20,14 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="backlash limit [um]: forecast the date it is crossed")
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory: monitor its residuals and inputs")
-    parser.add_argument("--warn-months", type=float, default=6.0,
-                        help="alert when the crossing may come within this many months of "
-                             "the last visit (default 6)")
-    parser.add_argument("--alpha", type=float, default=0.05,
-                        help="significance level of trend tests and intervals (default 0.05)")
-    parser.add_argument("--min-jump-sigma", type=float, default=3.0,
-                        help="a change point must move the level by this many standard "
-                             "errors (default 3)")
+    add_trend_arguments(parser)
     parser.add_argument("--uncertainty", metavar="BUDGET.toml",
                         help="ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
                              "each visit's backlash; steps within it do not alert")

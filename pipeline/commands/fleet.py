@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.commands.common import add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
 
@@ -21,14 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="D", help="maintenance interval [days]: the next visit is due "
                                           "this long after the last one at the latest "
                                           f"(default {DEFAULT_INTERVAL_DAYS:g})")
-    parser.add_argument("--warn-months", type=float, default=6.0,
-                        help="alert when the crossing may come within this many months of "
-                             "the last visit (default 6)")
-    parser.add_argument("--alpha", type=float, default=0.05,
-                        help="significance level of trend tests and intervals (default 0.05)")
-    parser.add_argument("--min-jump-sigma", type=float, default=3.0,
-                        help="a change point must move the level by this many standard "
-                             "errors (default 3)")
+    add_trend_arguments(parser)
     parser.add_argument("--out", metavar="DIR",
                         help="write the fleet site into DIR (index.html, one page per axis, "
                              "fleet.json); it opens from disk")
