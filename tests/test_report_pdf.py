@@ -29,8 +29,8 @@ def pdf_pages(path: Path) -> list[str]:
     n_pages = len(re.findall(rb"/Type\s*/Page\b", data))
     texts = []
     for m in re.finditer(rb"stream\r?\n(.*?)\r?\nendstream", data, re.DOTALL):
-        try:
-            body = zlib.decompress(m.group(1))
+        try:  # a stream whose last byte is CR loses it to the pattern: only its checksum is cut
+            body = zlib.decompressobj().decompress(m.group(1))
         except zlib.error:  # fonts and images
             continue
         blocks = re.findall(rb"BT(.*?)ET", body, re.DOTALL)
