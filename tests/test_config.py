@@ -110,7 +110,8 @@ def test_every_preset_is_a_toml_campaign_file():
     from models.physics import PRESETS
     from models.physics.campaign import Campaign, load_config
 
-    assert {"paper", "fleet", "drift", "demo", "indirect", "wear", "compensation"} <= set(PRESETS)
+    assert {"paper", "fleet", "drift", "demo", "indirect", "wear", "compensation",
+            "rotary"} <= set(PRESETS)
     for name, path in PRESETS.items():
         assert path.suffix == ".toml" and path.parent.name == "presets"
         assert isinstance(load_config(name), Campaign)

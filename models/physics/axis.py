@@ -14,6 +14,10 @@ b moves nothing (``play``). What the laser then sees depends on the measuring sy
 Position errors (lead, thermal, refraction, Abbe, settling) add to every reading; the machine
 warms up along the run; the reading gets white noise and is rounded to the laser's resolution.
 All tests sharing a path run at once: one numpy step per waypoint, vectorised over tests.
+
+Units: positions in mm and errors in um on a linear axis; on a rotary axis (a worm-driven
+table) the same arrays hold degrees and arcsec, and ``per_unit`` (errors per position unit:
+1000 um/mm, 3600 arcsec/deg) converts between them.
 """
 
 from __future__ import annotations
@@ -26,10 +30,12 @@ from models.physics.cycles import Path
 SYSTEMS = ("indirect", "direct")
 
 
-def play(commanded_mm: np.ndarray, width_um: np.ndarray) -> np.ndarray:
+def play(commanded_mm: np.ndarray, width_um: np.ndarray, per_unit=1000.0) -> np.ndarray:
     """Table positions [mm] for commanded motor positions [mm], shape (tests, waypoints):
-    p_k = clip(p_(k-1), m_k - b_k/2, m_k + b_k/2), starting centred on the first waypoint."""
-    half = width_um / 2000.0
+    p_k = clip(p_(k-1), m_k - b_k/2, m_k + b_k/2), starting centred on the first waypoint.
+    ``per_unit``: width units per position unit (1000 um/mm; 3600 arcsec/deg on a rotary
+    axis), a scalar or one value per test (tests, 1)."""
+    half = width_um / (2.0 * np.asarray(per_unit, float))
     table = np.empty_like(commanded_mm)
     p = commanded_mm[:, 0].copy()
     for k in range(commanded_mm.shape[1]):
@@ -88,7 +94,9 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     pressure_drift_hpa_per_h, humidity_drift_pct_per_h (air profiles along the run) and
     cooling_tau_s (> 0: the screw cools towards ambient during each dwell); optional
     wear_local_um (per test, peak of the local wear [um]) with scalars wear_center_mm and
-    wear_width_mm: a worn zone of ``backlash_position``'s shape added to the play width.
+    wear_width_mm: a worn zone of ``backlash_position``'s shape added to the play width;
+    optional ``per_unit`` (per test, default 1000): error units per position unit, 3600 for a
+    rotary axis (positions in deg, errors in arcsec).
     Returns arrays of shape (tests, readings): deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
     conditions at each reading, and per-reading target, direction and cycle.
 
@@ -97,6 +105,7 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     offsets are added to the commanded path ahead of the play, as the controller does.
     """
     n = len(tests["feed_mm_min"])
+    per_unit = np.broadcast_to(np.asarray(tests.get("per_unit", 1000.0), float), (n,))[:, None]
     elapsed = run_times_s(path, tests["feed_mm_min"], tests["dwell_s"])
     hours = elapsed / 3600.0
     # air profiles: the run's start value plus a linear drift along the run (drifts default 0)
@@ -133,14 +142,15 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     target = targets_mm[path.target_index[read]]
     direction = path.direction[read]
     if system == "indirect" and compensation is not None:
-        lost = (_compensated_table(path, compensation, width)[:, read] - position[:, read]) * 1000.0
+        table = _compensated_table(path, compensation, width, per_unit)
+        lost = (table[:, read] - position[:, read]) * per_unit
     elif system == "indirect":
-        lost = (play(position, width)[:, read] - position[:, read]) * 1000.0
+        lost = (play(position, width, per_unit)[:, read] - position[:, read]) * per_unit
     else:
         lost = -direction * width[:, read] / 2 * path.reversal[read]
         if compensation is not None:  # the scale loop drives the table onto setpoint + offset
             offsets = _compensated_motor(path, compensation)[:, 1::2] - position
-            lost = lost + offsets[:, read] * 1000.0
+            lost = lost + offsets[:, read] * per_unit
     at_read = {k: v[:, read] for k, v in conditions.items()}
     out = {"true_backlash_um": width[:, read], "lost_motion_um": lost}
     deviation = lost.copy()
@@ -177,9 +187,9 @@ def _compensated_motor(path: Path, compensation) -> np.ndarray:
     return np.stack([plain if c is None else cache[id(c)] for c in compensation])
 
 
-def _compensated_table(path: Path, compensation, width: np.ndarray) -> np.ndarray:
+def _compensated_table(path: Path, compensation, width: np.ndarray, per_unit) -> np.ndarray:
     """Table positions [mm] at the waypoints when the motor follows the compensated path."""
     motor = _compensated_motor(path, compensation)
     before = np.c_[width[:, :1], width[:, :-1]]
     widths = np.stack([before, width], axis=2).reshape(motor.shape)
-    return play(motor, widths)[:, 1::2]
+    return play(motor, widths, per_unit)[:, 1::2]

@@ -56,6 +56,9 @@ bump whose amplitude grows with h. An adjustment resets the hours (and so the we
 to ``adjusted_b0_um``; a failure adds ``failure_jump_um``. The visit table records the hours,
 b0, the local wear's peak ``wear_local_um`` and rate ``wear_local_um_per_1000h``; the truth table
 records ``wear_um`` (uniform plus local wear) at every target.
+A rotary axis (A, B, C) reads every ``*_mm`` value as degrees, every ``*_um`` value as arcsec
+and feeds as deg/min (the ``rotary`` preset: a worm-driven table over a full turn); one
+campaign may mix linear and rotary axes.
 The paper plan (``paper`` preset): 8 targets over 0-350 mm, feeds 200/500/1200 mm/min, dwells
 3/5/7 s, 3 repeats, linear and pendulum, 5 cycles: 3 x 3 x 3 x 8 targets x 2 directions = 432
 paired linear/pendulum points per axis (324 at interior targets, i.e. 162 backlash points).
@@ -480,6 +483,7 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
         arrays = {c: part[c].to_numpy(float) for c in
                   ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
                    "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
+        arrays["per_unit"] = part["axis"].map(schema.deviation_scale).to_numpy(float)
         arrays["wear_center_mm"] = float(config.fleet.wear_center_mm)
         arrays["wear_width_mm"] = float(config.fleet.wear_width_mm)
         for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",

@@ -194,33 +194,46 @@ def lead_error_linear(position_mm, direction, conditions, k_um_per_m=8.0):
 
 
 def lead_error_periodic(position_mm, direction, conditions, amplitude_um=1.0, pitch_mm=10.0,
-                        phase_rad=0.0, amplitude2_um=0.0, phase2_rad=0.0):
+                        phase_rad=0.0, amplitude2_um=0.0, phase2_rad=0.0, amplitude_rev_um=0.0,
+                        phase_rev_rad=0.0, revolution_mm=360.0):
     """Periodic lead error of the screw with its pitch as period, with its second harmonic
-    (eccentric screw, wobbling nut).
+    (eccentric screw, wobbling nut); on a rotary table driven by a worm, the worm's error with
+    the wheel's tooth pitch as period and the wheel's once-per-revolution eccentricity.
 
     Parameters
     ----------
     position_mm : array-like
-        Target position x [mm].
+        Target position x [mm] (rotary axis: [deg]).
     amplitude_um, amplitude2_um : float
-        Amplitudes of the first and second harmonic A, A2 [um].
+        Amplitudes of the first and second harmonic A, A2 [um] (rotary: [arcsec]).
     pitch_mm : float
-        Screw pitch p [mm].
+        Screw pitch p [mm]; for a worm gear with z teeth, the angle one worm turn indexes the
+        table, 360 / z [deg].
     phase_rad, phase2_rad : float
         Phases phi, phi2 [rad].
+    amplitude_rev_um, phase_rev_rad : float
+        Once-per-revolution term A_r [arcsec], phi_r [rad]: eccentricity of the wheel or of the
+        encoder disc on a rotary axis (0 on a linear axis).
+    revolution_mm : float
+        Period of that term, one revolution R [deg].
 
     Returns
     -------
     e : ndarray
-        e = A sin(2 pi x / p + phi) + A2 sin(4 pi x / p + phi2) [um]. Invisible when the
-        targets are spaced at multiples of the pitch, hence ISO 230-2's irregular spacing.
+        e = A sin(2 pi x / p + phi) + A2 sin(4 pi x / p + phi2) + A_r sin(2 pi x / R + phi_r)
+        [um]. The screw terms are invisible when the targets are spaced at multiples of the
+        pitch, hence ISO 230-2's irregular spacing.
 
     References
     ----------
-    ISO 230-2:2014, section 4.3 (target positions with irregular spacing).
+    ISO 230-2:2014, section 4.3 (target positions with irregular spacing). A graduation of
+    radius r [mm] mounted off-centre by e [um] reads an angular error of e / r [mrad] times
+    sin(x + phi_r) once per revolution (A_r = 206.265 e / r arcsec).
     """
-    turns = 2 * np.pi * np.asarray(position_mm) / pitch_mm
-    return amplitude_um * np.sin(turns + phase_rad) + amplitude2_um * np.sin(2 * turns + phase2_rad)
+    x = np.asarray(position_mm)
+    turns = 2 * np.pi * x / pitch_mm
+    return (amplitude_um * np.sin(turns + phase_rad) + amplitude2_um * np.sin(2 * turns + phase2_rad)
+            + amplitude_rev_um * np.sin(2 * np.pi * x / revolution_mm + phase_rev_rad))
 
 
 def lead_error_profile(position_mm, direction, conditions, p0_um=0.0, p1_um=2.0, p2_um=-1.5,
