@@ -122,3 +122,39 @@ def epoch_lines(notes: list[dict], limit: int = 6) -> list[str]:
     if len(notes) > limit:
         lines.append(f"wear clock: {len(notes) - limit} more machine axes (model.json meta)")
     return lines
+
+
+def usage_rates(readings: pd.DataFrame) -> list[dict]:
+    """How fast each machine axis's hour counter runs: operating hours per calendar day.
+
+    Per machine axis, each visit's date (its first ``started_at``) and hour-counter reading
+    (median ``operating_hours``); the rate is the hours counted over the calendar days between
+    consecutive visits, r = sum(dh) / sum(dd) over the pairs whose counter did not drop (a drop
+    is a reset at an adjustment, not negative use).
+
+    Returns
+    -------
+    list of dict
+        ``machine_id, axis, last_date`` (ISO date of the last visit), ``last_hours`` [h] and
+        ``hours_per_day`` [h/day], for the axes with two or more dated visits some days apart;
+        empty when the readings have no ``started_at`` or ``operating_hours``.
+    """
+    from features.readings.schema import AXIS_KEYS
+
+    if not {"started_at", "operating_hours", "visit", *AXIS_KEYS} <= set(readings.columns):
+        return []
+    visits = (readings.groupby([*AXIS_KEYS, "visit"], observed=True)
+              .agg(date=("started_at", "min"), hours=("operating_hours", "median"))
+              .dropna().reset_index().sort_values([*AXIS_KEYS, "date"]))
+    rows = []
+    for (machine, axis), v in visits.groupby(list(AXIS_KEYS), observed=True, sort=True):
+        days = np.diff(v["date"].to_numpy("datetime64[s]")).astype(float) / 86400.0
+        hours = np.diff(v["hours"].to_numpy(float))
+        counted = (hours >= 0) & (days > 0)
+        if not counted.any() or days[counted].sum() < 1:
+            continue
+        rows.append({"machine_id": str(machine), "axis": str(axis),
+                     "last_date": pd.Timestamp(v["date"].iloc[-1]).date().isoformat(),
+                     "last_hours": float(v["hours"].iloc[-1]),
+                     "hours_per_day": round(float(hours[counted].sum() / days[counted].sum()), 6)})
+    return rows

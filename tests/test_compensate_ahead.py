@@ -10,8 +10,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
+from features.readings.errors import InputError
 from pipeline.cli import main
 from pipeline.workflows.compensate import compensate
 
@@ -94,21 +96,39 @@ def test_machine_selection_and_hours_in_json(twin, tmp_path, capsys):
     assert [p.name for p in out.iterdir()] == ["M02_X_compensation.csv"]
 
 
-def test_date_through_the_recorded_usage_rate(twin):
+def test_training_records_each_axis_usage_rate_from_the_visits(twin):
+    """The twin's hour counters run 16 h a day; the model records the last visit's date and
+    reading, so a date 30 days later is 480 h on."""
+    sim, visits, model = twin
+    trained = sim.visits[sim.visits["visit"] == visits[QUARTERS * (TRAINED - 1)]]
+    usage = {(u["machine_id"], u["axis"]): u for u in model.meta["usage"]}
+    assert set(usage) == {("M01", "X"), ("M02", "X")}
+    for _, visit in trained.iterrows():
+        u = usage[(visit["machine_id"], visit["axis"])]
+        assert u["hours_per_day"] == pytest.approx(16.0)
+        assert u["last_hours"] == pytest.approx(visit["operating_hours"])
+        assert u["last_date"] == visit["started_at"].date().isoformat()
+    last = pd.Timestamp(usage[("M01", "X")]["last_date"])
+    later = (last + pd.Timedelta(days=30)).date().isoformat()
+    result = compensate(model, at_date=later, machine="M01")
+    assert result.profiles[0].at_hours == pytest.approx(usage[("M01", "X")]["last_hours"] + 480)
+    assert later in result.profiles[0].notes[0]
+
+
+def test_a_model_without_usage_refuses_a_date(twin):
     _, _, model = twin
-    model.meta["usage"] = [{"machine_id": "M01", "axis": "X", "last_date": "2026-06-01",
-                            "last_hours": 2880.0, "hours_per_day": 16.0}]
+    usage = model.meta.pop("usage")
     try:
-        result = compensate(model, at_date="2026-07-01", machine="M01")
+        with pytest.raises(InputError, match="does not record the axis's usage rate") as err:
+            compensate(model, at_date="2027-07-01", machine="M01")
     finally:
-        del model.meta["usage"]
-    assert result.profiles[0].at_hours == pytest.approx(2880 + 16 * 30)
-    assert "2026-07-01" in result.profiles[0].notes[0]
+        model.meta["usage"] = usage
+    assert err.value.parameter == "at_date"
 
 
 @pytest.mark.parametrize("options, message", [
     (["--at-hours", "-5"], "--at-hours: must be None or a float in the range [0.0, inf)"),
-    (["--at-date", "2026-07-01"], "does not record the axis's usage rate"),
+    (["--at-date", "2026-01-01"], "is before the axis's last visit"),
     (["--at-date", "July"], "'July' is not a date YYYY-MM-DD"),
     (["--at-hours", "10", "--at-date", "2026-07-01"], "not both"),
     (["--machine", "M09"], "selects no machine axis the model knows (M01 X, M02 X)"),

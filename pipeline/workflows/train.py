@@ -207,10 +207,13 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     budget = None if uncertainty is None else _budget(uncertainty)
     loaded = model_data(data, format, target, features, truth)
     U_B = None if budget is None else measurement_U_B_um(loaded.readings, budget)
-    table, clock, origins = loaded.table, None, {}
+    table, clock, origins, usage = loaded.table, None, {}, []
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
         from models.training import hours_origins
+        from models.wear_clock import usage_rates
         from models.wear_map import epoch_lines
+
+        usage = usage_rates(loaded.readings)  # turns a date into hour-counter readings
 
         table, clock = since_adjustment(table, loaded.readings)
         origins = hours_origins(table, clock["series"])
@@ -234,7 +237,8 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     digest = loaded.digest
     meta = {"split": split, "data_sha256": digest, "data": loaded.source,
             "noise_floor_um": loaded.noise_floor_um, "target_reason": table.reason,
-            "seed": seed, **({"wear_clock": clock} if clock else {}), **resolution}
+            "seed": seed, **({"wear_clock": clock} if clock else {}),
+            **({"usage": usage} if usage else {}), **resolution}
     params = {"model": name, "split": split, "target_kind": table.target_kind,
               "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
               "n_test": len(fit.test_index), "data": loaded.source, "data_sha256": digest,
