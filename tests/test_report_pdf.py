@@ -4,16 +4,21 @@ checked page by page against the hand calculation of the files."""
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
 import zlib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from features import iso230
 from features.readings import read_readings
+from pipeline import iso_report
 from pipeline.cli import main
-from pipeline.iso_chart import draw_readings
+from pipeline.iso_chart import DOWN, UP, draw_readings
 from pipeline.report_page import new_figure
+from pipeline.workflows.report import report
 from tests.test_iso230 import hand_calculation, synthetic
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -104,3 +109,80 @@ def test_bad_input_is_one_line_and_writes_nothing(ess_file, tmp_path, capsys, ar
     err = captured.err.strip().splitlines()
     assert len(err) == 1 and words in err[0], err
     assert captured.out == "" and not out.exists()
+
+
+RENDER_DPI = 100
+RING = ("black", 9.0)  # how draw_readings rings a flagged reading: edge colour, size [pt]
+
+
+def rendered_pages(pdf: Path, dpi: int = RENDER_DPI) -> list[np.ndarray]:
+    """Each page of ``pdf`` as poppler draws it: an RGB array in [0, 1], top row first."""
+    from matplotlib.image import imread
+
+    subprocess.run(["pdftoppm", "-r", str(dpi), "-png", str(pdf), str(pdf.with_suffix(""))],
+                   check=True, capture_output=True, timeout=120)
+    pngs = sorted(pdf.parent.glob(f"{pdf.stem}-*.png"), key=lambda p: int(p.stem.split("-")[-1]))
+    return [imread(png)[..., :3] for png in pngs]
+
+
+def _near(pixels: np.ndarray, colour: str, tol: float) -> np.ndarray:
+    from matplotlib.colors import to_rgb
+
+    return np.abs(pixels - np.array(to_rgb(colour))).max(axis=-1) <= tol
+
+
+def ringed(img: np.ndarray, x: float, y: float, radius: float, colour: str) -> float:
+    """The share of 32 directions around pixel (x, y) (from the top left) in which a pixel of
+    ``colour`` lies within a pixel of ``radius``: near 1 inside a ring, low elsewhere."""
+    angles = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    hits = np.zeros(len(angles), dtype=bool)
+    for r in (radius - 1, radius, radius + 1):
+        cols = np.floor(x + r * np.cos(angles)).astype(int)
+        rows = np.floor(y + r * np.sin(angles)).astype(int)
+        hits |= _near(img[rows, cols], colour, 0.35)
+    return hits.mean()
+
+
+@pytest.mark.pdftoppm
+@pytest.mark.skipif(shutil.which("pdftoppm") is None,
+                    reason="pdftoppm not found (apt-get install poppler-utils)")
+def test_the_pdf_pages_as_drawn_hold_the_charts(ess_file, psi_file, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["report", str(ess_file), str(psi_file), "--out", str(out),
+                 "--uncertainty", str(BUDGET)]) == 0
+    images = rendered_pages(out / "iso_report.pdf")
+    # the same pages, laid out again to know where each reading is drawn
+    result = report([str(ess_file), str(psi_file)], uncertainty=str(BUDGET)).iso
+    assert len(images) == len(result.figures) == 2
+    rings = []
+    for img, page in zip(images, iso_report._pages(result)):
+        fig = iso_report.test_figure(result, *page)
+        width_in, height_in = fig.get_size_inches()
+        assert abs(width_in * 25.4 - 210) < 1 and abs(height_in * 25.4 - 297) < 1  # A4
+        assert abs(img.shape[1] - width_in * RENDER_DPI) <= 2
+        assert abs(img.shape[0] - height_in * RENDER_DPI) <= 2
+        assert (img.min(axis=-1) < 0.9).mean() > 0.04  # text, table and chart, not a blank page
+        (ax,) = [a for a in fig.axes if any(line.get_label() == "readings +" for line in a.lines)]
+        scale = RENDER_DPI / fig.dpi  # figure pixels to rendered pixels
+        box, height = ax.get_window_extent(), fig.bbox.height
+        chart = img[int((height - box.y1) * scale):int((height - box.y0) * scale),
+                    int(box.x0 * scale):int(box.x1 * scale)]
+        for colour in (UP, DOWN):  # the mean lines and their markers, up and down, in the chart
+            assert _near(chart, colour, 0.06).sum() > 300, colour
+            assert _near(chart, colour, 0.06).sum() == _near(img, colour, 0.06).sum(), colour
+        # every reading where the page puts it: is there a ring around it in the drawn page?
+        readings = np.vstack([line.get_xydata() for line in ax.lines
+                              if line.get_label().startswith("readings")])
+        assert len(readings) == len(page[2]) == 50
+        radius = RING[1] / 2 / 72 * RENDER_DPI
+        found = []
+        for (target, deviation), (x, y) in zip(readings, ax.transData.transform(readings)):
+            share = ringed(img, x * scale, (height - y) * scale, radius, RING[0])
+            assert share > 0.9 or share < 0.5, (target, deviation, share)  # ring or clearly none
+            if share > 0.9:
+                found.append(round(deviation, 1))
+        flagged = page[2].loc[page[3], "deviation_um"]
+        assert sorted(found) == sorted(round(v, 1) for v in flagged)
+        rings.append(sorted(found))
+    # the two readings ISO flags on the ESS file, none on the PSI file
+    assert rings == [[62.8, 93.2], []]
