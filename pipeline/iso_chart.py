@@ -32,6 +32,7 @@ def draw_test(ax, ax_reversal, targets: pd.DataFrame, figures: pd.Series) -> Non
     ax_reversal.axhline(0, color="black", lw=0.5)
     ax_reversal.set_ylabel(f"B_i [{unit}]")
     ax_reversal.set_xlabel(f"target [{schema.position_unit(figures['axis'])}]")
+    ax.figure.align_ylabels([ax, ax_reversal])  # wide B_i ticks would push its label off the page
     box = "\n".join(_box_line(figures, k) for k in ("A", "A_up", "A_down", "E", "E_up",
                                                       "E_down", "M", "R", "R_up", "R_down",
                                                       "B", "B_mean"))

@@ -75,7 +75,8 @@ def test_figure(result, row, targets, readings, flags, source):
     """One A4 page: title and conditions, chart with every reading, B_i, per-target table."""
     # fixed margins: constrained layout costs a second per page, and every page is alike
     fig = new_figure(*A4_IN, fixed_margins=True)
-    grid = fig.add_gridspec(4, 1, height_ratios=[1.5, 3.2, 1.0, 2.4], right=0.74, hspace=0.3)
+    grid = fig.add_gridspec(4, 1, height_ratios=[1.5, 3.2, 1.0, 2.4], left=0.14, right=0.74,
+                            hspace=0.3)  # left: room for wide tick labels and the y labels
     head, ax, ax_b, ax_t = (fig.add_subplot(grid[i]) for i in range(4))
     ax_b.sharex(ax)
     head.axis("off")
