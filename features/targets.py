@@ -22,6 +22,8 @@ only pendulum tests falls back to ``iso`` (``choose_kind``'s rule for one test m
 point carries its ``target_kind``; ``frame.attrs["target_kind"]`` is ``"paper"`` or ``"iso"``
 when all points agree and ``"mixed"`` otherwise, ``frame.attrs["target_reason"]`` says why.
 ``backlash_u_um`` is the standard uncertainty of each point from the tests' repeatability.
+With an ISO/TR 230-9 budget (``features.uncertainty``) each point also carries ``backlash_U_um``,
+the expanded uncertainty of its backlash (``point_uncertainty``).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from features import iso230
+from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
 
@@ -42,9 +45,12 @@ AXIS_KEYS = schema.AXIS_KEYS
 DIRECT_RATIO = 0.5
 # Axes named in a reason before the rest are only counted.
 NAMED_AXES = 4
+# The two parts [um] of a point's budget uncertainty (``point_uncertainty``): systematic for one
+# setup, and new at every run.
+BUDGET_PARTS = ("backlash_u_setup_um", "backlash_u_env_um")
 
 
-def backlash_targets(readings: pd.DataFrame, kind: str = "auto") -> pd.DataFrame:
+def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) -> pd.DataFrame:
     """Backlash per point of a readings table.
 
     Parameters
@@ -53,25 +59,41 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto") -> pd.DataFrame
         Validated readings (``features.readings.read_readings``).
     kind : {'auto', 'paper', 'iso'}, default 'auto'
         Definition of a point's backlash; ``auto`` chooses per machine axis.
+    budget : str, path-like, dict or UncertaintyBudget, optional
+        An ISO/TR 230-9 budget (``features.uncertainty``; e.g.
+        ``experiments/data/paper_uncertainty.toml``): adds ``backlash_U_um``
+        (``point_uncertainty``). Linear axes only.
 
     Returns
     -------
     DataFrame
         One row per point: ``POINT_KEYS``, ``backlash_um`` [um], ``backlash_u_um`` [um],
-        ``target_kind`` ('paper' or 'iso'), ``interior`` (not a test's first or last target),
-        ``started_at`` (when the readings have it) and, for paper points, ``z_up_um``,
-        ``z_down_um`` [um], ``linear_test_id`` and ``pendulum_test_id``. ``attrs`` hold
-        ``target_kind`` ('paper', 'iso' or 'mixed'), ``target_reason`` and ``source``.
+        with a budget ``backlash_U_um`` [um] (k of the budget), ``target_kind`` ('paper' or
+        'iso'), ``interior`` (not a test's first or last target), ``started_at`` (when the
+        readings have it) and, for paper points, ``z_up_um``, ``z_down_um`` [um],
+        ``linear_test_id`` and ``pendulum_test_id``. ``attrs`` hold ``target_kind`` ('paper',
+        'iso' or 'mixed'), ``target_reason``, ``source`` and, with a budget,
+        ``coverage_factor``.
+
+    Raises
+    ------
+    InputError
+        An unknown ``kind``, unpaired tests for ``paper``, an unreadable or non-physical
+        budget, a budget for a rotary axis.
     """
     return targets_of(iso230.per_target(readings), kind,
-                      readings.attrs.get("source", "readings"))
+                      readings.attrs.get("source", "readings"), budget)
 
 
-def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings") -> pd.DataFrame:
-    """``backlash_targets`` from per-target statistics (``features.iso230.per_target``)."""
+def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings", budget=None,
+               parts: bool = False) -> pd.DataFrame:
+    """``backlash_targets`` from per-target statistics (``features.iso230.per_target``);
+    with ``parts`` (and a budget) also the two parts ``BUDGET_PARTS`` [um] of each point's
+    budget uncertainty (``point_uncertainty``), which the visit series combines."""
     if kind not in KINDS:
         raise InputError(f"unknown target {kind!r}; expected one of {', '.join(KINDS)}",
                          parameter="kind")
+    budget = None if budget is None else unc.checked_budget(budget)
     stats = _with_pair_keys(stats).assign(interior=lambda s: _interior(s))
     if kind == "auto":
         points, reason = auto_points(stats, source)
@@ -81,10 +103,114 @@ def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings"
                   else iso_points(stats)).assign(target_kind=kind)
         reason = _DEFAULT_REASON[kind]
     points = points.sort_values(list(POINT_KEYS), kind="stable").reset_index(drop=True)
+    if budget is not None:
+        points = point_uncertainty(points, stats, budget)
+        if not parts:
+            points = points.drop(columns=list(BUDGET_PARTS))
     kinds = points["target_kind"].unique()
     frame_kind = str(kinds[0]) if len(kinds) == 1 else MIXED if len(kinds) else "iso"
     points.attrs.update(target_kind=frame_kind, target_reason=reason, source=source)
+    if budget is not None:
+        points.attrs["coverage_factor"] = budget.coverage_factor
     return points
+
+
+def point_uncertainty(points: pd.DataFrame, stats: pd.DataFrame,
+                      budget: unc.UncertaintyBudget) -> pd.DataFrame:
+    """``points`` with ``backlash_U_um``, the expanded uncertainty of each point's backlash,
+    and its two budget parts ``BUDGET_PARTS``.
+
+    Each test's reversal values B_i carry the budget's U(B) at the test's measuring length and
+    runs per direction n (``features.uncertainty.per_test_um``), in two parts
+    (``features.uncertainty.reversal_terms_um``): the setup's Abbe error u_setup = 2u_S, the
+    same in every run of one setup, and the environmental variation u_env = 2u_EVE/√n, new in
+    every run. The laser, misalignment and temperature errors, proportional to the position,
+    are the same in the four means at one target and cancel in any difference of them.
+
+    An ``iso`` point is the mean over the tests t that reached it of -B_i,t. Its parts are the
+    largest of its tests' (with one setup the tests' errors are correlated, r ≤ 1, and the
+    uncertainty of a mean is at most the largest of its terms, [GUM] 5.2.2):
+
+    .. math:: u_{setup} = \\max_t 2u_S, \\qquad u_{env} = \\max_t 2u_{EVE}/\\sqrt{n_t}
+
+    A ``paper`` point is |z_down - z_up| with z_d = (pendulum mean) - (linear mean), that is
+    the difference of the two tests' reversal values, b = |B_lin - B_pend|. Both tests of a
+    pair are made at one visit with one setup (same laser position, Abbe offset and direction of
+    approach at the target): their Abbe errors are the same (r = +1) and cancel, as does a
+    thermal change between the two runs, common to both directions. The environmental
+    variations of the two runs are uncorrelated and add ([GUM] 5.1.2):
+
+    .. math::
+
+        u_{setup} = 0, \\qquad
+        u_{env} = \\sqrt{\\frac{(2u_{EVE})^2}{n_{lin}} + \\frac{(2u_{EVE})^2}{n_{pend}}}
+
+    With the point's repeatability u_r (``backlash_u_um``, a Type A evaluation from the
+    readings' scatter; taken as 0 where the data give none), uncorrelated with both:
+
+    .. math:: U = k \\sqrt{u_{setup}^2 + u_{env}^2 + u_r^2}
+
+    For an ``iso`` point of one test this is k √((U(B)/k)² + u_r²), the form the visit series
+    uses (``features.visits.axis_backlash``). With the paper's budget (Table 3, n = 5) U(B) =
+    4.12 um, while a ``paper`` point's budget part is k·√2·2u_EVE/√5 = 0.73 um: its Abbe term
+    cancels. A test with one target has no length to scale the budget to and takes the
+    budget's own ``length_mm`` and ``cycles``.
+
+    Parameters
+    ----------
+    points : DataFrame
+        Backlash points (``targets_of``) with ``target_kind``, ``backlash_u_um`` and, for
+        paper points, ``linear_test_id`` and ``pendulum_test_id``.
+    stats : DataFrame
+        The per-target statistics the points come from, with every ``POINT_KEYS`` column.
+    budget : UncertaintyBudget
+        The contributors and k.
+
+    Returns
+    -------
+    DataFrame
+        ``points`` plus ``backlash_U_um`` [um] (k of the budget) and ``BUDGET_PARTS`` [um].
+
+    Raises
+    ------
+    InputError
+        A test on a rotary axis (a budget holds lengths, not angles).
+
+    References
+    ----------
+    .. [ISO230-9] ISO/TR 230-9:2005; the U(B) form of the backlash paper's Table 4
+       (``features.uncertainty.expanded_parameters_um``).
+    .. [GUM] JCGM 100:2008, 5.1.2 (uncorrelated inputs) and 5.2.2 (correlated inputs).
+    """
+    setup, env = unc.REVERSAL_PARTS
+    tests = unc.per_test_um(stats, budget)
+    for column, nominal in zip((setup, env), unc.nominal_reversal_parts_um(budget)):
+        tests[column] = tests[column].fillna(nominal)
+    test_keys = list(schema.TEST_KEYS)
+    out = points.assign(**dict.fromkeys(BUDGET_PARTS, np.nan))
+    paper = (out["target_kind"] == "paper").to_numpy()
+    if paper.any():
+        env_of = {}
+        for method in schema.METHODS:
+            ids = out.loc[paper, [*test_keys[:-1], f"{method}_test_id"]].rename(
+                columns={f"{method}_test_id": "test_id"})
+            env_of[method] = ids.merge(tests[[*test_keys, env]], on=test_keys,
+                                       how="left")[env].to_numpy(float)
+        out.loc[paper, BUDGET_PARTS[0]] = 0.0
+        out.loc[paper, BUDGET_PARTS[1]] = np.hypot(*env_of.values())
+    if (~paper).any():
+        keys = list(POINT_KEYS)
+        per_point = (stats[[*keys, "test_id"]].merge(tests[[*test_keys, setup, env]],
+                                                     on=test_keys, how="left")
+                     .groupby(keys, dropna=False, sort=False)[[setup, env]].max())
+        found = out.loc[~paper, keys].merge(per_point.reset_index(), on=keys, how="left")
+        out.loc[~paper, BUDGET_PARTS[0]] = found[setup].to_numpy(float)
+        out.loc[~paper, BUDGET_PARTS[1]] = found[env].to_numpy(float)
+    u_r = out["backlash_u_um"].fillna(0.0)
+    u_budget = np.hypot(out[BUDGET_PARTS[0]], out[BUDGET_PARTS[1]])
+    at = out.columns.get_loc("backlash_u_um") + 1
+    out.insert(at, "backlash_U_um", budget.coverage_factor * np.hypot(u_budget, u_r))
+    return out
 
 
 _DEFAULT_REASON = {

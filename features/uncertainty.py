@@ -8,15 +8,20 @@ repeatability of the setup (Abbe offset). They combine into u_P, the standard un
 positional deviation at the measuring length, and into the expanded uncertainties (k = 2) of
 the ISO 230-2 figures A, E, M, R, R↑/R↓ and B (Table 4).
 
-Every function takes and returns plain numbers with the unit in its name or in brackets in its
-docstring: lengths [mm], deviations [um], ppm of a length, temperatures [°C], expansion
-coefficients [um/(mm·°C)]. A budget file is read by ``read_budget`` into ``UncertaintyBudget``;
-``evaluate`` turns it into the budget's lines in one of two arithmetics:
+Every function of the budget takes and returns plain numbers with the unit in its name or in
+brackets in its docstring: lengths [mm], deviations [um], ppm of a length, temperatures [°C],
+expansion coefficients [um/(mm·°C)]. A budget file is read by ``read_budget`` (``checked_budget``
+also checks a budget built in code) into ``UncertaintyBudget``; ``evaluate`` turns it into the
+budget's lines in one of two arithmetics:
 
 - ``"iso"``: every length-dependent line at the measuring length L, the laser's accuracy and
   wavelength stability combined by root-sum-square (uncorrelated inputs, [GUM] 5.1.2);
 - ``"paper"``: the lengths and the linear sum the paper's Table 3 lines use (the budget's
   ``[paper]`` table), which reproduces its printed numbers.
+
+``per_test_um`` evaluates a budget at every test of a readings table (its own measuring length
+and runs per direction): the expanded uncertainties the ``iso`` figures, the backlash targets
+(``features.targets``) and the visit series (``features.visits``) carry.
 
 References
 ----------
@@ -221,7 +226,7 @@ def expanded_parameters_um(u_d, u_m, u_t, u_eve, u_s, cycles, k=2.0) -> dict:
         ``R_dir`` (R↑ and R↓), ``B``, ``R``, ``E`` (E↑, E↓, E), ``M``, ``A`` [um].
     """
     u_r_dir = 2.0 * u_eve
-    u_b = math.sqrt((2.0 * u_s) ** 2 + u_r_dir ** 2 / cycles)
+    u_b = math.hypot(*reversal_terms_um(u_s, u_eve, cycles))
     return {
         "R_dir": k * u_r_dir,
         "B": k * u_b,
@@ -231,6 +236,35 @@ def expanded_parameters_um(u_d, u_m, u_t, u_eve, u_s, cycles, k=2.0) -> dict:
         "A": k * math.sqrt(u_d ** 2 + u_m ** 2 + u_t ** 2 + u_s ** 2
                            + (8.0 + 3.0 / cycles) * u_eve ** 2),
     }
+
+
+def reversal_terms_um(u_s, u_eve, cycles) -> tuple[float, float]:
+    """The two parts of the standard uncertainty of a reversal value B_i (Table 4's U(B)/k).
+
+    .. math::
+
+        u_{setup} = 2u_S, \\qquad u_{env} = \\frac{2u_{EVE}}{\\sqrt{n}}, \\qquad
+        u(B) = \\sqrt{u_{setup}^2 + u_{env}^2}
+
+    The Abbe error of the setup changes sign with the direction (2u_S) and repeats in every
+    run of one setup: systematic. The environmental variation is a new draw in every run and
+    averages over the n runs per direction. The laser, misalignment and temperature errors are
+    proportional to the position and cancel in the difference of the two directions at one
+    target. Reconstructed from the paper's Table 4 (``expanded_parameters_um``).
+
+    Parameters
+    ----------
+    u_s, u_eve : float
+        Standard uncertainties [um] of the setup (Abbe) and of the environmental variation.
+    cycles : int
+        n, the runs per direction.
+
+    Returns
+    -------
+    (u_setup, u_env) : tuple of float
+        Standard uncertainties [um].
+    """
+    return 2.0 * u_s, 2.0 * u_eve / math.sqrt(cycles)
 
 
 # --------------------------------------------------------------------------- the budget file
@@ -374,6 +408,21 @@ def read_budget(source, file=None) -> UncertaintyBudget:
         table, file = read_toml(source, "uncertainty budget"), str(source)
     _check_units(table, UncertaintyBudget, file)
     return from_table(table, UncertaintyBudget, file=file)
+
+
+def checked_budget(source) -> UncertaintyBudget:
+    """The budget of a TOML path, a dict or an ``UncertaintyBudget`` built in code, checked
+    (``UncertaintyBudget.check``) in every case: a file or a dict is checked as it is read.
+
+    Raises
+    ------
+    InputError
+        As ``read_budget``, or a non-physical budget object (naming the key).
+    """
+    budget = read_budget(source)
+    if source is budget:
+        budget.check()
+    return budget
 
 
 def _check_units(table, cls, file, prefix: str = "") -> None:
@@ -578,6 +627,89 @@ def expanded_at_length_um(budget: UncertaintyBudget, length_mm: float, cycles: i
     if not length_mm > 0 or cycles < 1:
         raise InputError(f"needs a measuring length > 0 and at least one run per direction; "
                          f"got {length_mm} mm and {cycles} runs", parameter="length_mm")
-    test = replace(budget, length_mm=float(length_mm), cycles=int(cycles), arithmetic="iso")
-    return budget_values(test, "iso").expanded_um
+    return _test_values(budget, length_mm, cycles).expanded_um
 
+
+def _test_values(budget: UncertaintyBudget, length_mm: float, cycles: int) -> BudgetValues:
+    """The budget evaluated in the ISO arithmetic at a test's length [mm] and runs."""
+    test = replace(budget, length_mm=float(length_mm), cycles=int(cycles), arithmetic="iso")
+    return budget_values(test, "iso")
+
+
+
+# --------------------------------------------------------------------------- per test
+# Expanded uncertainties [um] a test carries, by the figure of ``expanded_parameters_um``.
+TEST_UNCERTAINTY_KEYS = {"U_A_um": "A", "U_E_um": "E", "U_M_um": "M", "U_R_um": "R", "U_B_um": "B"}
+# Standard uncertainties [um] of a test's reversal values B_i (``reversal_terms_um``).
+REVERSAL_PARTS = ("u_B_setup_um", "u_B_env_um")
+
+
+def per_test_um(stats, budget: UncertaintyBudget):
+    """The budget evaluated at every test of per-target statistics.
+
+    A test's measuring length is its largest minus its smallest target [mm]; its runs per
+    direction n are the fewest readings any target has in either direction (dropped outliers
+    lower it, which widens U). Each test gets ``expanded_at_length_um`` at (L, n) and the two
+    parts of its reversal values' standard uncertainty (``reversal_terms_um``). A test with one
+    target or no readings has no length to scale the budget to: its values are NaN.
+
+    Parameters
+    ----------
+    stats : DataFrame
+        Per-target statistics (``features.iso230.per_target``): the test keys, ``target``,
+        ``n_up``, ``n_down``.
+    budget : UncertaintyBudget
+        The contributors and k.
+
+    Returns
+    -------
+    DataFrame
+        One row per test: ``machine_id``, ``axis``, ``visit``, ``test_id``, ``length_mm``
+        [mm], ``cycles``, ``TEST_UNCERTAINTY_KEYS`` (k of the budget) and ``REVERSAL_PARTS`` [um].
+
+    Raises
+    ------
+    InputError
+        A test on a rotary axis: the budget's contributors are lengths, not angles.
+    """
+    import pandas as pd
+
+    from features.readings import schema
+
+    keys = list(schema.TEST_KEYS)
+    at: dict[tuple, dict] = {}  # the budget at each (length, n): most tests share one
+    rows = []
+    for key, t in stats.groupby(keys, sort=False, dropna=False):
+        row = dict(zip(keys, key))
+        if schema.is_rotary(row["axis"]):
+            raise InputError(f"test {row['test_id']} is on rotary axis {row['axis']}: an "
+                             "uncertainty budget holds lengths, not angles",
+                             parameter="uncertainty")
+        length = float(t["target"].max() - t["target"].min())
+        counts = pd.concat([t["n_up"], t["n_down"]])
+        cycles = int(counts[counts > 0].min()) if (counts > 0).any() else 0
+        row.update(length_mm=length, cycles=cycles)
+        if length > 0 and cycles > 0:
+            if (length, cycles) not in at:
+                at[length, cycles] = _at_test(budget, length, cycles)
+            row.update(at[length, cycles])
+        rows.append(row)
+    columns = [*keys, "length_mm", "cycles", *TEST_UNCERTAINTY_KEYS, *REVERSAL_PARTS]
+    return pd.DataFrame(rows, columns=columns).astype(
+        {c: float for c in (*TEST_UNCERTAINTY_KEYS, *REVERSAL_PARTS)})
+
+
+def _at_test(budget: UncertaintyBudget, length_mm: float, cycles: int) -> dict:
+    """``TEST_UNCERTAINTY_KEYS`` and ``REVERSAL_PARTS`` [um] of one test of (L, n)."""
+    values = _test_values(budget, length_mm, cycles)
+    u = values.contributors_um
+    parts = reversal_terms_um(u["u_S"], u["u_EVE"], cycles)
+    return {**{k: values.expanded_um[f] for k, f in TEST_UNCERTAINTY_KEYS.items()},
+            **dict(zip(REVERSAL_PARTS, parts))}
+
+
+def nominal_reversal_parts_um(budget: UncertaintyBudget) -> tuple[float, float]:
+    """``REVERSAL_PARTS`` [um] at the budget's own ``length_mm`` and ``cycles``: for a test
+    without a length of its own (one target)."""
+    parts = _at_test(budget, budget.length_mm, budget.cycles)
+    return parts[REVERSAL_PARTS[0]], parts[REVERSAL_PARTS[1]]

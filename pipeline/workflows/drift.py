@@ -137,9 +137,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         A change point must move the level by this many standard errors.
     uncertainty : str, path-like, dict or UncertaintyBudget, optional
         An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): every visit gets
-        ``backlash_U_um``, the expanded uncertainty of its backlash (``backlash_uncertainty``),
-        and a step within the expanded uncertainty of the difference of two visits is a note,
-        not an alert (``models.drift``). Linear axes only.
+        ``backlash_U_um``, the expanded uncertainty of its backlash
+        (``features.visits.axis_backlash``), and a step within the expanded uncertainty of the
+        difference of two visits is a note, not an alert (``models.drift``). Linear axes only.
 
     Returns
     -------
@@ -169,10 +169,8 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
 
         predictor = load_model(model)
     readings = readings_of(data, format)
-    visits = visit_backlash(readings)
-    k = None
-    if budget is not None:
-        visits, k = backlash_uncertainty(visits, readings, budget), budget.coverage_factor
+    visits = visit_backlash(readings, budget=budget)
+    k = None if budget is None else budget.coverage_factor
     counts = visits.groupby(list(SERIES_KEYS)).size()
     notes = [f"{m} axis {a}: a single visit, no drift analysis"
              for (m, a), c in counts.items() if c < 2]
@@ -210,67 +208,6 @@ def figures_with_uncertainty(readings, budget: unc.UncertaintyBudget):
 
     stats = iso230.per_target(readings)
     return with_uncertainty(iso230.axis_figures(readings, stats), stats, budget)
-
-
-def backlash_uncertainty(visits, readings, budget: unc.UncertaintyBudget):
-    """``visits`` with the expanded uncertainty of each visit's backlash.
-
-    The budget's U(B) of each test (``pipeline.workflows.iso.with_uncertainty``: at the test's
-    measuring length, the travel of its targets, and its runs per direction; the largest of
-    the visit's tests) splits by [ISO230-9]'s U(B) = k √((2u_S)² + (2u_EVE)²/n) into the
-    setup's Abbe part k·2u_S, systematic for one setup of the axis, and the environmental part,
-    random from visit to visit. With the repeatability of the visit's value u_r
-    (``backlash_u_um``), uncorrelated with both ([GUM] 5.1.2):
-
-    .. math::
-
-        U_{visit} = k \\sqrt{(U(B)/k)^2 + u_r^2},  \\qquad
-        u_v = \\sqrt{U(B)^2/k^2 - (2u_S)^2 + u_r^2}
-
-    Parameters
-    ----------
-    visits : DataFrame
-        ``features.visits.visit_backlash`` of ``readings``.
-    readings : DataFrame
-        The validated readings.
-    budget : UncertaintyBudget
-        The contributors and k.
-
-    Returns
-    -------
-    DataFrame
-        ``visits`` plus ``backlash_U_um`` [um] (k of the budget) and ``backlash_u_visit_um``
-        [um], the standard uncertainty of the parts that change between visits.
-
-    Raises
-    ------
-    InputError
-        Readings of a rotary axis (``with_uncertainty``).
-
-    References
-    ----------
-    .. [ISO230-9] ISO/TR 230-9:2005, basic equations of the measurement uncertainty of machine
-       tool tests; the U(B) form of the backlash paper's Table 4 (``features.uncertainty``).
-    .. [GUM] JCGM 100:2008, 5.1.2 (uncorrelated inputs) and 5.2.2 (correlated inputs).
-    """
-    import numpy as np
-
-    from features.visits import VISIT_KEYS
-
-    figures = figures_with_uncertainty(readings, budget)
-    keys = list(VISIT_KEYS)
-    k = budget.coverage_factor
-    nominal = unc.expanded_at_length_um(budget, budget.length_mm, budget.cycles)["B"]
-    u_b = (figures.groupby(keys, sort=False)["U_B_um"].max().fillna(nominal) / k).rename("u_b")
-    u_setup = 2.0 * unc.budget_values(budget, "iso").contributors_um["u_S"]
-    out = visits.merge(u_b.reset_index(), on=keys, how="left")
-    u_r = out["backlash_u_um"].fillna(0.0)
-    out["backlash_U_um"] = k * np.hypot(out["u_b"], u_r)
-    out["backlash_u_visit_um"] = np.sqrt(np.maximum(out["u_b"] ** 2 - u_setup ** 2, 0.0)
-                                         + u_r ** 2)
-    out = out.drop(columns="u_b")
-    out.attrs.update(visits.attrs)
-    return out
 
 
 WORKFLOW = Workflow(

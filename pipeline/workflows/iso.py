@@ -34,7 +34,7 @@ PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R
 TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
 # Expanded uncertainties [um] added to the figures, the JSON objects and the table when a
 # budget is given, by the figure of ``features.uncertainty.expanded_parameters_um`` they take.
-UNCERTAINTY_KEYS = {"U_A_um": "A", "U_E_um": "E", "U_M_um": "M", "U_R_um": "R", "U_B_um": "B"}
+UNCERTAINTY_KEYS = unc.TEST_UNCERTAINTY_KEYS
 
 
 def _parameters() -> dict:
@@ -157,46 +157,22 @@ class IsoResult(Result):
 
 
 def with_uncertainty(figures, targets, budget: unc.UncertaintyBudget):
-    """``figures`` with the ``UNCERTAINTY_KEYS`` columns [um] of every test.
-
-    A test's measuring length is its largest minus its smallest target [mm]; its runs per
-    direction n are the fewest readings any target has in either direction (dropped outliers
-    lower it, which widens U).
+    """``figures`` with the ``UNCERTAINTY_KEYS`` columns [um] of every test, the budget at its
+    own measuring length and runs per direction (``features.uncertainty.per_test_um``).
 
     Raises
     ------
     InputError
         A test on a rotary axis: the budget's contributors are lengths, not angles.
     """
-    import numpy as np
-    import pandas as pd
-
     keys = list(schema.TEST_KEYS)
-    rows = []
-    for key, t in targets.groupby(keys, sort=False, dropna=False):
-        row = dict(zip(keys, key))
-        if schema.is_rotary(row["axis"]):
-            raise InputError(f"test {row['test_id']} is on rotary axis {row['axis']}: an "
-                             "uncertainty budget holds lengths, not angles", parameter="uncertainty")
-        length = float(t["target"].max() - t["target"].min())
-        counts = pd.concat([t["n_up"], t["n_down"]])
-        cycles = int(counts[counts > 0].min()) if (counts > 0).any() else 0
-        if length > 0 and cycles > 0:
-            expanded = unc.expanded_at_length_um(budget, length, cycles)
-            row.update({k: expanded[f] for k, f in UNCERTAINTY_KEYS.items()})
-        else:  # one target or no readings: no length to scale the budget to
-            row.update(dict.fromkeys(UNCERTAINTY_KEYS, np.nan))
-        rows.append(row)
-    return figures.merge(pd.DataFrame(rows, columns=keys + list(UNCERTAINTY_KEYS)), on=keys,
-                         how="left")
+    per_test = unc.per_test_um(targets, budget)
+    return figures.merge(per_test[keys + list(UNCERTAINTY_KEYS)], on=keys, how="left")
 
 
 def _budget(source) -> unc.UncertaintyBudget:
     """The budget from a TOML path, a dict or a budget object (checked like a file's)."""
-    budget = unc.read_budget(source)
-    if source is budget:
-        budget.check()
-    return budget
+    return unc.checked_budget(source)
 
 
 def read_tests(data, format: str = "auto"):

@@ -1,0 +1,48 @@
+"""``backlash targets``: backlash per point of a readings table, with its uncertainty."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.commands.data import add_readings_argument
+from pipeline.workflows.targets import WORKFLOW
+
+HELP = WORKFLOW.summary
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+TABLE_ROWS = 40  # rows printed; targets.csv and --json hold every point
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_readings_argument(parser)
+    parser.add_argument("--out", help="output folder: write targets.csv")
+    parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
+                        help="backlash definition: pendulum minus linear (paper), ISO reversal "
+                             "value (iso) or chosen from the measuring-system evidence (auto)")
+    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
+                        help="ISO/TR 230-9 budget: add backlash_U_um (the expanded uncertainty "
+                             "of each point's backlash)")
+    parser.add_argument("--json", action="store_true", help="print the points as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.readings.fileio import dumps
+    from pipeline.commands.data import readings_arg
+    from pipeline.workflows.targets import targets
+
+    result = targets(readings_arg(args), format=args.format, target=args.target,
+                     uncertainty=args.uncertainty)
+    if args.out:
+        result.write(args.out)
+    print(f"{len(result.points)} points, target {result.target_kind}: {result.target_reason}",
+          file=sys.stderr)
+    print(result.table(max_rows=TABLE_ROWS), file=sys.stderr)
+    if result.coverage_factor is not None:
+        print(f"backlash_U_um: expanded uncertainty, k = {result.coverage_factor:g}",
+              file=sys.stderr)
+    if args.out:
+        print(f"wrote {result.files['targets']}", file=sys.stderr)
+    if args.json:
+        print(dumps(result.to_json()))
+    return 0
