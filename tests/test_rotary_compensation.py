@@ -36,7 +36,7 @@ def rotary_readings() -> pd.DataFrame:
 def result(tmp_path_factory):
     path = tmp_path_factory.mktemp("rotary") / "rotary.csv"  # a canonical readings file
     rotary_readings().to_csv(path, index=False)
-    return compensate(path, controller="linuxcnc,sinumerik,heidenhain,csv")
+    return compensate(path, controller="linuxcnc,sinumerik,heidenhain,fanuc,csv")
 
 
 def test_files_speak_degrees_and_arcsec(result):
@@ -49,7 +49,25 @@ def test_files_speak_degrees_and_arcsec(result):
     assert "[deg], 0 at the reference point 0 deg" in eec
     assert "points every 45 deg" in eec and "arcsec; needs MD38000" in eec
     ini = result.contents["R1_C_linuxcnc.ini"].decode()
-    assert "rotary joint C: TYPE = ANGULAR" in ini and "[JOINT_5]" in ini
+    assert "rotary joint C: TYPE = ANGULAR" in ini and "[JOINT_5]\nTYPE = ANGULAR\n" in ini
+    sheet = result.contents["R1_C_fanuc.txt"].decode().splitlines()
+    assert "DETECTION UNIT = 0.001 deg" in sheet and "REFERENCE POSITION = 0.0000 deg" in sheet
+    assert "3625 C = 360000" in "\n".join(sheet)
+    assert result.contents["R1_C.COM"].decode().count("BEGIN R1_C.COM DEG\n") == 1
+
+
+def test_a_full_turn_is_a_modulo_table(result):
+    """0 to 315 deg every 45 deg closes the turn: SINUMERIK writes IS_MODULO=1 from 0 to 360 deg
+    with the value at 360 deg that at 0 deg; read back, every file takes up the constant lost
+    motion (Fanuc to half its detection unit of 0.001 deg = 1.8 arcsec)."""
+    eec = result.contents["R1_C_AX_EEC.INI"].decode()
+    assert "$AA_ENC_COMP_IS_MODULO[0,AX6]=1\n" in eec
+    assert "$AA_ENC_COMP_MIN[0,AX6]=0.000000\n$AA_ENC_COMP_MAX[0,AX6]=360.000000\n" in eec
+    assert re.search(r"^\$AA_ENC_COMP\[0,0,AX6\]=(\S+)$", eec, re.MULTILINE)[1] == re.search(
+        r"^\$AA_ENC_COMP\[0,8,AX6\]=(\S+)$", eec, re.MULTILINE)[1]
+    for w in result.written:
+        limit = 1.8 if w["controller"] == "fanuc" else 0.5  # arcsec: B_i is one value
+        assert w["reversal_left_um"] < limit, w["controller"]
 
 
 def test_values_are_in_degrees(result):
@@ -60,8 +78,14 @@ def test_values_are_in_degrees(result):
     assert float(re.search(r"\$MA_BACKLASH\[0,AX6\]=(\S+)", md)[1]) == pytest.approx(b_deg,
                                                                                      abs=1e-6)
     table = np.loadtxt(result.contents["R1_C.comp"].decode().splitlines())
-    assert np.allclose(table[:, 0], np.arange(0.0, 360.0, 45.0))
+    assert np.allclose(table[:, 0], np.arange(0.0, 361.0, 45.0))  # the turn closed at 360
+    assert np.allclose(table[-1, 1:] - 360, table[0, 1:])
     assert np.allclose(table[:, 2] - table[:, 1], b_deg, atol=2e-5)
+    sheet = result.contents["R1_C_fanuc.txt"].decode()
+    assert int(re.search(r"^1851 C = (\d+)", sheet, re.MULTILINE)[1]) == round(LOST_ARCSEC / 3.6)
+    mp = result.contents["R1_C_heidenhain_MP.txt"].decode()
+    mp710 = float(re.search(r"^MP710\.5 = (\S+)", mp, re.MULTILINE)[1])
+    assert mp710 == pytest.approx(b_deg, abs=5e-5)
     linuxcnc = next(w for w in result.written if w["controller"] == "linuxcnc")
     assert linuxcnc["reversal_left_um"] < 0.01  # arcsec: the table carries the reversal
 

@@ -14,9 +14,12 @@ sees). The parsers below turn each file's own sign convention into those offsets
   three numbers; at most 256 lines; ``BACKLASH`` is ignored when ``COMP_FILE`` is set.
 - SINUMERIK EEC (``$AA_ENC_COMP[0,N,AXn]`` = error [mm], equidistant from ``_MIN`` by
   ``_STEP`` to ``_MAX``): offset = -error, one table for both directions; ``MD32450 BACKLASH``
-  [mm] at reversal.
+  [mm] at reversal. With ``$AA_ENC_COMP_IS_MODULO=1`` the table repeats cyclically, the value
+  at ``_MAX`` followed at once by the value at ``_MIN`` (function manual K3, 4.4.2.2): the
+  position is taken modulo ``_MAX - _MIN`` from ``_MIN``.
 - Fanuc (1851 backlash and incremental pitch-error values per section, detection units):
-  offset = cumulative sum of the increments from the reference point, linear within a section.
+  offset = cumulative sum of the increments from the reference point, linear within a section;
+  a rotary axis's table (``3625`` movement per rotation) repeats every rotation.
 - Heidenhain (``.COM`` error table, ``MP710`` backlash [mm]): offset = -error.
 - Marlin / RepRapFirmware ``M425``, grblHAL ``$160-$162``: backlash only [mm].
 - CSV written by the product: the ``correction_*`` columns are the offsets.
@@ -34,7 +37,7 @@ models never import the pipeline; a test checks that both halves name the same c
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,10 +50,12 @@ LINUXCNC_MAX_LINES = 256
 
 @dataclass(frozen=True)
 class Compensation:
-    """What a controller adds to the commanded position [mm].
+    """What a controller adds to the commanded position [mm] (deg for a rotary axis).
 
     ``nominal_mm`` ascending table positions (may be empty), ``plus_mm`` / ``minus_mm`` the
-    offsets at those positions when moving + / -, ``backlash_mm`` the scalar reversal value.
+    offsets at those positions when moving + / -, ``backlash_mm`` the scalar reversal value,
+    ``period_mm`` the range after which a modulo table repeats (None: the end values are held
+    outside the table).
     """
 
     nominal_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -58,10 +63,19 @@ class Compensation:
     minus_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     backlash_mm: float = 0.0
     source: str = ""
+    period_mm: float | None = None
+
+    def table_position_mm(self, position_mm) -> np.ndarray:
+        """Where in the table the controller looks up ``position_mm``: the position itself, or
+        for a modulo table ``nominal_0 + (position - nominal_0) mod period``."""
+        x = np.asarray(position_mm, float)
+        if self.period_mm is None or not len(self.nominal_mm):
+            return x
+        return self.nominal_mm[0] + np.mod(x - self.nominal_mm[0], self.period_mm)
 
     def offset_mm(self, position_mm, direction) -> np.ndarray:
         """Offset [mm] added to the commanded ``position_mm`` moving in ``direction`` (+1/-1)."""
-        x = np.asarray(position_mm, float)
+        x = self.table_position_mm(position_mm)
         d = np.broadcast_to(np.asarray(direction, float), x.shape)
         out = np.where(d > 0, self.backlash_mm / 2, -self.backlash_mm / 2)
         if len(self.nominal_mm):
@@ -84,15 +98,15 @@ class Compensation:
 
 def flipped(comp: Compensation) -> Compensation:
     """The same compensation with every sign reversed (what a sign mistake does)."""
-    return Compensation(comp.nominal_mm, -comp.plus_mm, -comp.minus_mm, -comp.backlash_mm,
-                        comp.source + " (flipped)")
+    return replace(table_flipped(comp), backlash_mm=-comp.backlash_mm,
+                   source=comp.source + " (flipped)")
 
 
 def table_flipped(comp: Compensation) -> Compensation:
     """The same compensation with the table's sign reversed and the backlash kept: a table
     file read with the other sign convention (``error`` <-> ``correction``)."""
-    return Compensation(comp.nominal_mm, -comp.plus_mm, -comp.minus_mm, comp.backlash_mm,
-                        comp.source + " (table sign reversed)")
+    return replace(comp, plus_mm=-comp.plus_mm, minus_mm=-comp.minus_mm,
+                   source=comp.source + " (table sign reversed)")
 
 
 # --------------------------------------------------------------------------- parsers
@@ -165,7 +179,14 @@ _EEC = re.compile(
 
 
 def siemens(eec_path, md_path=None) -> Compensation:
-    """SINUMERIK EEC table (``%_N_AX_EEC_INI``) and/or ``MD32450 BACKLASH``."""
+    """SINUMERIK EEC table (``%_N_AX_EEC_INI``) and/or ``MD32450 BACKLASH``.
+
+    A table with ``$AA_ENC_COMP_IS_MODULO[0,AXn]=1`` repeats cyclically: the value at ``_MAX``
+    is followed at once by the value at ``_MIN`` (function manual K3, 6FC5397-1BP40-3BA1, 03/2013,
+    4.4.2.2), so positions are looked up modulo ``_MAX - _MIN`` from ``_MIN`` (the table's range
+    taken as the axis's modulo range) and a value at ``_MAX`` that differs from the one at
+    ``_MIN`` is a jump, as on the control.
+    """
     backlash = 0.0 if md_path is None else _last_setting(
         md_path, r"\$MA_BACKLASH\[\d+,\w+\]\s*=\s*(\S+)", "MD32450 BACKLASH")
     if eec_path is None:
@@ -183,36 +204,44 @@ def siemens(eec_path, md_path=None) -> Compensation:
     for kind in ("_STEP", "_MIN", "_MAX"):
         if kind not in meta:
             raise InputError(f"missing $AA_ENC_COMP{kind}", file=eec_path)
-    if meta.get("_IS_MODULO", 0):
-        raise InputError("modulo EEC tables are not modelled", file=eec_path)
+    if meta.get("_IS_MODULO", 0) and not meta["_MAX"] > meta["_MIN"]:
+        raise InputError("a modulo EEC table needs $AA_ENC_COMP_MAX > $AA_ENC_COMP_MIN",
+                         file=eec_path)
     n = round((meta["_MAX"] - meta["_MIN"]) / meta["_STEP"]) + 1
     if sorted(values) != list(range(n)):
         raise InputError(f"expected compensation values 0..{n - 1} from _MIN, _MAX and _STEP, "
                          f"got {len(values)}", file=eec_path)
     nominal = meta["_MIN"] + meta["_STEP"] * np.arange(n)
     error = np.array([values[i] for i in range(n)])
+    period = nominal[-1] - nominal[0] if meta.get("_IS_MODULO", 0) else None
     # the EEC value is the error: the control takes it off the position
-    return Compensation(nominal, -error, -error, backlash, "siemens EEC")
+    return Compensation(nominal, -error, -error, backlash, "siemens EEC", period)
 
 
 def fanuc(path) -> Compensation:
-    """Fanuc parameter sheet: 1851 backlash, 3620-3624 and incremental pitch-error values."""
-    params, pitch, unit_um, reference = {}, {}, None, None
+    """Fanuc parameter sheet: 1851 backlash, 3620-3625 and incremental pitch-error values.
+
+    The detection unit and the reference position are in ``um`` / ``mm`` (linear axis) or
+    ``deg`` (rotary axis). With 3625 (movement per rotation, rotary-axis type) the table starts
+    at the reference position (3621 = 3620), spans one rotation ((3622 - 3620) x 3624 = 3625)
+    and repeats every rotation (0i-PB parameter manual B-63980EN, example 2).
+    """
+    params, pitch, unit, reference = {}, {}, None, None
     for row, line in enumerate(file_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
         if m := re.fullmatch(r"(\d{4})\s+\w+\s*=\s*(\S+)", line):
             params[int(m[1])] = finite_number(m[2], path, row, f"parameter {m[1]}")
         elif m := re.fullmatch(r"PITCH\s+(\d+)\s*=\s*(\S+)", line):
             pitch[int(m[1])] = finite_number(m[2], path, row, f"pitch error point {m[1]}")
-        elif m := re.fullmatch(r"DETECTION UNIT\s*=\s*(\S+)\s*um", line):
-            unit_um = finite_number(m[1], path, row, "detection unit")
-        elif m := re.fullmatch(r"REFERENCE POSITION\s*=\s*(\S+)\s*mm", line):
+        elif m := re.fullmatch(r"DETECTION UNIT\s*=\s*(\S+)\s*(um|deg)", line):
+            unit = finite_number(m[1], path, row, "detection unit") / (1000.0 if m[2] == "um"
+                                                                        else 1.0)
+        elif m := re.fullmatch(r"REFERENCE POSITION\s*=\s*(\S+)\s*(?:mm|deg)", line):
             reference = finite_number(m[1], path, row, "reference position")
-    if unit_um is None or reference is None:
-        raise InputError("missing 'DETECTION UNIT = ... um' or 'REFERENCE POSITION = ... mm'",
-                         file=path)
-    unit_mm = unit_um / 1000.0
-    backlash = params.get(1851, 0.0) * unit_mm
+    if unit is None or reference is None:
+        raise InputError("missing 'DETECTION UNIT = ... um|deg' or 'REFERENCE POSITION = ... "
+                         "mm|deg'", file=path)
+    backlash = params.get(1851, 0.0) * unit
     if not pitch:
         return Compensation(backlash_mm=backlash, source="fanuc 1851")
     missing = [p for p in (3620, 3621, 3622, 3623, 3624) if p not in params]
@@ -223,12 +252,23 @@ def fanuc(path) -> Compensation:
     if sorted(pitch) != list(points) or not low <= ref <= high:
         raise InputError(f"expected pitch error values for points {low}..{high} around the "
                          f"reference point {ref}", file=path)
-    increment = np.array([pitch[p] for p in points]) * params[3623] * unit_mm
+    period = _fanuc_rotation(params, path) * unit if params.get(3625) else None
+    increment = np.array([pitch[p] for p in points]) * params[3623] * unit
     # the value of point N is output over the section from point N-1 to N; 0 at the reference
     cumulative = np.cumsum(np.r_[0.0, increment[1:]])
     cumulative -= cumulative[ref - low]
-    nominal = reference + (points - ref) * params[3624] * unit_mm
-    return Compensation(nominal, cumulative, cumulative, backlash, "fanuc pitch error")
+    nominal = reference + (points - ref) * params[3624] * unit
+    return Compensation(nominal, cumulative, cumulative, backlash, "fanuc pitch error", period)
+
+
+def _fanuc_rotation(params: dict, path) -> float:
+    """3625, the movement per rotation [detection units] of a rotary-axis type table, checked
+    against the table's layout (it starts at the reference and spans one rotation)."""
+    ref, low, high, interval, rotation = (params[p] for p in (3620, 3621, 3622, 3624, 3625))
+    if low != ref or not np.isclose((high - ref) * interval, rotation):
+        raise InputError(f"3625 = {rotation:g}: a rotary-axis table needs 3621 = 3620 and "
+                         "(3622 - 3620) x 3624 = 3625", file=path)
+    return float(rotation)
 
 
 def heidenhain(com_path, mp_path=None) -> Compensation:

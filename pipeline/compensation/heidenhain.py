@@ -11,33 +11,48 @@ travel is too long); one table for both directions, so it holds the bidirectiona
 Not confirmed: the column layout of the ``.COM`` file written here (``NR position error``
 lines between a ``BEGIN``/``[END]`` frame: check it against the control's table editor before
 loading), its spacing rules on your control, and the sign of the ``.COM`` values.
+
+Rotary axes: positions, values and MP710 in degrees. The frame line names the unit: ``MM`` for
+a linear axis, ``DEG`` for a rotary one (**not confirmed**: the public technical manuals show
+the ``.COM`` columns, ``AXISPOS`` and the axis's column on the TNC 620 / MANUALplus 620
+generation, but no unit keyword for a rotary axis's table; the file says so). A rotary axis
+measured over a whole turn (``common.full_turn``) gets a table from its start to start +
+360 deg with the same value at both ends; whether the control wraps the table is not confirmed
+(the twin's model holds the end values outside it).
 """
 
 from __future__ import annotations
 
 from features.readings.fileio import write_text
-from pipeline.compensation.common import AXIS_INDEX, header, reference_position, table_sign, units
-from pipeline.compensation.profile import grid, resample
+from pipeline.compensation.common import (
+    AXIS_INDEX,
+    error_table,
+    header,
+    reference_position,
+    table_sign,
+    units,
+)
 
 MAX_POINTS = 256
+ROTARY_UNIT = "unit keyword DEG of a rotary axis's .COM table (a linear axis's is MM)"
 SIGN_TEXT = {"error": "error (measured - nominal)",
              "correction": "correction (nominal - measured, the site's sign convention)"}
 
 
 def write(profile, out_dir, options) -> dict:
-    points = grid(profile.target, options.spacing_mm, MAX_POINTS)
-    error, interp_error = resample(profile.target, profile.position_error, points)
+    points, error, interp_error, _ = error_table(profile, options.spacing_mm, MAX_POINTS)
     ref = reference_position(points, options.reference_mm)
     factor, sign = table_sign("error", options)
     error = factor * (error - error[points == ref][0]) / profile.scale
-    unconfirmed = [".COM column layout", ".COM spacing rules", "sign of the .COM values (error)"]
-    a = profile.axis
     pos, dev = units(profile)
+    unconfirmed = [".COM column layout", ".COM spacing rules", "sign of the .COM values (error)",
+                   *([ROTARY_UNIT] if pos == "deg" else [])]
+    a = profile.axis
     head = header(profile, "Heidenhain TNC", ";", [
         (f"{a} = F({a}): {SIGN_TEXT[sign]} [{pos}], 0 at {ref:g} {pos}; {len(points)} points; "
         f"interpolation error at the measured targets {interp_error:.4f} {dev}"),
         *(f"NOT CONFIRMED: {u}" for u in unconfirmed)])
-    body = [f"BEGIN {profile.stem}.COM MM", f"NR    {a}-POS           {a}-ERROR"]
+    body = [f"BEGIN {profile.stem}.COM {pos.upper()}", f"NR    {a}-POS           {a}-ERROR"]
     body += [f"{i:<5d} {x:+.4f} {v:+.5f}" for i, (x, v) in enumerate(zip(points, error))]
     body.append("[END]")
     com = write_text(out_dir / f"{profile.stem}.COM", head + "\n".join(body) + "\n")
