@@ -5,16 +5,27 @@ every table controller on it."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from features import iso230
+from features.readings import read_readings
 from models.physics.axis import play
 from models.physics.campaign import load_config, simulate
 from pipeline.cli import main
+from pipeline.compensation import CONTROLLERS, read
+from pipeline.compensation.common import Options
+from pipeline.compensation.profile import measured_profiles
 
 pytestmark = pytest.mark.filterwarnings("ignore::features.readings.errors.BacklashWarning")
+
+
+def write_files(profile, name: str, folder: Path) -> dict:
+    folder.mkdir(parents=True, exist_ok=True)
+    return CONTROLLERS[name].writer(profile, folder, Options())["files"]
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +99,7 @@ def twin_dir(tmp_path_factory):
     return out
 
 
-@pytest.mark.parametrize("controller", ["linuxcnc", "csv", "siemens", "heidenhain"])
+@pytest.mark.parametrize("controller", ["linuxcnc", "csv", "siemens", "heidenhain", "fanuc"])
 def test_closed_loop_on_the_rotary_table(twin_dir, tmp_path, capsys, controller):
     """Every table controller's file, read back as the controller applies it (offsets in
     degrees), takes the worm's lost motion and the eccentricity out of the re-measured table."""
@@ -98,3 +109,52 @@ def test_closed_loop_on_the_rotary_table(twin_dir, tmp_path, capsys, controller)
     assert check["passed"] and check["axis"] == "C"
     assert check["before"]["B"] > 9 and check["before"]["E"] > 15  # arcsec
     assert check["ratio_B"] <= 0.15 and check["ratio_E"] <= 0.1
+
+
+# --------------------------------------------------------------------------- recalibration
+@pytest.fixture(scope="module")
+def one_visit():
+    return load_config({"fleet": {"visits": 1}}, preset="rotary")
+
+
+@pytest.mark.parametrize("controller", ["linuxcnc", "siemens", "heidenhain", "fanuc"])
+def test_recalibration_of_the_rotary_table(one_visit, tmp_path, capsys, controller):
+    """The table measured with a half-strength file active: the new file is the active one
+    plus the residual, the raw test's full table up to the play, the noise and (Fanuc) the
+    0.001 deg detection unit; --verify re-measures with the active file and with the new one."""
+    from pipeline.workflows.simulate import simulate as simulate_result
+
+    raw = simulate_result(one_visit, seed=2)
+    raw.write(tmp_path / "raw")
+    p = measured_profiles(read_readings(tmp_path / "raw" / "readings.csv"))[0]
+    half = write_files(replace(p, mean_up=p.mean_up / 2, mean_down=p.mean_down / 2),
+                       controller, tmp_path / "half")
+    active = read(controller, half)
+    simulate_result(one_visit, seed=2, compensation={(p.machine_id, p.axis): active}).write(
+        tmp_path / "with_half")
+    argv = ["compensate", str(tmp_path / "with_half" / "readings.csv"), "--controller",
+            controller, "--verify", "--json", "--out", str(tmp_path / "out")]
+    for path in half.values():
+        argv += ["--active", str(path)]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out)
+    (check,) = result["verify"]
+    assert check["before"]["B"] > 4 and check["before"]["E"] > 8  # arcsec: half left
+    assert check["passed"] and check["ratio_B"] < 0.3 and check["ratio_E"] < 0.35
+    new = read(controller, {r: Path(f) for r, f in result["files"][0]["files"].items()
+                            if r != "changes"})
+    full = read(controller, write_files(p, controller, tmp_path / "full"))
+    tolerance_arcsec = 4.0 if controller == "fanuc" else 1.0
+    for d in (1, -1):
+        gap = 3600 * (new.offset_mm(p.target, d) - full.offset_mm(p.target, d))
+        assert np.max(np.abs(gap - np.median(gap))) < tolerance_arcsec
+
+
+def test_an_active_table_in_mm_is_refused_for_a_rotary_axis(twin_dir, tmp_path, capsys):
+    table = tmp_path / "T.COM"
+    table.write_text("BEGIN T.COM MM\nNR C-POS C-ERROR\n0 +0.0000 +0.00000\n[END]\n")
+    assert main(["compensate", str(twin_dir / "readings.csv"), "--controller", "heidenhain",
+                 "--active", str(table), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("a table in MM; expected DEG for axis C") and "\n" not in err
+    assert not (tmp_path / "out").exists()

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.compensation import CONTROLLERS, read
 from pipeline.compensation.common import AXIS_INDEX, in_units
@@ -66,7 +67,7 @@ def read_active(paths, controller: str, profile, options):
     texts = {path: _text(path) for path in paths}
     files = _roles(texts, controller)
     _check_axis(texts, controller, profile.axis)
-    _check_unit(texts, controller, options)
+    _check_unit(texts, controller, profile.axis, options)
     record = CONTROLLERS[controller]
     for role in dict(record.recognise):
         if role not in files:
@@ -164,21 +165,36 @@ def _axis(m: re.Match) -> str:
     return AXES.get(index, f"number {index}")
 
 
-def _check_unit(texts: dict, controller: str, options) -> None:
-    """Units a file states: Fanuc's detection unit must be the one written (``fanuc_unit_um``),
-    a Heidenhain table must be in mm."""
-    checks = {"fanuc": (r"^\s*DETECTION UNIT\s*=\s*(\S+)\s*um",
-                        lambda unit: np.isclose(float(unit), options.fanuc_unit_um),
-                        ("detection unit {} um; the new sheet is written in "
-                        f"{options.fanuc_unit_um:g} um (--fanuc-unit-um)")),
-              "heidenhain": (r"^\s*BEGIN\s+\S+\.COM\s+(\w+)", lambda unit: unit.upper() == "MM",
-                             "a table in {}; expected MM")}
+def _check_unit(texts: dict, controller: str, axis: str, options) -> None:
+    """Units a file states: Fanuc's detection unit must be the one written (``fanuc_unit_um``
+    thousandths of the position unit: um, or 0.001 deg on a rotary axis), a Heidenhain table
+    must be in the axis's position unit (MM, DEG on a rotary axis)."""
+    rotary = schema.is_rotary(axis)
+    detection = (options.fanuc_unit_um / 1000.0, "deg") if rotary else (options.fanuc_unit_um,
+                                                                         "um")
+    position = "DEG" if rotary else "MM"
+    checks = {"fanuc": (r"^\s*DETECTION UNIT\s*=\s*(\S+\s*\w+)",
+                        lambda unit: _same_unit(unit, *detection),
+                        (f"detection unit {{}}; the new sheet is written in {detection[0]:g} "
+                         f"{detection[1]} (--fanuc-unit-um)")),
+              "heidenhain": (r"^\s*BEGIN\s+\S+\.COM\s+(\w+)",
+                             lambda unit: unit.upper() == position,
+                             f"a table in {{}}; expected {position} for axis {axis}")}
     if controller not in checks:
         return
     pattern, same, message = checks[controller]
     for path, text in texts.items():
         if (m := re.search(pattern, text, re.MULTILINE)) and not same(m[1]):
             raise InputError(message.format(m[1]), file=path, parameter="active")
+
+
+def _same_unit(text: str, value: float, unit: str) -> bool:
+    """Whether ``text`` (``"1 um"``, ``"0.001 deg"``) states ``value`` in ``unit``."""
+    number, _, stated = text.partition(" ")
+    try:
+        return stated.strip() == unit and bool(np.isclose(float(number), value))
+    except ValueError:
+        return False
 
 
 def _check_cover(comp, profile, path) -> None:
