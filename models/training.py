@@ -42,9 +42,12 @@ class Fit:
 def _known_axes(estimator) -> list[dict]:
     """model.json's list of the machine axes a per-axis model knows: visits since the wear
     clock restarted, where the hours count from, the axis's noise and how much it borrowed
-    from the fleet."""
+    from the fleet, and the unit of its backlash (``um``, ``arcsec`` for a rotary axis)."""
+    from features.readings.schema import deviation_unit
+
     known = registry.knows_axes(estimator)
-    return [{"machine_id": m, "axis": a, "visits": int(estimator.axis_visits_[i]),
+    return [{"machine_id": m, "axis": a, "unit": deviation_unit(a),
+             "visits": int(estimator.axis_visits_[i]),
              "hours_origin": float(estimator.hours_origin_[i]),
              "noise_um": round(float(estimator.axis_sigma_um_[i]), 4),
              "borrowed": round(float(estimator.shrinkage_[i]), 3)}

@@ -13,6 +13,10 @@ POSITION = "target"
 HOURS = "operating_hours"
 GROUPS = AXIS_KEYS  # the columns that name a machine axis on a fleet
 AXIS_INDEX = "__axis__"  # row -> machine axis index in a fleet's local frame
+# the wear map's own record of the condition terms: input -> the effect whose unit-amplitude
+# contribution is the term's column
+CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
+              "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
 
 
 def spline_basis(x, lo: float, hi: float, n_control: int, degree: int = 3) -> np.ndarray:

@@ -17,6 +17,13 @@ every axis's visits of rank k), and what the held-out visits missed beyond the m
 variance (``misfit_um_``: the shape no basis follows) widens every interval. A plan for an
 axis the model does not know is forecast from the fleet's distribution, with its spread of
 maps and of per-target deviations in the interval.
+
+Each axis keeps its units: a rotary axis's backlash is in arcsec along a travel in deg, a
+linear axis's in um along mm. A fleet that has both is pooled unit by unit (``UnitGroups``):
+the fit above runs once on the rotary axes and once on the linear ones, so the fleet
+distribution of one unit never informs the other, and a unit with a single axis is fitted as
+that axis alone. A plan's rows go to the model of their axis's unit (an unknown rotary axis is
+forecast from the rotary axes' distribution).
 """
 
 from __future__ import annotations
@@ -25,12 +32,21 @@ import numpy as np
 import pandas as pd
 from scipy.special import stdtrit
 
-from models.wear_basis import AXIS_INDEX, HOURS, POSITION, split_groups, target_basis
+from features.readings.schema import deviation_unit
+from models.wear_basis import (
+    AXIS_INDEX,
+    CONDITIONS,
+    GROUPS,
+    HOURS,
+    POSITION,
+    split_groups,
+    target_basis,
+)
 
 # the fitted state of a model that knows its machine axes (saved with the rest)
-FLEET_STATE = ("pooled_", "axes_", "axis_range_", "hours_origin_", "axis_visits_",
-               "axis_sigma_um_", "misfit_um_", "axis_knots_", "deviation_sd_", "axis_coef_",
-               "axis_covariance_", "prior_covariance_", "shrinkage_")
+FLEET_STATE = ("pooled_", "axes_", "axis_units_", "axis_range_", "hours_origin_",
+               "axis_visits_", "axis_sigma_um_", "misfit_um_", "axis_knots_", "deviation_sd_",
+               "axis_coef_", "axis_covariance_", "prior_covariance_", "shrinkage_")
 FLEET_ARRAYS = ("axis_coef_", "axis_covariance_", "prior_covariance_")
 
 
@@ -41,7 +57,6 @@ class FleetWearMap:
 
     def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
                    hours_origin: dict):
-        check_one_unit(self.axes_)
         axis = self._axis_index(labels)
         x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
         self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
@@ -262,20 +277,6 @@ class FleetWearMap:
         return pd.concat(maps, ignore_index=True)
 
 
-def check_one_unit(axes: list[tuple[str, str]]) -> None:
-    """A fleet model pools one unit: rotary axes (backlash in arcsec) and linear axes (um)
-    cannot share a distribution of wear maps; refused in one line naming both kinds."""
-    from features.readings.errors import InputError
-    from features.readings.schema import is_rotary
-
-    rotary = [f"{m} {a}" for m, a in axes if is_rotary(a)]
-    linear = [f"{m} {a}" for m, a in axes if not is_rotary(a)]
-    if rotary and linear:
-        raise InputError(f"the data mix rotary axes ({', '.join(rotary[:3])}: arcsec) and "
-                         f"linear axes ({', '.join(linear[:3])}: um); a fleet model pools one "
-                         "unit: train the rotary and the linear axes apart", parameter="data")
-
-
 def block_folds(blocks, n_folds: int) -> np.ndarray:
     """Fold of every visit block (n_axes, V): its rank within its axis modulo the folds, as
     ``visit_folds`` gives its rows."""
@@ -293,3 +294,103 @@ def visit_folds(local: pd.DataFrame, axis: np.ndarray, n_folds: int = 5):
     if rank.max() < 2:
         return np.arange(len(local)) % n_folds, False
     return rank % min(n_folds, rank.max() + 1), True
+
+
+# per-axis state of a model that knows its machine axes, in ``axes_`` order
+AXIS_SUMMARY = ("axis_visits_", "hours_origin_", "axis_sigma_um_", "shrinkage_", "axis_range_")
+# what a model of several units keeps beside its per-unit models (``unit_maps_``)
+UNIT_STATE = ("pooled_", "axes_", "axis_units_", "visit_hours_", *AXIS_SUMMARY,
+              "use_position_", "use_hours_", "conditions_", "used_features_", "can_forecast_")
+
+
+class UnitGroups:
+    """A fleet of rotary and linear axes (module docstring): one fitted model per unit
+    (``unit_maps_``: deviation unit -> model fitted on that unit's axes alone, by the same
+    ``fit``), and their per-axis state merged in ``axes_`` order."""
+
+    def _fit_units(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
+                   hours_origin: dict):
+        from sklearn.base import clone
+
+        units = row_units(labels)
+        self.unit_maps_ = {}
+        for unit in dict.fromkeys(self.axis_units_):
+            rows = units == unit
+            X = pd.concat([pd.DataFrame(labels[rows].tolist(), columns=list(GROUPS)),
+                           frame[rows].reset_index(drop=True)], axis=1)
+            self.unit_maps_[unit] = clone(self).fit(X, y[rows], hours_origin=hours_origin)
+        self._merge_units(hours_origin)
+        return self
+
+    def _merge_units(self, hours_origin: dict) -> None:
+        """The per-axis state of ``axes_`` from the unit models, and the inputs any of them
+        uses (a plan gives them all; each model reads its own)."""
+        models = self.unit_maps_.values()
+        per_axis = {}
+        for model in models:
+            summary = axis_summary(model, hours_origin)
+            for i, key in enumerate(model.axes_):
+                per_axis[key] = {name: values[i] for name, values in summary.items()}
+        for name in AXIS_SUMMARY:
+            setattr(self, name, [per_axis[key][name] for key in self.axes_])
+        self.use_position_ = any(m.use_position_ for m in models)
+        self.use_hours_ = any(m.use_hours_ for m in models)
+        self.can_forecast_ = all(m.can_forecast_ for m in models)
+        used = {c for m in models for c in m.used_features_}
+        self.conditions_ = [c for c in CONDITIONS if any(c in m.conditions_ for m in models)]
+        self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_) if c in used]
+
+    def _predict_units(self, X: pd.DataFrame, labels: np.ndarray, level):
+        """Every row from the model of its axis's unit: (mean, low, high)."""
+        units = row_units(labels)
+        out = np.zeros((3, len(X)))
+        for unit, model in self.unit_maps_.items():
+            rows = units == unit
+            if rows.any():
+                out[:, rows] = model.predict_interval(X[rows], level)
+        return out[0], out[1], out[2]
+
+    def _units_rate_map(self, positions_mm, level) -> pd.DataFrame:
+        """Every unit model's wear-rate maps (``wear_rate_map``), with the unit of each
+        (``um`` or ``arcsec`` per 1000 h)."""
+        maps = []
+        for unit, model in self.unit_maps_.items():
+            rate = model.wear_rate_map(positions_mm, level)
+            if "axis" not in rate:  # one axis alone
+                rate.insert(0, "axis", model.axes_[0][1])
+                rate.insert(0, "machine_id", model.axes_[0][0])
+            maps.append(rate.assign(unit=unit))
+        return pd.concat(maps, ignore_index=True)
+
+    def _check_units(self, labels: np.ndarray | None) -> None:
+        """Refuse rows of an axis whose unit (rotary: arcsec, linear: um) none of the model's
+        axes has: no fleet of that unit to forecast it from."""
+        from features.readings.errors import InputError
+
+        known = {deviation_unit(a) for _, a in (getattr(self, "axes_", None) or [])}
+        if labels is None or not known:
+            return
+        strange = sorted({(m, a) for m, a in labels if deviation_unit(a) not in known})
+        if strange:
+            names = ", ".join(f"{m} {a}" for m, a in strange[:3])
+            raise InputError(f"{names}: backlash in {deviation_unit(strange[0][1])}, but the "
+                             f"model knows only axes in {', '.join(sorted(known))}; train on "
+                             "axes of that kind", column="axis")
+
+
+def row_units(labels: np.ndarray) -> np.ndarray:
+    """Deviation unit (``um``, ``arcsec``) of every row's machine axis."""
+    return np.array([deviation_unit(a) for _, a in labels], dtype=object)
+
+
+def axis_summary(model, hours_origin: dict) -> dict[str, list]:
+    """``AXIS_SUMMARY`` of a fitted model over its ``axes_``: a fleet's own, or for one axis
+    alone its visits, where its hours count from, its noise [um or arcsec], nothing borrowed
+    and its travel."""
+    if model.pooled_:
+        return {name: list(getattr(model, name)) for name in AXIS_SUMMARY}
+    key = model.axes_[0]
+    return {"axis_visits_": [max(len(model.visit_hours_[0]), 1)],
+            "hours_origin_": [float(hours_origin.get(key, 0.0))],
+            "axis_sigma_um_": [model.sigma_um_], "shrinkage_": [0.0],
+            "axis_range_": [list(model.range_mm_)]}

@@ -24,7 +24,11 @@ every machine axis gets its own maps and condition terms, over its own travel (t
 mapped to 0..1 between its end targets) and its own wear clock, and the axes share strength by
 partial pooling (``models.pooling``): an axis with few visits borrows from the fleet's
 distribution of maps, an axis with many visits follows its own data. A plan for an axis the model
-does not know is forecast from that fleet distribution, with its wider interval.
+does not know is forecast from that fleet distribution, with its wider interval. Every axis keeps
+its units (``features.readings.schema.deviation_unit``: backlash in arcsec and positions in deg
+for a rotary axis, um and mm for a linear one; the names say um and mm): a fleet with both is
+pooled unit by unit (``models.wear_fleet.UnitGroups``), one model per unit inside the one
+estimator, and ``axis_units_`` says each axis's unit.
 
 A condition the caller cannot give (a plan without machine temperature) may be NaN: the term
 then takes its training mean and the interval widens by the term's training spread. Terms whose
@@ -44,27 +48,32 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 from scipy.special import stdtrit  # Student t quantile; scipy.stats costs a second to import
-from sklearn.base import BaseEstimator, RegressorMixin, _fit_context
+from sklearn.base import BaseEstimator, RegressorMixin, _fit_context, clone
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from features.readings.schema import deviation_unit
 from features.statistics import grouped_cv_sse, varies_only_between
-from models.wear_basis import GROUPS, HOURS, POSITION, spline_basis, split_groups, target_basis
+from models.wear_basis import (
+    CONDITIONS,
+    GROUPS,
+    HOURS,
+    POSITION,
+    spline_basis,
+    split_groups,
+    target_basis,
+)
 from models.wear_clock import epoch_lines, found_adjustments, latest_epoch, wear_epochs
-from models.wear_fleet import FLEET_ARRAYS, FLEET_STATE, FleetWearMap
+from models.wear_fleet import FLEET_ARRAYS, FLEET_STATE, UNIT_STATE, FleetWearMap, UnitGroups
 
 # the wear clock (``models.wear_clock``) is importable from here too
 __all__ = ["CONDITIONS", "FILE_NAME", "HOURS", "POSITION", "WearMap", "epoch_lines",
            "found_adjustments", "latest_epoch", "spline_basis", "target_basis", "wear_epochs"]
 
-# the wear map's own record of the condition terms: input -> the effect whose unit-amplitude
-# contribution is the term's column
-CONDITIONS = {"feed_mm_min": ("backlash_feed", "k_um_per_m_min"),
-              "machine_temp_c": ("backlash_temperature", "k_um_per_k")}
 FILE_NAME = "wear_map.json"
 
 
-class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
+class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
     """Backlash b0(x) + w(x) h + condition terms, smooth along the axis (module docstring).
 
     Parameters
@@ -143,11 +152,12 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
     # ---- fit ----------------------------------------------------------------------------
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y, hours_origin: dict | None = None):
-        """Fit on the inputs ``X`` and backlash ``y`` [um].
+        """Fit on the inputs ``X`` and backlash ``y`` [um; arcsec for a rotary axis].
 
         ``hours_origin`` maps (machine_id, axis) to the operating hours [h] at which that
         axis's wear clock restarts (an adjustment that left the hour counter running on);
-        the axis's hours count from there.
+        the axis's hours count from there. ``y`` is in each axis's unit (arcsec for a rotary
+        axis); rotary and linear axes are pooled apart (``models.wear_fleet.UnitGroups``).
         """
         labels, X = split_groups(X)
         names = (self._names(X, X.shape[1])
@@ -160,6 +170,10 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         self.axes_ = sorted({tuple(k) for k in labels}) if labels is not None else []
         self.pooled_ = len(self.axes_) > 1
         self.visit_hours_ = _visit_hours(frame, labels, self.axes_)
+        self.axis_units_ = [deviation_unit(a) for _, a in self.axes_]
+        vars(self).pop("unit_maps_", None)  # a refit of one unit
+        if len(set(self.axis_units_)) > 1:
+            return self._fit_units(frame, y, labels, hours_origin or {})
         if self.pooled_:
             return self._fit_fleet(frame, y, labels, hours_origin or {})
         return self._fit_axis(frame, y)
@@ -258,7 +272,7 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
 
     # ---- predict ------------------------------------------------------------------------
     def _predict_frame(self, X) -> pd.DataFrame:
-        check_is_fitted(self, "coef_")
+        _check_fitted(self)
         if isinstance(X, pd.DataFrame) and set(GROUPS) <= set(map(str, X.columns)):
             X = X.drop(columns=list(GROUPS))
         if isinstance(X, pd.DataFrame) and not hasattr(self, "feature_names_in_"):
@@ -289,7 +303,7 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         clock restarted; visits told apart by their hours), ascending: of machine axis ``key``
         = (machine_id, axis) when the model knows its axes, else of its one axis. Empty for
         an axis it does not know, or a model saved without them."""
-        check_is_fitted(self, "coef_")
+        _check_fitted(self)
         known = getattr(self, "visit_hours_", None) or []
         if key is not None and self.axes_:
             index = {tuple(k): i for i, k in enumerate(self.axes_)}.get(tuple(map(str, key)))
@@ -298,8 +312,12 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
 
     def chosen_params(self) -> dict:
         """The parameters cross-validation chose (the control points), to refit the same model
-        on other rows (a backtest) without choosing again."""
-        check_is_fitted(self, "coef_")
+        on other rows (a backtest) without choosing again; a model of rotary and linear axes
+        gives one only when both units chose the same (else each chooses again)."""
+        _check_fitted(self)
+        if hasattr(self, "unit_maps_"):
+            chosen = {m.n_control_ for m in self.unit_maps_.values()}
+            return {"n_control": chosen.pop()} if len(chosen) == 1 else {}
         return {"n_control": self.n_control_}
 
     def predict(self, X) -> np.ndarray:
@@ -309,16 +327,21 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         """Predicted backlash [um] and its interval (low, high) at ``level`` (default the
         estimator's): parameter covariance (on a fleet, the axis's posterior; the fleet's
         distribution for an axis the model does not know), plus the training spread of every
-        condition term whose input is missing (NaN)."""
-        labels, X = split_groups(X)
-        frame = self._predict_frame(X)
+        condition term whose input is missing (NaN). In each axis's unit (arcsec for a rotary
+        axis); an axis of a unit the model has no axis of is an ``InputError``."""
+        _check_fitted(self)
+        labels, rest = split_groups(X)
+        if getattr(self, "pooled_", False) and labels is None:
+            raise ValueError(f"the model knows {len(self.axes_)} machine axes: the inputs need "
+                             f"the columns {', '.join(GROUPS)}")
+        self._check_units(labels)
+        if hasattr(self, "unit_maps_"):
+            return self._predict_units(X, labels, level)
+        frame = self._predict_frame(rest)
         z = stdtrit(self.dof_, 0.5 + (level or self.level) / 2)
         if not getattr(self, "pooled_", False):
             mean, var = self._moments(frame, self.coef_, self.covariance_)
             return mean, mean - z * np.sqrt(var), mean + z * np.sqrt(var)
-        if labels is None:
-            raise ValueError(f"the model knows {len(self.axes_)} machine axes: the inputs need "
-                             f"the columns {', '.join(GROUPS)}")
         axis = self._axis_index(labels)
         local = self._local(frame, axis, labels)
         mean, var = np.zeros(len(frame)), np.zeros(len(frame))
@@ -354,13 +377,19 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         """The wear-rate map w(x) [um per 1000 h] with its interval, and b0(x) [um], at
         ``positions_mm`` (default 50 points over the training range); on a fleet one map per
         machine axis over its own travel (``positions_mm`` then in each axis's travel), with
-        ``machine_id`` and ``axis`` columns."""
-        check_is_fitted(self, "coef_")
+        ``machine_id`` and ``axis`` columns. A model that knows a rotary axis adds a ``unit``
+        column: its map is in arcsec per 1000 h along deg (the names say um and mm)."""
+        _check_fitted(self)
+        if hasattr(self, "unit_maps_"):
+            return self._units_rate_map(positions_mm, level)
         if not getattr(self, "pooled_", False):
             x = (np.linspace(*self.range_mm_, 50) if positions_mm is None
                  else np.asarray(positions_mm, float))
-            return self._rate_map(x, x, self.coef_, self.covariance_, level)
-        return self._fleet_rate_map(positions_mm, level)
+            rate = self._rate_map(x, x, self.coef_, self.covariance_, level)
+        else:
+            rate = self._fleet_rate_map(positions_mm, level)
+        rotary = set(getattr(self, "axis_units_", None) or []) == {"arcsec"}
+        return rate.assign(unit="arcsec") if rotary else rate
 
     def _rate_map(self, x, positions_mm, coef, cov, level) -> pd.DataFrame:
         basis = (self._basis(x, self.n_control_) if self.use_position_
@@ -382,39 +411,64 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         """Write ``wear_map.json`` (parameters and fitted state) into ``directory``."""
         from models.persistence import write_state
 
-        check_is_fitted(self, "coef_")
+        _check_fitted(self)
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         params = self.get_params()
         params["features"] = list(params["features"]) if params["features"] else None
-        state = {"params": params, **{name: _jsonable(getattr(self, name)) for name in _STATE},
-                 **{name: _jsonable(getattr(self, name)) for name in (*FLEET_STATE, *_OPTIONAL)
-                    if hasattr(self, name)}}
-        return write_state(directory / FILE_NAME, self, state)
+        return write_state(directory / FILE_NAME, self, {"params": params, **self._state()})
+
+    def _state(self) -> dict:
+        """The fitted state as JSON values; a model of rotary and linear axes nests each
+        unit's model's under ``unit_maps_``."""
+        if hasattr(self, "unit_maps_"):
+            return {**{name: _jsonable(getattr(self, name)) for name in UNIT_STATE},
+                    "unit_maps_": {u: m._state() for u, m in self.unit_maps_.items()}}
+        return {**{name: _jsonable(getattr(self, name)) for name in _STATE},
+                **{name: _jsonable(getattr(self, name)) for name in (*FLEET_STATE, *_OPTIONAL)
+                   if hasattr(self, name)}}
 
     @classmethod
     def load(cls, directory) -> WearMap:
         """Read ``save``'s file; every problem is an ``InputError`` naming it."""
         from features.readings.errors import InputError
-        from models.persistence import checked_params, read_state, restore_inputs
+        from models.persistence import checked_params, read_state
 
         path = Path(directory) / FILE_NAME
-        state = read_state(path, ("params", *_STATE))
+        state = read_state(path, ("params",))
         try:
             params = dict(state["params"])
             if params.get("features") is not None:
                 params["features"] = tuple(params["features"])
             model = checked_params(cls(**params), path)
-            for name in _STATE:
-                setattr(model, name, _restore(name, state[name]))
-            for name in (*FLEET_STATE, *_OPTIONAL):
-                if name in state:
-                    setattr(model, name, _restore(name, state[name]))
+            model._restore_state(state, path)
         except (TypeError, ValueError) as err:
             if isinstance(err, InputError):
                 raise
             raise InputError(f"broken {FILE_NAME}: {err}", file=path) from None
-        return restore_inputs(model, state)
+        return model
+
+    def _restore_state(self, state: dict, path) -> WearMap:
+        """Set ``_state``'s attributes (and the inputs ``state`` names) on this model."""
+        from features.readings.errors import InputError
+        from models.persistence import restore_inputs
+
+        units = state.get("unit_maps_")
+        needed = (*UNIT_STATE, "unit_maps_") if units is not None else _STATE
+        missing = [name for name in needed if name not in state]
+        if missing:
+            raise InputError(f"broken {FILE_NAME}: lacks the key {missing[0]!r}", file=path)
+        for name in (*needed, *FLEET_STATE, *_OPTIONAL):
+            if name in state and name != "unit_maps_":
+                setattr(self, name, _restore(name, state[name]))
+        if units is not None:
+            if (not isinstance(units, dict) or not set(units) <= {"um", "arcsec"}
+                    or not all(isinstance(s, dict) and "unit_maps_" not in s
+                               for s in units.values())):
+                raise ValueError("unit_maps_ must map 'um' and 'arcsec' to one unit's model")
+            self.unit_maps_ = {u: clone(self)._restore_state({**s, **_inputs(state)}, path)
+                               for u, s in units.items()}
+        return restore_inputs(self, state)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
@@ -422,6 +476,17 @@ class WearMap(FleetWearMap, RegressorMixin, BaseEstimator):
         tags.regressor_tags.poor_score = True
         tags.input_tags.allow_nan = False
         return tags
+
+
+def _check_fitted(model) -> None:
+    check_is_fitted(model, ("coef_", "unit_maps_"), all_or_any=any)
+
+
+def _inputs(state: dict) -> dict:
+    """The fitted inputs ``write_state`` put beside the state (a unit model shares them)."""
+    from models.persistence import INPUT_KEYS
+
+    return {key: state[key] for key in INPUT_KEYS}
 
 
 _STATE = ("use_position_", "use_hours_", "conditions_", "condition_means_", "condition_sd_",

@@ -17,6 +17,9 @@ Five machines with two linear axes each, a maintenance visit every quarter:
 
 ``fleet()`` returns the readings (docs/data-contract.md columns), the true lost motion per
 machine, axis, visit and target (``truth``), and what each axis is (``axes``).
+``fleet(rotary=True)`` gives the same machines two rotary axes instead (A and C: targets in
+deg, lost motion and deviations in arcsec), with sizes of their own (``ROTARY``) and their own
+random draws.
 """
 
 from __future__ import annotations
@@ -32,6 +35,35 @@ CYCLES = 5
 READING_SD_UM = 0.25       # laser reading noise
 VISIT_SD_UM = 0.06         # day-to-day variation of the lost motion itself
 N_TARGETS = 11
+
+
+@dataclass(frozen=True)
+class Kind:
+    """The sizes of one kind of axis, in its units (um and mm, or arcsec and deg)."""
+
+    names: tuple[str, ...]
+    seed: int
+    travels: tuple[float, ...]
+    centred: bool             # targets symmetric about 0 (a tilting axis) or from 0
+    level: tuple[float, float]
+    level_slope: tuple[float, float]
+    base_rate: tuple[float, float]     # per 1000 h
+    zone_rate: tuple[float, float]     # per 1000 h
+    reading_sd: float
+    visit_sd: float
+    setup_sd: float
+    lead: float               # per 1000 position units
+    thermal: float            # per 1000 position units and K
+    periodic: float
+
+
+LINEAR = Kind(("X", "Y"), 70_000, (400.0, 500.0, 630.0, 800.0), False, (1.2, 3.5),
+              (-0.4, 0.6), (0.15, 0.4), (0.5, 1.4), READING_SD_UM, VISIT_SD_UM, 0.3,
+              9.0, 11.0, 0.8)
+# a worm-gear rotary table and a tilting axis: lost motion of tens of arcsec, a worm-wheel
+# periodic error, an encoder read to about 2 arcsec
+ROTARY = Kind(("A", "C"), 80_000, (120.0, 180.0, 240.0, 360.0), True, (12.0, 35.0),
+              (-4.0, 6.0), (1.5, 4.0), (5.0, 14.0), 2.0, 0.6, 3.0, 20.0, 2.0, 6.0)
 
 
 @dataclass(frozen=True)
@@ -70,6 +102,7 @@ class Axis:
     zone_centre: float
     zone_half_width: float
     level_after_adjust_um: float
+    kind: Kind = LINEAR
 
     def rate(self, x):
         """Wear rate [um per 1000 h] along the axis."""
@@ -85,20 +118,21 @@ class Axis:
         return self.level(x, adjusted) + self.rate(x) * hours_since / 1000.0
 
 
-def make_axes(rng: np.random.Generator) -> list[Axis]:
+def make_axes(rng: np.random.Generator, kind: Kind = LINEAR) -> list[Axis]:
     axes = []
     for machine in MACHINES:
-        for name in ("X", "Y"):
-            travel = float(rng.choice([400.0, 500.0, 630.0, 800.0]))
+        for name in kind.names:
+            travel = float(rng.choice(list(kind.travels)))
             t = np.linspace(0.0, travel, N_TARGETS)
             t[1:-1] += rng.uniform(-0.25, 0.25, N_TARGETS - 2) * travel / (N_TARGETS - 1)
-            level = rng.uniform(1.2, 3.5)
+            start = -travel / 2 if kind.centred else 0.0
+            level = rng.uniform(*kind.level)
             axes.append(Axis(
-                machine, name, np.round(t, 2), level, rng.uniform(-0.4, 0.6),
-                base_rate=rng.uniform(0.15, 0.4), zone_rate=rng.uniform(0.5, 1.4),
-                zone_centre=rng.uniform(0.3, 0.7) * travel,
+                machine, name, np.round(t + start, 2), level, rng.uniform(*kind.level_slope),
+                base_rate=rng.uniform(*kind.base_rate), zone_rate=rng.uniform(*kind.zone_rate),
+                zone_centre=start + rng.uniform(0.3, 0.7) * travel,
                 zone_half_width=rng.uniform(0.2, 0.35) * travel,
-                level_after_adjust_um=level * rng.uniform(0.5, 0.8)))
+                level_after_adjust_um=level * rng.uniform(0.5, 0.8), kind=kind))
     return axes
 
 
@@ -114,10 +148,11 @@ def _cycle(method: str, n: int):
                 yield (i, -1, c, True)
 
 
-def fleet(seed: int = 0, visits: int = 8):
-    """Readings, truth and axes of the fleet (module docstring)."""
-    rng = np.random.default_rng(70_000 + seed)
-    axes = make_axes(rng)
+def fleet(seed: int = 0, visits: int = 8, rotary: bool = False):
+    """Readings, truth and axes of the fleet (module docstring); ``rotary``: its rotary axes."""
+    kind = ROTARY if rotary else LINEAR
+    rng = np.random.default_rng(kind.seed + seed)
+    axes = make_axes(rng, kind)
     rows, truth = [], []
     for ax in axes:
         m = ax.machine
@@ -129,7 +164,7 @@ def fleet(seed: int = 0, visits: int = 8):
             if adjusted and hours_at_adjust is None:  # adjusted a few weeks before the visit
                 hours_at_adjust = hours - m.hours_per_month * rng.uniform(0.5, 1.5)
             since = hours - hours_at_adjust if adjusted else hours
-            true = ax.lost_motion(ax.targets, since, adjusted) + rng.normal(0, VISIT_SD_UM)
+            true = ax.lost_motion(ax.targets, since, adjusted) + rng.normal(0, kind.visit_sd)
             truth += [{"machine_id": m.machine_id, "axis": ax.axis, "visit": str(visit),
                        "target": float(x), "backlash_true_um": float(b),
                        "operating_hours": hours, "hours_since_adjustment": since}
@@ -145,13 +180,13 @@ def fleet(seed: int = 0, visits: int = 8):
 
 def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start, hours,
           feed, temp) -> list[dict]:
-    m = ax.machine
+    m, k = ax.machine, ax.kind
     t = ax.targets
     length = t[-1] - t[0]
     # geometric error common to both directions: a lead error and thermal growth of the screw
-    geometric = 9.0 * (t - t[0]) / 1000.0 + 11.0 * (temp - 20.0) * (t - t[0]) / 1000.0 \
-        + 0.8 * np.sin(2 * np.pi * (t - t[0]) / (0.37 * length))
-    offset = rng.normal(0, 0.3)  # setup offset of the laser per test
+    geometric = k.lead * (t - t[0]) / 1000.0 + k.thermal * (temp - 20.0) * (t - t[0]) / 1000.0 \
+        + k.periodic * np.sin(2 * np.pi * (t - t[0]) / (0.37 * length))
+    offset = rng.normal(0, k.setup_sd)  # setup offset of the laser per test
     test_id = f"{m.machine_id}{ax.axis}-v{visit}-{method[:3]}"
     out = []
     for i, sign, cycle, after_reversal in _cycle(method, len(t)):
@@ -160,7 +195,7 @@ def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start
         out.append({
             "machine_id": m.machine_id, "axis": ax.axis, "test_id": test_id, "method": method,
             "target": float(t[i]), "direction": "+" if sign > 0 else "-", "cycle": cycle,
-            "deviation_um": geometric[i] + offset + play + rng.normal(0, READING_SD_UM),
+            "deviation_um": geometric[i] + offset + play + rng.normal(0, k.reading_sd),
             "visit": str(visit), "repeat": 1, "started_at": start.isoformat(),
             "feed_mm_min": feed, "dwell_s": 2.0, "machine_temp_c": temp,
             "ambient_temp_c": 20.4 + rng.normal(0, 0.1), "pressure_hpa": 1012.0,
@@ -168,10 +203,10 @@ def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start
     return out
 
 
-def plan_and_truth(seed: int = 0, visits: int = 8):
+def plan_and_truth(seed: int = 0, visits: int = 8, rotary: bool = False):
     """Training readings (every visit but the last), the plan of the last visit (targets and
-    conditions, no deviations) and its true lost motion."""
-    readings, truth, axes = fleet(seed, visits)
+    conditions, no deviations) and its true lost motion (``rotary``: of the rotary axes)."""
+    readings, truth, axes = fleet(seed, visits, rotary)
     last = readings["visit"] == str(visits)
     keys = ["machine_id", "axis", "target", "operating_hours", "feed_mm_min", "dwell_s",
             "machine_temp_c"]

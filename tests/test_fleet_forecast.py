@@ -192,13 +192,3 @@ def test_pooling_recovers_known_variance_components():
     # posterior than a well-measured axis
     assert fitted.covariances[0][1, 1] > 3 * fitted.covariances[1][1, 1]
 
-
-def test_rotary_and_linear_axes_are_not_pooled_together(tmp_path, capsys):
-    readings, _, _, _ = plan_and_truth(0)
-    turned = readings.assign(axis=readings["axis"].replace({"Y": "C"}))
-    turned.to_csv(tmp_path / "mixed.csv", index=False)
-    code = main(["train", str(tmp_path / "mixed.csv"), "--out", str(tmp_path / "model")])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1
-    assert "rotary axes (M1 C" in err[0] and "linear axes (M1 X" in err[0]
-    assert not (tmp_path / "model").exists()

@@ -43,7 +43,8 @@ class PredictionResult(Result):
     predictions : DataFrame
         The point's keys (or the plan's columns) and ``backlash_um``; a predictor with an
         interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
-        predictions are clipped at 0 (backlash is a magnitude).
+        predictions are clipped at 0 (backlash is a magnitude). With a rotary axis among the
+        points a ``unit`` column says each row's unit (``arcsec`` for a rotary axis).
     model : str
         Registry name of the predictor.
     recorded : pipeline.store.records.Recorded or None
@@ -160,7 +161,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         note(f"{names}: not in the model's fleet; forecast from the fleet's distribution of "
              "wear maps (a wider interval)")
     predicted = prediction_frame(trained, inputs, source)
-    out = pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1)
+    out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
     result = PredictionResult(predictions=out, model=trained.name)
     if store is not None:
         points = out.copy()
@@ -170,6 +171,20 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
             points["started_at"] = _visit_starts(readings, inputs)
         result.recorded = record_forecast(store, points, trained, model, source)
     return result
+
+
+def with_units(out: pd.DataFrame) -> pd.DataFrame:
+    """``out`` with a ``unit`` column before ``backlash_um`` when a rotary axis is among its
+    points: their backlash is in arcsec (``features.readings.schema.deviation_unit``), the
+    columns keep their names."""
+    from features.readings.schema import deviation_unit, is_rotary
+
+    axes = out["axis"].astype(str) if "axis" in out else None
+    if axes is None or not axes.map(is_rotary).any():
+        return out
+    out = out.copy()
+    out.insert(out.columns.get_loc("backlash_um"), "unit", axes.map(deviation_unit))
+    return out
 
 
 def _visit_starts(readings: pd.DataFrame, inputs: pd.DataFrame):
