@@ -482,6 +482,27 @@ def test_mixed_units_with_two_cycles_are_refused(tmp_path, capsys):
              column="deviation_um")
 
 
+def test_a_reading_in_degrees_among_arcsec_is_refused(tmp_path, capsys):
+    """A rotary axis: 3600x, not 1000x, between the units."""
+    table = valid_table(cycles=4).assign(axis="C", deviation_um=lambda t: t["deviation_um"] * 9)
+    row = table.index[(table["target"] == 100.0) & (table["direction"] == "-")][1]
+    table.loc[row, "deviation_um"] /= 3600.0
+    _refused(tmp_path, capsys, write_csv(tmp_path, table),
+             "looks like deg while the other readings at this target are about", row=row + 2,
+             column="deviation_um")
+
+
+def test_a_reading_near_zero_among_noisy_siblings_is_kept(tmp_path):
+    """Siblings scattering by 2 um around 4 um: a reading of 0.004 um is noise, not mm."""
+    table = valid_table(cycles=5)
+    at = (table["target"] == 100.0) & (table["direction"] == "-")
+    table.loc[at, "deviation_um"] = [0.004, 2.0, 4.5, 6.0, 3.5]
+    frame = read_readings(write_csv(tmp_path, table))
+    np.testing.assert_allclose(np.sort(frame.loc[
+        (frame["target"] == 100.0) & (frame["direction"] == "-"), "deviation_um"]),
+        [0.004, 2.0, 3.5, 4.5, 6.0])
+
+
 def test_blank_lines_are_skipped_and_rows_keep_their_line_numbers(tmp_path, capsys):
     lines = valid_table().to_csv(index=False).splitlines()
     lines[6] = lines[6].replace("500.0", "fast")

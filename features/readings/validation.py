@@ -323,6 +323,19 @@ def _deviation_um(frame: pd.DataFrame, path: Path, test: pd.Series) -> pd.Series
     return deviation
 
 
+def _others_scatter(values: pd.Series, groups) -> pd.Series:
+    """Per value, the standard deviation of the other values of its group (0 where fewer than
+    two others): s^2 = (S2 - x^2 - (n - 1) m^2) / (n - 2), m = (S1 - x) / (n - 1)."""
+    n = groups.transform("size").to_numpy(float)
+    s1 = groups.transform("sum").to_numpy(float)
+    s2 = (values ** 2).groupby(groups.ngroup(), sort=False).transform("sum").to_numpy(float)
+    x = values.to_numpy(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = (s1 - x) / (n - 1)
+        var = (s2 - x ** 2 - (n - 1) * mean ** 2) / (n - 2)
+    return pd.Series(np.sqrt(np.clip(np.where(n > 2, var, 0.0), 0.0, None)), index=values.index)
+
+
 def _check_deviation_units(frame, path, measured, scale, test) -> None:
     """Refuse deviations that look like millimetres in a micrometre column."""
     dev = frame["deviation_um"]
@@ -343,18 +356,22 @@ def _check_deviation_units(frame, path, measured, scale, test) -> None:
                 f"deviation_um {dev.iloc[i]:g} disagrees with measured - target = "
                 f"{expected.iloc[i]:g}; expected the same reading in both columns (or only one "
                 "of them)", file=path, row=row_of(frame[ROW], i), column="deviation_um")
-    # A reading 1000x smaller than its siblings at the same target and direction: mm among um.
+    # A reading 1000x (3600x rotary) smaller than its siblings at the same target and
+    # direction: mm among um (deg among arcsec), unless the siblings scatter so much that a
+    # reading near 0 is just noise.
     groups = dev.groupby([test, frame["target"], frame["direction"]], sort=False)
     # The median of a pair is its mean, which one mm value drags halfway: use the other one.
     pair = groups.transform("size") == 2
     sibling = groups.transform("median").where(~pair, groups.transform("sum") - dev)
     mm_like = ((sibling.abs() >= 0.5) & (dev.abs() < sibling.abs() / 100)
-               & ((dev * 1000 - sibling).abs() < 0.3 * sibling.abs()))
+               & ((dev * scale - sibling).abs() < 0.3 * sibling.abs())
+               & ((sibling - dev).abs() > 4 * _others_scatter(dev, groups)))
     if mm_like.any():
         i = _first_bad(mm_like)
+        unit, small = (("arcsec", "deg") if scale[i] == 3600.0 else ("um", "mm"))
         raise InputError(
-            f"mixed units: {dev.iloc[i]:g} looks like mm while the other readings at this "
-            f"target are about {sibling.iloc[i]:.3g} um", file=path,
+            f"mixed units: {dev.iloc[i]:g} looks like {small} while the other readings at "
+            f"this target are about {sibling.iloc[i]:.3g} {unit}", file=path,
             row=row_of(frame[ROW], i), column="deviation_um")
     largest = dev.abs().groupby(test, sort=False).transform("max")
     tiny = largest < MIN_PLAUSIBLE_MAX_DEVIATION_UM
