@@ -114,6 +114,23 @@ def scores(y_true, y_pred) -> dict[str, float]:
     }
 
 
+def scores_by_unit(y_true, y_pred, rotary, mixed: bool) -> dict[str, float]:
+    """``scores`` of points from a data set that may mix linear axes (um) and rotary axes
+    (arcsec): with ``mixed`` units, the linear points under the usual names and the rotary
+    ones with ``_arcsec`` for ``_um`` (``r2_rotary``, ``mape_pct_rotary`` for the unitless
+    ones), each only when the points hold some; one unit alone
+    keeps the usual names (a rotary axis's ``deviation_um`` holds arcsec)."""
+    y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
+    if not mixed:
+        return scores(y_true, y_pred)
+    rotary = np.asarray(rotary, bool)
+    out = scores(y_true[~rotary], y_pred[~rotary]) if (~rotary).any() else {}
+    if rotary.any():
+        out |= {k.replace("_um", "_arcsec") if "_um" in k else f"{k}_rotary": v
+                for k, v in scores(y_true[rotary], y_pred[rotary]).items()}
+    return out
+
+
 def against_uncertainty(y_true, y_pred, U_um: float) -> dict[str, float]:
     """A predictor's error against U(B), what the measurement can resolve.
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from features.readings.schema import is_rotary
 from features.table import FeatureTable, check_features
 from models import evaluation, registry
 
@@ -70,8 +71,12 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     estimator.fit(X.iloc[train], table.y.iloc[train], **extra)
     predicted = np.asarray(estimator.predict(X), float)
     y = table.y.to_numpy(float)
-    metrics = {f"test_{k}": v for k, v in evaluation.scores(y[test], predicted[test]).items()}
-    metrics |= {f"train_{k}": v for k, v in evaluation.scores(y[train], predicted[train]).items()}
+    rotary = (table.meta["axis"].map(is_rotary).to_numpy(bool) if "axis" in table.meta
+              else np.zeros(len(y), bool))
+    mixed = bool(rotary.any() and not rotary.all())
+    metrics = {f"{part}_{k}": v for part, rows in (("test", test), ("train", train))
+               for k, v in evaluation.scores_by_unit(y[rows], predicted[rows], rotary[rows],
+                                                     mixed).items()}
     fit = Fit(name, estimator, table, train, test, predicted, metrics, inputs=X)
     if truth is not None:
         fit.truth_um = evaluation.true_backlash(table.meta, truth, table.target_kind)

@@ -90,6 +90,7 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     ``visits``: rows of ``features.visits.visit_backlash`` (``machine_id, axis, visit, date,
     backlash_um, backlash_u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
     """
+    from features.readings.schema import deviation_unit
     from models import drift
 
     rows = []
@@ -103,7 +104,8 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
                 rows.append({"machine_id": series.machine_id, "axis": series.axis,
                              "visit": visit, "jump_um": change["jump_um"],
                              "jump_sigma": change["jump_sigma"],
-                             "reason": f"backlash steps down by {-change['jump_um']:.2f} um "
+                             "reason": f"backlash steps down by {-change['jump_um']:.2f} "
+                                       f"{deviation_unit(series.axis)} "
                                        f"({-change['jump_sigma']:.1f} sigma, drift change point)"})
     return pd.DataFrame(rows, columns=["machine_id", "axis", "visit", "jump_um", "jump_sigma",
                                        "reason"])

@@ -70,6 +70,25 @@ def test_one_model_keeps_every_axis_in_its_unit(fleets):
     assert level["arcsec"] > 4 * level["um"]
 
 
+def test_scores_are_given_per_unit(fleets):
+    """The hold-out scores never pool um with arcsec: the linear points under the usual
+    names, the rotary points under ``_arcsec`` names, each recomputed here by hand."""
+    _, result, _ = fleets[0]
+    fit = result.fit
+    y, predicted = fit.table.y.to_numpy(float), fit.predicted_um
+    rotary = fit.table.meta["axis"].isin(["A", "B", "C"]).to_numpy()
+    for part, rows in (("test", fit.test_index), ("train", fit.train_index)):
+        for name, chosen in (("um", ~rotary[rows]), ("arcsec", rotary[rows])):
+            error = predicted[rows][chosen] - y[rows][chosen]
+            assert result.metrics[f"{part}_rmse_{name}"] == pytest.approx(
+                np.sqrt(np.mean(error ** 2)))
+            assert result.metrics[f"{part}_mae_{name}"] == pytest.approx(np.mean(np.abs(error)))
+            true = y[rows][chosen]
+            r2 = 1 - np.sum(error ** 2) / np.sum((true - true.mean()) ** 2)
+            key = f"{part}_r2" + ("_rotary" if name == "arcsec" else "")
+            assert result.metrics[key] == pytest.approx(r2)
+
+
 def test_each_unit_is_pooled_alone(fleets):
     """(a) The same training rows and wear clocks, each unit's axes fitted alone: the same
     numbers, so the fleet distribution of one unit never informs the other."""

@@ -35,10 +35,11 @@ def run(args: argparse.Namespace) -> int:
     result = predict(args.model, readings_arg(args), format=args.format, store=args.store)
     result.write(args.out)
     out = result.predictions
-    print(f"{len(out)} points, backlash {out['backlash_um'].min():.2f}-"
-          f"{out['backlash_um'].max():.2f} um ({result.model}"
-          f"{', 95 % interval' if result.has_interval else ''}) -> {args.out}",
-          file=sys.stderr)
+    for unit, part in (out.groupby("unit", sort=False) if "unit" in out else [("um", out)]):
+        print(f"{len(part)} points, backlash {part['backlash_um'].min():.2f}-"
+              f"{part['backlash_um'].max():.2f} {unit} ({result.model}"
+              f"{', 95 % interval' if result.has_interval else ''}) -> {args.out}",
+              file=sys.stderr)
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)
     if args.json:

@@ -59,6 +59,10 @@ def print_metrics(name: str, metrics: dict, file) -> None:
     if "noise_floor_um" in metrics:
         line += f" (noise floor of one target {metrics['noise_floor_um']:.3f} um)"
     print(line, file=file)
+    if "test_rmse_arcsec" in metrics:  # a fleet of linear and rotary axes: scored per unit
+        print(f"  rotary axes: test RMSE {metrics['test_rmse_arcsec']:.3f} arcsec, MAE "
+              f"{metrics['test_mae_arcsec']:.3f} arcsec, R^2 {metrics['test_r2_rotary']:.3f} "
+              "(the line above: linear axes)", file=file)
     if "U_B_um" in metrics:
         from models.evaluation import resolution_verdict
 
