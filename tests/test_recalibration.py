@@ -283,7 +283,12 @@ def test_real_ess_reversal_varies_and_psi_does_not(ess_file, psi_file, capsys):
     assert left["linuxcnc"] < 1e-3 and left["csv"] < 1e-3  # a table per direction
     for name in ("siemens", "heidenhain", "marlin", "reprap", "grblhal"):
         assert left[name] == pytest.approx(29.768, abs=0.05)
-    assert left["fanuc"] == pytest.approx(29.768, abs=0.5)  # whole 1 um detection units
+    # bidirectional pitch error tables in whole 1 um detection units
+    assert left["fanuc"] < 1.0
+    per_direction = {w["controller"]: w["per_direction"] for w in ess.written}
+    assert per_direction == {**dict.fromkeys(("linuxcnc", "csv", "fanuc"), True),
+                             **dict.fromkeys(("siemens", "heidenhain", "marlin", "reprap",
+                                              "grblhal"), False)}
     axis = ess.to_json()["axes"][0]["reversal_variation"]
     assert axis["direction_dependent"] is True and axis["dof"] == 4
     with warnings.catch_warnings():

@@ -19,7 +19,9 @@ sees). The parsers below turn each file's own sign convention into those offsets
   position is taken modulo ``_MAX - _MIN`` from ``_MIN``.
 - Fanuc (1851 backlash and incremental pitch-error values per section, detection units):
   offset = cumulative sum of the increments from the reference point, linear within a section;
-  a rotary axis's table (``3625`` movement per rotation) repeats every rotation.
+  a rotary axis's table (``3625`` movement per rotation) repeats every rotation; with
+  ``3605#0 = 1`` a second table (from point ``3626``, its value at the reference ``3627``)
+  applies moving -.
 - Heidenhain (``.COM`` error table, ``MP710`` backlash [mm]): offset = -error.
 - Marlin / RepRapFirmware ``M425``, grblHAL ``$160-$162``: backlash only [mm].
 - CSV written by the product: the ``correction_*`` columns are the offsets.
@@ -219,18 +221,54 @@ def siemens(eec_path, md_path=None) -> Compensation:
 
 
 def fanuc(path) -> Compensation:
-    """Fanuc parameter sheet: 1851 backlash, 3620-3625 and incremental pitch-error values.
+    """Fanuc parameter sheet: 1851 backlash, 3620-3627 and incremental pitch-error values.
 
     The detection unit and the reference position are in ``um`` / ``mm`` (linear axis) or
     ``deg`` (rotary axis). With 3625 (movement per rotation, rotary-axis type) the table starts
     at the reference position (3621 = 3620), spans one rotation ((3622 - 3620) x 3624 = 3625)
-    and repeats every rotation (0i-PB parameter manual B-63980EN, example 2).
+    and repeats every rotation (0i-PB parameter manual B-63980EN, example 2). With ``3605#0 =
+    1`` (bidirectional pitch error compensation) points 3621..3622 apply moving + and points
+    3626..3626 + 3622 - 3621, at the same positions, moving -; the + table is 0 at the
+    reference position, the - table is 3627 there (detection units; the writer's stated
+    assumptions, ``pipeline.compensation.fanuc``).
     """
+    params, pitch, unit, reference = _fanuc_sheet(path)
+    backlash = params.get(1851, 0.0) * unit
+    if not pitch:
+        return Compensation(backlash_mm=backlash, source="fanuc 1851")
+    both = params.get("3605#0", 0) == 1
+    missing = [p for p in (3620, 3621, 3622, 3623, 3624, *((3626, 3627) if both else ()))
+               if p not in params]
+    if missing:
+        raise InputError(f"missing parameter {missing[0]}", file=path)
+    ref, low, high = (int(params[p]) for p in (3620, 3621, 3622))
+    tables = [np.arange(low, high + 1)]
+    if both:
+        tables.append(int(params[3626]) + np.arange(high - low + 1))
+    expected = sorted(int(p) for t in tables for p in t)
+    if sorted(pitch) != expected or len(set(expected)) != len(expected) or not low <= ref <= high:
+        raise InputError(f"expected pitch error values for points {low}..{high} around the "
+                         f"reference point {ref}" + (f" and {tables[1][0]}..{tables[1][-1]} "
+                                                     "(3626, travel in the - direction)"
+                                                     if both else ""), file=path)
+    period = _fanuc_rotation(params, path) * unit if params.get(3625) else None
+    plus, *minus = (_fanuc_cumulative([pitch[p] for p in t], params[3623] * unit, ref - low)
+                    for t in tables)
+    minus = minus[0] + params[3627] * unit if both else plus
+    nominal = reference + (tables[0] - ref) * params[3624] * unit
+    return Compensation(nominal, plus, minus, backlash,
+                        "fanuc bidirectional pitch error" if both else "fanuc pitch error", period)
+
+
+def _fanuc_sheet(path) -> tuple[dict, dict, float | None, float | None]:
+    """The settings of a Fanuc sheet: parameters (``NNNN`` as int, bits ``NNNN#b`` as text),
+    pitch error values by point, the detection unit [mm, deg] and the reference position."""
     params, pitch, unit, reference = {}, {}, None, None
     for row, line in enumerate(file_text(path).splitlines(), start=1):
         line = line.split(";")[0].strip()
-        if m := re.fullmatch(r"(\d{4})\s+\w+\s*=\s*(\S+)", line):
-            params[int(m[1])] = finite_number(m[2], path, row, f"parameter {m[1]}")
+        if m := re.fullmatch(r"(\d{4})(#\d)?\s+\w+\s*=\s*(\S+)", line):
+            key = f"{m[1]}{m[2]}" if m[2] else int(m[1])
+            params[key] = finite_number(m[3], path, row, f"parameter {m[1]}{m[2] or ''}")
         elif m := re.fullmatch(r"PITCH\s+(\d+)\s*=\s*(\S+)", line):
             pitch[int(m[1])] = finite_number(m[2], path, row, f"pitch error point {m[1]}")
         elif m := re.fullmatch(r"DETECTION UNIT\s*=\s*(\S+)\s*(um|deg)", line):
@@ -241,24 +279,15 @@ def fanuc(path) -> Compensation:
     if unit is None or reference is None:
         raise InputError("missing 'DETECTION UNIT = ... um|deg' or 'REFERENCE POSITION = ... "
                          "mm|deg'", file=path)
-    backlash = params.get(1851, 0.0) * unit
-    if not pitch:
-        return Compensation(backlash_mm=backlash, source="fanuc 1851")
-    missing = [p for p in (3620, 3621, 3622, 3623, 3624) if p not in params]
-    if missing:
-        raise InputError(f"missing parameter {missing[0]}", file=path)
-    ref, low, high = (int(params[p]) for p in (3620, 3621, 3622))
-    points = np.arange(low, high + 1)
-    if sorted(pitch) != list(points) or not low <= ref <= high:
-        raise InputError(f"expected pitch error values for points {low}..{high} around the "
-                         f"reference point {ref}", file=path)
-    period = _fanuc_rotation(params, path) * unit if params.get(3625) else None
-    increment = np.array([pitch[p] for p in points]) * params[3623] * unit
-    # the value of point N is output over the section from point N-1 to N; 0 at the reference
-    cumulative = np.cumsum(np.r_[0.0, increment[1:]])
-    cumulative -= cumulative[ref - low]
-    nominal = reference + (points - ref) * params[3624] * unit
-    return Compensation(nominal, cumulative, cumulative, backlash, "fanuc pitch error", period)
+    return params, pitch, unit, reference
+
+
+def _fanuc_cumulative(values, step_mm: float, ref_index: int) -> np.ndarray:
+    """The offset [mm] at each point of one table: the value of point N is output over the
+    section from point N-1 to N (``step_mm`` per unit: detection unit x 3623); 0 at the
+    reference point."""
+    cumulative = np.cumsum(np.r_[0.0, np.asarray(values[1:], float)]) * step_mm
+    return cumulative - cumulative[ref_index]
 
 
 def _fanuc_rotation(params: dict, path) -> float:

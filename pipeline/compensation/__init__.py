@@ -62,7 +62,8 @@ class Controller:
         when the format fixes it (positions, named columns) or there is no table.
     per_direction : bool
         Whether the files carry one table per approach direction, so that a reversal value
-        varying along the axis is compensated.
+        varying along the axis is compensated (Fanuc: written so when it varies,
+        ``common.direction_dependent``).
     recognise : tuple of (str, str)
         ``(role, regular expression)``: a file whose text the expression finds (multi-line
         mode) is this controller's file of that role (``--active``).
@@ -134,10 +135,11 @@ CONTROLLERS = {c.name: c for c in (
                units="detection units (`fanuc_unit_um`: um, 0.001 deg)", axes=BOTH,
                files="parameter sheet",
                description=("pitch-error increments (3620-3625, rotary-axis type over a full "
-                            "turn) and 1851 backlash"),
-               sign="correction",
+                            "turn) and 1851 backlash; when the reversal varies along the axis, "
+                            "one table per direction (3605#0, 3626, 3627) instead of 1851"),
+               sign="correction", per_direction=True,
                recognise=(("parameters", r"^\s*(PITCH\s+\d+|1851\s+\w+)\s*="),),
-               axis_patterns=(r"^\s*\d{4}\s+(?P<axis>[XYZABC])\s*=",)),
+               axis_patterns=(r"^\s*\d{4}(?:#\d)?\s+(?P<axis>[XYZABC])\s*=",)),
     Controller("heidenhain", "Heidenhain TNC", ("tnc", "tnc640", "tnc530", "tnc7"),
                _writer("heidenhain"),
                _reader("heidenhain"), kind="table", units="mm (deg)", axes=BOTH,

@@ -147,15 +147,35 @@ def closed_turn(profile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (np.r_[target, target[0] + TURN_DEG], np.r_[up, up[0]], np.r_[down, down[0]])
 
 
+def direction_dependent(profile) -> bool:
+    """Whether the profile's reversal value varies along the axis by more than its uncertainty
+    (``AxisProfile.reversal_variation``): then a format that has a table per approach direction
+    gets both tables, and one whose reversal does not vary keeps its one-table form."""
+    return bool(profile.reversal_variation()["direction_dependent"])
+
+
+def table_points(profile, spacing: float | None, max_points: int) -> tuple[np.ndarray, bool]:
+    """The points [mm, deg] of an equidistant table and whether they are one turn (a full-turn
+    rotary axis, ``full_turn``: ``turn_grid``; else ``profile.grid`` over the targets)."""
+    from pipeline.compensation.profile import grid
+
+    if full_turn(profile):
+        return turn_grid(profile.target, spacing, max_points), True
+    return grid(profile.target, spacing, max_points), False
+
+
+def resampled(profile, values, points, turn: bool) -> tuple[np.ndarray, float]:
+    """``values`` per target [um, arcsec] at the table ``points`` and the interpolation error at
+    the measured targets: around the turn (``resample_turn``) or along the axis
+    (``profile.resample``)."""
+    from pipeline.compensation.profile import resample
+
+    return (resample_turn if turn else resample)(profile.target, values, points)
+
+
 def error_table(profile, spacing: float | None, max_points: int):
     """The bidirectional mean error of an equidistant one-table format: points [mm, deg], the
     error there [um, arcsec], the interpolation error at the measured targets [um, arcsec] and
-    whether the table is one turn (a full-turn rotary axis, ``full_turn``: ``turn_grid`` and
-    ``resample_turn``; else ``profile.grid`` and ``profile.resample`` over the targets)."""
-    from pipeline.compensation.profile import grid, resample
-
-    if full_turn(profile):
-        points = turn_grid(profile.target, spacing, max_points)
-        return (points, *resample_turn(profile.target, profile.position_error, points), True)
-    points = grid(profile.target, spacing, max_points)
-    return (points, *resample(profile.target, profile.position_error, points), False)
+    whether the table is one turn (``table_points``, ``resampled``)."""
+    points, turn = table_points(profile, spacing, max_points)
+    return (points, *resampled(profile, profile.position_error, points, turn), turn)

@@ -451,8 +451,10 @@ def _write_all(profiles, names, folder: Path, options) -> list[dict]:
         for profile in profiles:
             result = record.writer(profile, folder, options)
             result.setdefault("sign", record.sign)
+            # a writer that chooses per axis (Fanuc: two tables only where the reversal varies)
+            result.setdefault("per_direction", record.per_direction)
             result.update(controller=name, kind=record.kind, machine_id=profile.machine_id,
-                          axis=profile.axis, per_direction=record.per_direction)
+                          axis=profile.axis)
             result["files"] = {role: Path(p).name for role, p in result["files"].items()}
             written.append(result)
     return written
