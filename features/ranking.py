@@ -99,11 +99,12 @@ class KnnResult:
     n_neighbors: int
     n_splits: int
     majority_rate: float           # accuracy of always guessing the largest class
+    unit: str = "um"               # of the class edges: arcsec on rotary axes
 
     @property
     def class_labels(self) -> list[str]:
         e = self.class_edges_um
-        return [f"{lo:.3g}-{hi:.3g} um" for lo, hi in itertools.pairwise(e)]
+        return [f"{lo:.3g}-{hi:.3g} {self.unit}" for lo, hi in itertools.pairwise(e)]
 
 
 @dataclass
@@ -168,7 +169,7 @@ def check_inputs(X: pd.DataFrame, y, n_neighbors: int = N_NEIGHBORS,
                          parameter="k")
 
 
-def backlash_classes(y_um, bins=N_BINS, source: str = "features"):
+def backlash_classes(y_um, bins=N_BINS, source: str = "features", unit: str = "um"):
     """Backlash classes for the k-NN classifier and the ANOVA.
 
     Parameters
@@ -198,7 +199,7 @@ def backlash_classes(y_um, bins=N_BINS, source: str = "features"):
     used, classes = np.unique(raw, return_inverse=True)
     if used.size < 2:
         raise InputError(f"all {len(y)} points fall into one backlash class "
-                         f"({y.min():.3g}-{y.max():.3g} um): a ranking needs backlash that "
+                         f"({y.min():.3g}-{y.max():.3g} {unit}): a ranking needs backlash that "
                          "varies (check the data or the class boundaries)", file=source,
                          column="backlash_um", parameter="bins")
     inner = cuts[used[1:] - 1]
@@ -295,7 +296,7 @@ def knn_classifier(n_neighbors: int = N_NEIGHBORS):
 
 def knn_scores(X: pd.DataFrame, classes, edges_um, n_neighbors: int = N_NEIGHBORS,
                n_splits: int = N_SPLITS, random_state: int = 0,
-               source: str = "features") -> tuple[KnnResult, pd.DataFrame]:
+               source: str = "features", unit: str = "um") -> tuple[KnnResult, pd.DataFrame]:
     """Stratified-CV accuracy of the weighted k-NN and its drop-column accuracy loss per input.
 
     Returns
@@ -311,7 +312,7 @@ def knn_scores(X: pd.DataFrame, classes, edges_um, n_neighbors: int = N_NEIGHBOR
     folds = min(n_splits, int(counts.min()))
     if folds < 2:
         raise InputError(f"backlash class {edges_um[counts.argmin()]:.3g}-"
-                         f"{edges_um[counts.argmin() + 1]:.3g} um holds a single point; "
+                         f"{edges_um[counts.argmin() + 1]:.3g} {unit} holds a single point; "
                          "cross-validation needs two per class; give fewer classes",
                          file=source, column="backlash_um", parameter="bins")
     smallest_train = len(classes) - int(np.ceil(len(classes) / folds))
@@ -339,7 +340,8 @@ def knn_scores(X: pd.DataFrame, classes, edges_um, n_neighbors: int = N_NEIGHBOR
         fold_accuracy=accuracy[0],
         confusion=confusion_matrix(classes, predicted, labels=np.arange(counts.size)),
         class_edges_um=np.asarray(edges_um, dtype=float), class_counts=counts,
-        n_neighbors=n_neighbors, n_splits=folds, majority_rate=float(counts.max() / counts.sum()))
+        n_neighbors=n_neighbors, n_splits=folds, majority_rate=float(counts.max() / counts.sum()),
+        unit=unit)
     drop = pd.DataFrame({"knn_drop": loss.mean(axis=1), "knn_drop_std": loss.std(axis=1, ddof=1)},
                         index=X.columns)
     return result, drop
@@ -467,7 +469,7 @@ def final_rank(table: pd.DataFrame, rank_by: str = "consensus") -> pd.Series:
     return pd.Series(np.arange(1, len(order) + 1), index=order, name="rank").reindex(table.index)
 
 
-def association_reading(name: str, row: pd.Series) -> str:
+def association_reading(name: str, row: pd.Series, unit: str = "um") -> str:
     """One sentence on what the marginal views see (association only, no causal claim)."""
     label = LABELS.get(name, name)
     if row["proxy_for_visit"]:
@@ -477,7 +479,7 @@ def association_reading(name: str, row: pd.Series) -> str:
     p_text = format_p(row["anova_score"])
     if not row["influence"]:
         return (f"{label} shows no measurable association with backlash (ANOVA {p_text}, "
-                f"permutation {row['permutation_um']:.2g} ± {row['permutation_std_um']:.2g} um, "
+                f"permutation {row['permutation_um']:.2g} ± {row['permutation_std_um']:.2g} {unit}, "
                 "MI at noise level).")
     hidden = (row["anova_score"] <= -np.log(ANOVA_ALPHA))
     tail = ("; the association is not monotone, so the ANOVA of class means misses what "
@@ -500,7 +502,7 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
                   n_neighbors: int = N_NEIGHBORS, n_splits: int = N_SPLITS, estimator=None,
                   prefit: bool = False, rank_by: str = "consensus", n_boot: int = 200,
                   n_repeats: int = 5, random_state: int = 0,
-                  source: str = "features") -> Ranking:
+                  source: str = "features", unit: str = "um") -> Ranking:
     """Rank the inputs of a feature table by their association with backlash (marginal views).
 
     Parameters
@@ -517,6 +519,8 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
         Predictor for permutation importance (``permutation_scores``).
     rank_by : {'anova', 'consensus'}
         Final rank rule (module docstring).
+    unit : str
+        Unit of the backlash in labels and sentences: um, or arcsec for rotary axes.
 
     Returns
     -------
@@ -528,8 +532,8 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
     check_inputs(X, y_um, n_neighbors, source)
     X = X.astype(float).reset_index(drop=True)
     y = np.asarray(y_um, dtype=float)
-    classes, edges = backlash_classes(y, bins, source)
-    knn, drop = knn_scores(X, classes, edges, n_neighbors, n_splits, random_state, source)
+    classes, edges = backlash_classes(y, bins, source, unit)
+    knn, drop = knn_scores(X, classes, edges, n_neighbors, n_splits, random_state, source, unit)
     table = pd.concat([
         anova_scores(X, classes, n_boot, random_state),
         permutation_scores(X, y, estimator, prefit, n_splits, n_repeats, random_state),
@@ -543,7 +547,7 @@ def rank_features(X: pd.DataFrame, y_um, groups=None, bins=N_BINS,
     table["influence"] = influence(table)
     table["rank"] = final_rank(table, rank_by)
     table.insert(0, "label", [LABELS.get(c, c) for c in table.index])
-    table["reading"] = [association_reading(name, row) for name, row in table.iterrows()]
+    table["reading"] = [association_reading(name, row, unit) for name, row in table.iterrows()]
     table = table.sort_values("rank")
     table.index.name = "feature"
     if prefit:

@@ -15,14 +15,15 @@ def plot(result, readings, path: Path) -> Path:
     used = np.ones(len(readings), bool) if result.used is None else result.used
     x = readings["target"].to_numpy(float)[used]
     up = readings["direction"].to_numpy()[used] == "+"
+    unit, position = result.unit, "deg" if result.unit == "arcsec" else "mm"
     fig, axes = new_figure(14, 4, ncols=3)
     for ax, resid, title in ((axes[0], result.residual_before, "residual, baseline"),
                              (axes[1], result.residual_after, "residual, final model")):
         ax.plot(x[up], resid[up], ".", ms=3, alpha=0.5, label="+ approach")
         ax.plot(x[~up], resid[~up], ".", ms=3, alpha=0.5, label="- approach")
         ax.axhline(0, color="black", lw=0.6)
-        ax.set_xlabel("target [mm]")
-        ax.set_ylabel("measured - simulated [um]")
+        ax.set_xlabel(f"target [{position}]")
+        ax.set_ylabel(f"measured - simulated [{unit}]")
         ax.set_title(title)
         ax.legend(fontsize=7)
     lim = max(float(np.abs(result.residual_before).max()), 1e-9)
@@ -33,12 +34,12 @@ def plot(result, readings, path: Path) -> Path:
     axes[2].bar(range(len(gaps)), gaps, color="#1f5f99")
     axes[2].axhline(result.repeatability_um, color="red", ls="--", label="repeatability")
     axes[2].set_xticks(range(len(gaps)), labels, rotation=20, ha="right", fontsize=8)
-    axes[2].set_ylabel("gap: RMSE simulation vs measurement [um]")
+    axes[2].set_ylabel(f"gap: RMSE simulation vs measurement [{unit}]")
     axes[2].legend(fontsize=7)
     return save_figure(fig, path)
 
 
-def _unexplained(gap: dict | None) -> str:
+def _unexplained(gap: dict | None, unit: str) -> str:
     if not gap:
         return ""
     rows = "".join(
@@ -48,19 +49,19 @@ def _unexplained(gap: dict | None) -> str:
     hint = (f"<p>Effects that act along it: {html.escape(', '.join(gap['candidates']))}.</p>"
             if gap.get("candidates") else "")
     return (f"<h2>Unexplained gap</h2><div class='alert'>{html.escape(gap['reason'])}</div>"
-            f"{hint}<table><tr><th>residual against</th><th>share</th><th>rms [um]</th>"
+            f"{hint}<table><tr><th>residual against</th><th>share</th><th>rms [{unit}]</th>"
             f"<th>p (F-test)</th></tr>{rows}</table>")
 
 
-def _system(test: dict | None) -> str:
+def _system(test: dict | None, unit: str) -> str:
     """The measuring-system decision and its test, one line."""
     if not test:
         return ""
     line = (f"Measuring system: <b>{html.escape(str(test['system']))}</b> ({html.escape(test['test'])}: "
-            f"mean {test['mean_um']:.3g} um over {test['n']} values, t = {test['statistic']:.3g}, "
+            f"mean {test['mean_um']:.3g} {unit} over {test['n']} values, t = {test['statistic']:.3g}, "
             f"p = {test['p_value']:.2g}")
     if "pendulum_statistic" in test:
-        line += (f"; against the pendulum tests' {test['pendulum_mean_um']:.3g} um: t = "
+        line += (f"; against the pendulum tests' {test['pendulum_mean_um']:.3g} {unit}: t = "
                  f"{test['pendulum_statistic']:.3g}, p = {test['pendulum_p_value']:.2g}")
     return f"<p>{line}).</p>"
 
@@ -81,16 +82,17 @@ def write(result, readings, out_dir, source: str = "") -> dict:
         for i, table in enumerate(result.evidence, 1))
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in result.notes)
     ambiguous = '; '.join(', '.join(g) for g in result.ambiguous) or 'none'
-    system = _system(result.measuring_system)
+    unit = result.unit
+    system = _system(result.measuring_system, unit)
     body = f"""<div class="summary"><p>{html.escape(source)}: named
 <b>{', '.join(result.named) or 'none'}</b>; ambiguous: {html.escape(ambiguous)}.
-Gap {result.rmse_before_um:.3f} um &rarr; {result.rmse_after_um:.3f} um; repeatability
-{result.repeatability_um:.3f} um.</p>{system}</div>
+Gap {result.rmse_before_um:.3f} {unit} &rarr; {result.rmse_after_um:.3f} {unit}; repeatability
+{result.repeatability_um:.3f} {unit}.</p>{system}</div>
 <img src="{png.name}" alt="residuals and gap per step">
 <h2>Steps</h2><table><tr><th>#</th><th>effect</th><th>parameters</th><th>95 % interval</th>
-<th>&Delta;BIC</th><th>CV gain</th><th>gap before [um]</th><th>gap after [um]</th>
+<th>&Delta;BIC</th><th>CV gain</th><th>gap before [{unit}]</th><th>gap after [{unit}]</th>
 <th>not identified</th></tr>{steps}</table>
-{_unexplained(result.unexplained)}
+{_unexplained(result.unexplained, unit)}
 <h2>Notes</h2><ul>{notes}</ul><h2>Evidence</h2>{evidence}"""
     return {"html": write_page(out / "discovery.html", "Missing physical effects", body),
             "png": png}

@@ -41,7 +41,10 @@ def conditions(row: pd.Series, source: str) -> list[tuple[str, str]]:
     for key in (*schema.TEST_KEYS, *TEST_COLUMNS, *ENVIRONMENT):
         value = row.get(key)
         if value is not None and pd.notna(value):
-            pairs.append((LABELS[key], f"{value:.2f}" if isinstance(value, float) else str(value)))
+            label = LABELS[key]
+            if key == "feed_mm_min" and schema.is_rotary(row["axis"]):
+                label = "feed [deg/min]"  # a rotary axis's feed_mm_min holds deg/min
+            pairs.append((label, f"{value:.2f}" if isinstance(value, float) else str(value)))
     pairs.append(("instrument", str(row["instrument"]) if pd.notna(row.get("instrument"))
                   else "not recorded in the readings"))
     return pairs

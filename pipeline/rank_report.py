@@ -45,8 +45,9 @@ LEVEL_WORDS = {"point": "within runs", "run": "between runs", "visit": "between 
 
 
 def write_rank_report(result, out_dir, *, source: str = "", target_kind: str = "",
-                      notes: list[str] | tuple = ()) -> dict[str, Path]:
-    """Write the report files (module docstring) for a ``models.influence.Explanation``.
+                      notes: list[str] | tuple = (), unit: str = "um") -> dict[str, Path]:
+    """Write the report files (module docstring) for a ``models.influence.Explanation``;
+    ``unit`` of the backlash: um, or arcsec for rotary axes.
 
     Returns
     -------
@@ -56,9 +57,9 @@ def write_rank_report(result, out_dir, *, source: str = "", target_kind: str = "
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {role: out / name for role, name in FILES.items()}
-    plot_effects(result, paths["effects"])
+    plot_effects(result, paths["effects"], unit)
     plot_anova(result, paths["anova"])
-    plot_views(result, paths["views"])
+    plot_views(result, paths["views"], unit)
     plot_confusion(result, paths["confusion"])
     table = result.table.drop(columns=["degrees"], errors="ignore").copy()
     table["physical_path"] = [",".join(p) for p in table["physical_path"]]
@@ -67,14 +68,15 @@ def write_rank_report(result, out_dir, *, source: str = "", target_kind: str = "
     write_json(paths["json"], clean_nan(result.to_json()))
     all_notes = [*result.ranking.notes, *result.notes, *notes]
     write_page(paths["html"], "Which conditions drive backlash",
-               render_body(result, source=source, target_kind=target_kind, notes=all_notes))
+               render_body(result, source=source, target_kind=target_kind, notes=all_notes,
+                           unit=unit))
     return paths
 
 
 # --- figures --------------------------------------------------------------------------------
 
-def plot_effects(result, path) -> Path:
-    """Effect [um] over the observed range with its 95 % bootstrap interval, per verdict."""
+def plot_effects(result, path, unit: str = "um") -> Path:
+    """Effect [um] (``unit``) over the observed range with its 95 % bootstrap interval, per verdict."""
     t = result.table
     fig = new_figure(7.5, 4.2)
     ax = fig.add_subplot()
@@ -85,7 +87,7 @@ def plot_effects(result, path) -> Path:
     ax.bar(x, effect, yerr=[low, high], capsize=3,
            color=[COLOURS.get(v, "#9aa7b4") for v in t["verdict"]])
     ax.set_xticks(x, t["label"], rotation=30, ha="right")
-    ax.set_ylabel("effect over the observed range [um]")
+    ax.set_ylabel(f"effect over the observed range [{unit}]")
     ax.set_title("Effect of each input given the others (colour: driver, proxy, "
                  "undecided, none)", fontsize=9)
     ax.set_ylim(bottom=0)
@@ -113,12 +115,12 @@ def plot_anova(result, path) -> Path:
     return save_figure(fig, path)
 
 
-def plot_views(result, path) -> Path:
+def plot_views(result, path, unit: str = "um") -> Path:
     """Permutation importance, mutual information, k-NN drop-column loss and the drop-column
     importance of gradient boosting (when computed)."""
     t = result.table
     panels = [
-        ("permutation_um", "permutation_std_um", "RMSE increase [um]",
+        ("permutation_um", "permutation_std_um", f"RMSE increase [{unit}]",
          f"Association: permutation importance ({result.ranking.permutation_model})"),
         ("mutual_info", "mutual_info_std", "mutual information [nat]",
          "Association: mutual information (bars) and noise level (markers)"),
@@ -126,7 +128,7 @@ def plot_views(result, path) -> Path:
          "Association: k-NN drop-column accuracy loss"),
     ]
     if "dropcolumn_um" in t:
-        panels.append(("dropcolumn_um", "dropcolumn_std_um", "RMSE increase [um]",
+        panels.append(("dropcolumn_um", "dropcolumn_std_um", f"RMSE increase [{unit}]",
                        ("Given the others: drop-column importance of gradient boosting, "
                         "CV grouped by visit or run")))
     fig, axes = new_figure(7.5, 2.5 * len(panels), nrows=len(panels), ncols=1, sharex=True)
@@ -187,14 +189,14 @@ def _p(p) -> str:
     return f"{p:.2g}" if p >= 1e-4 else "&lt; 1e-4"
 
 
-def _headline(t) -> str:
+def _headline(t, unit: str) -> str:
     drivers = t[t["verdict"] == "driver"]
     if drivers.empty:
         return ("<p><b>Drivers:</b> none measurable given the other inputs. The verdict "
                 "table says what each input's association stands for.</p>")
     items = "".join(
-        f"<li><b>{html.escape(r['label'])}</b>: {r['effect_um']:.2f} um over the observed "
-        f"range (95 % interval {r['effect_low_um']:.2f}-{r['effect_high_um']:.2f} um, "
+        f"<li><b>{html.escape(r['label'])}</b>: {r['effect_um']:.2f} {unit} over the observed "
+        f"range (95 % interval {r['effect_low_um']:.2f}-{r['effect_high_um']:.2f} {unit}, "
         f"{html.escape(r['effect_shape'])})</li>" for _, r in drivers.iterrows())
     return f"<p><b>Drivers, given the other inputs</b> (largest effect first):</p><ul>{items}</ul>"
 
@@ -269,7 +271,7 @@ def _confusion_table(knn) -> str:
 
 
 def render_body(result, *, source: str = "", target_kind: str = "",
-                notes: list[str] | tuple = ()) -> str:
+                notes: list[str] | tuple = (), unit: str = "um") -> str:
     """The report's HTML body; images are the relative PNG files of ``FILES``."""
     t = result.table
     knn = result.knn
@@ -284,7 +286,7 @@ def render_body(result, *, source: str = "", target_kind: str = "",
                     "association scores say so.</p>" if derived else "")
     return f"""<p>Data: <code>{html.escape(source)}</code> &mdash; {result.n_points} backlash
 points, {len(t)} inputs{target_line}.</p>
-<div class="summary">{_headline(t)}</div>
+<div class="summary">{_headline(t, unit)}</div>
 
 <h2>Verdicts given the other inputs</h2>
 <p><b>driver</b>: a physical path to lost motion (an effect record) and a significant partial
@@ -296,8 +298,8 @@ moves with backlash but stands in for something else (column <i>stands in for</i
 <b>none</b>: no influence measurable given the others. An input without a physical path is
 never a driver.</p>
 <table>
-<tr><th>input</th><th>verdict</th><th>effect [um] [95 % interval]</th><th>stands in for</th>
-<th>tested</th><th>p given the others</th><th>drop-column [um]</th><th>physical reading</th></tr>
+<tr><th>input</th><th>verdict</th><th>effect [{unit}] [95 % interval]</th><th>stands in for</th>
+<th>tested</th><th>p given the others</th><th>drop-column [{unit}]</th><th>physical reading</th></tr>
 {_verdict_rows(t)}
 </table>
 <img src="{FILES['effects']}" alt="effect of each input over its observed range">
@@ -311,7 +313,7 @@ that moves with a driver over the test plan scores like the driver.</p>
 {derived_note}
 <table>
 <tr><th>association rank</th><th>input</th><th>ANOVA score -ln(p)</th>
-<th>paper, FM38 X axis</th><th>permutation [um]</th><th>mutual information [nat]</th>
+<th>paper, FM38 X axis</th><th>permutation [{unit}]</th><th>mutual information [nat]</th>
 <th>k-NN drop-column</th><th>association</th></tr>
 {_association_rows(t)}
 </table>

@@ -162,7 +162,9 @@ def test_foreign_csv_names_the_missing_effect(tmp_path, capsys, feed_effect, nam
     result = json.loads(captured.out)
     assert result["named"] == named
     assert set(result) == {"named", "ambiguous", "steps", "rmse_before_um", "rmse_after_um",
-                           "repeatability_um", "notes", "unexplained", "measuring_system"}
+                           "repeatability_um", "notes", "unexplained", "measuring_system",
+                           "unit"}
+    assert result["unit"] == "um"
     # lost motion at every interior target of these linear tests: an indirect system
     assert result["measuring_system"]["system"] == "indirect"
     assert result["measuring_system"]["p_value"] < 1e-6

@@ -5,6 +5,7 @@ every table controller on it."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -158,3 +159,35 @@ def test_an_active_table_in_mm_is_refused_for_a_rotary_axis(twin_dir, tmp_path, 
     err = capsys.readouterr().err.strip()
     assert err.endswith("a table in MM; expected DEG for axis C") and "\n" not in err
     assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- units everywhere
+LINEAR_UNIT = re.compile(r"\b(um|mm|µm)\b")
+
+
+@pytest.mark.parametrize("command", [
+    ["iso", "--plot", "{out}/iso.png", "--json"],
+    ["report", "--out", "{out}"],
+    ["targets", "--out", "{out}", "--json"],
+    ["discover", "--out", "{out}", "--json"],
+    ["rank", "--out", "{out}", "--boot", "20"],
+    ["compensate", "--controller", "all", "--out", "{out}"],
+])
+def test_every_output_of_the_rotary_table_speaks_degrees_and_arcsec(
+        command, twin_dir, tmp_path, capsys, monkeypatch):
+    """Messages, tables, reports and files of a rotary axis never label a value um or mm
+    (column names such as deviation_um stay: a rotary axis's holds arcsec)."""
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    out = tmp_path / "out"
+    argv = [command[0], str(twin_dir / "readings.csv"),
+            *(a.format(out=out) for a in command[1:])]
+    assert main(argv) in (0, 3)
+    captured = capsys.readouterr()
+    texts = {"stdout": captured.out, "stderr": captured.err}
+    texts |= {str(p): p.read_text(encoding="utf-8") for p in out.rglob("*")
+              if p.suffix.lower() in (".html", ".csv", ".txt", ".ini", ".com", ".comp", ".json",
+                                      ".gcode")}
+    assert len(texts) > 2 or command[0] == "iso"
+    for where, text in texts.items():
+        assert not LINEAR_UNIT.search(text), (where, LINEAR_UNIT.search(text))
+    assert "arcsec" in captured.err + "".join(texts.values())

@@ -71,6 +71,13 @@ def deviation_unit(axis: str) -> str:
     return "arcsec" if is_rotary(axis) else "um"
 
 
+def unit_of(axes) -> str:
+    """The deviation unit of every axis named in ``axes``: "um", "arcsec", or "um or arcsec"
+    when linear and rotary axes are mixed (a label, for messages and table headings)."""
+    units = sorted({deviation_unit(a) for a in set(axes)}, reverse=True)
+    return " or ".join(units) if units else "um"
+
+
 def position_unit(axis: str) -> str:
     return "deg" if is_rotary(axis) else "mm"
 

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from features import iso230
+from features.readings import schema
 from features.readings.errors import InputError
 from models.discovery.candidates import (
     LOST_MOTION_PROFILE,
@@ -80,13 +81,15 @@ class Discovery:
     residual_after: np.ndarray | None = None
     used: np.ndarray | None = None                 # readings kept in the fit (mask)
     measuring_system: dict | None = None           # the decision and its test
+    unit: str = "um"                               # of every value: arcsec on a rotary axis
 
     def to_json(self) -> dict:
         return {"named": self.named, "ambiguous": self.ambiguous,
                 "steps": [s.__dict__ for s in self.steps],
                 "rmse_before_um": self.rmse_before_um, "rmse_after_um": self.rmse_after_um,
                 "repeatability_um": self.repeatability_um, "notes": self.notes,
-                "unexplained": self.unexplained, "measuring_system": self.measuring_system}
+                "unexplained": self.unexplained, "measuring_system": self.measuring_system,
+                "unit": self.unit}
 
 
 def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int = 4,
@@ -110,7 +113,8 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
     flagged = iso230.outliers(readings).to_numpy()
     # one wild reading inflates the repeatability by its square: the floor, the stopping rule
     # and the noise verdict all use the readings the ISO step keeps
-    result = Discovery(repeatability_um=repeatability_um(readings.loc[~flagged]))
+    result = Discovery(repeatability_um=repeatability_um(readings.loc[~flagged]),
+                       unit=schema.unit_of(readings["axis"]))
     if flagged.any():
         result.notes.append(
             f"{int(flagged.sum())} reading(s) flagged as outliers by the ISO 230-2 step left "

@@ -143,7 +143,7 @@ def structured(design: Design, resid: np.ndarray) -> bool:
 def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -> dict | None:
     """The remaining gap when it stays above the repeatability: its size and the residual's
     strongest structure, or the reason it is noise (its reason is added to ``result.notes``)."""
-    gap, noise = result.rmse_after_um, result.repeatability_um
+    gap, noise, unit = result.rmse_after_um, result.repeatability_um, result.unit
     if not np.isfinite(noise) or noise <= 0 or gap <= STOP_RATIO * noise:
         return None
     structure = residual_structure(design, resid)
@@ -153,8 +153,8 @@ def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -
            "structure": structure, "strongest": None, "verdict": "", "candidates": []}
     if single_noise or not significant:
         out["verdict"] = "noise-dominated"
-        why = (f"the gap ({gap:.3g} um) is within {NOISE_RATIO:g}x the repeatability "
-               f"({noise:.3g} um) of a single run" if single_noise else
+        why = (f"the gap ({gap:.3g} {unit}) is within {NOISE_RATIO:g}x the repeatability "
+               f"({noise:.3g} {unit}) of a single run" if single_noise else
                f"the residual shows no significant structure (F-test, p >= {level:.2g}) against "
                + ", ".join(s["against"] for s in structure))
         out["reason"] = (f"noise-dominated: {why}; "
@@ -169,9 +169,9 @@ def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -
                              if (column in r.inputs or (column == "direction"
                                                         and r.kind == "lost_motion"))
                              and n not in result.named]
-        out["reason"] = (f"the gap ({gap:.3g} um, {gap / noise:.1f}x the repeatability) is not "
-                         f"explained: the residual varies most with {top['against']} "
-                         f"({100 * top['share']:.0f} % of it, rms {top['rms_um']:.3g} um), and no "
+        out["reason"] = (f"the gap ({gap:.3g} {unit}, {gap / noise:.1f}x the repeatability) is "
+                         f"not explained: the residual varies most with {top['against']} "
+                         f"({100 * top['share']:.0f} % of it, rms {top['rms_um']:.3g} {unit}), and no "
                          "candidate passes")
     result.notes.append(out["reason"])
     return out

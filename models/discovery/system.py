@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from features import iso230
+from features.readings import schema
 
 SYSTEM_P = 0.01   # interior reversal values this unlikely under "no lost motion": indirect
 
@@ -46,6 +47,7 @@ class SystemTest(NamedTuple):
     pendulum_statistic: float = math.nan   # Welch t against the pendulum's reversal values
     pendulum_p_value: float = math.nan
     pendulum_mean_um: float = math.nan
+    unit: str = "um"      # of the reversal values: arcsec on a rotary axis
 
     def to_json(self) -> dict:
         out = {"system": self.system, "test": "t-test of the mean interior reversal value "
@@ -61,13 +63,13 @@ class SystemTest(NamedTuple):
 
     def note(self) -> str:
         """One sentence: the decision and its evidence."""
-        evidence = (f"mean interior reversal value {self.mean_um:.3g} um over {self.n} "
+        evidence = (f"mean interior reversal value {self.mean_um:.3g} {self.unit} over {self.n} "
                     f"target(s) of the linear tests, t = {self.statistic:.3g}, "
                     f"p = {self.p_value:.2g} against zero")
         if math.isfinite(self.pendulum_mean_um):
             evidence += (f"; t = {self.pendulum_statistic:.3g}, p = "
                          f"{self.pendulum_p_value:.2g} against the pendulum tests' "
-                         f"{self.pendulum_mean_um:.3g} um")
+                         f"{self.pendulum_mean_um:.3g} {self.unit}")
         if self.system == "indirect":
             return ("lost motion shows at the interior targets of the linear tests: indirect "
                     f"measuring system (rotary encoder) ({evidence})")
@@ -120,14 +122,14 @@ def measuring_system(readings: pd.DataFrame) -> SystemTest:
         the interior values contradict less.
     """
     interior, pendulum = reversal_values(readings)
-    n = len(interior)
+    n, unit = len(interior), schema.unit_of(readings["axis"])
     if n < 2:
-        return SystemTest(None, math.nan, math.nan, math.nan, n)
+        return SystemTest(None, math.nan, math.nan, math.nan, n, unit=unit)
     stat, p = _t_test(interior)
     if len(pendulum) < 2:
         return SystemTest("indirect" if p < SYSTEM_P else "direct", stat, p,
-                          float(interior.mean()), n)
+                          float(interior.mean()), n, unit=unit)
     stat_p, p_p = _t_test(interior, pendulum)
     system = "indirect" if abs(stat) > abs(stat_p) else "direct"
     return SystemTest(system, stat, p, float(interior.mean()), n, stat_p, p_p,
-                      float(pendulum.mean()))
+                      float(pendulum.mean()), unit)

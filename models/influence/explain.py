@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from features.readings.schema import unit_of
 from models.influence.design import design_groups
 from models.influence.dropcolumn import dropcolumn_importance
 from models.influence.verdicts import ALPHA, Influence, conditional_influence
@@ -70,7 +71,8 @@ def explain(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = None, *, bins=4,
     ranking = rank_features(X, y_um, groups=groups, bins=bins, n_neighbors=n_neighbors,
                             estimator=estimator, prefit=prefit, rank_by=rank_by,
                             n_boot=n_boot, n_repeats=n_repeats, random_state=random_state,
-                            source=source)
+                            source=source, unit=unit_of(meta["axis"]) if meta is not None
+                            and "axis" in meta else "um")
     X = X.reset_index(drop=True)
     drop = (dropcolumn_importance(X, y_um, meta, random_state=random_state)
             if dropcolumn else None)

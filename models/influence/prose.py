@@ -9,8 +9,10 @@ from models.influence.design import LEVEL_WORDS, Design
 from models.influence.paths import LABELS, Path
 
 
-def physical_reading(name: str, row: pd.Series, path: Path, design: Design) -> str:
-    """One or two sentences: the verdict and the physics behind it, from the effect records."""
+def physical_reading(name: str, row: pd.Series, path: Path, design: Design,
+                     unit: str = "um") -> str:
+    """One or two sentences: the verdict and the physics behind it, from the effect records;
+    effects in ``unit`` (um, or arcsec on rotary axes)."""
     label = LABELS.get(name, name)
     verdict, proxy = row["verdict"], row["proxy_for"]
     via = "; ".join(f"{n}: {r}" for n, r in path.paths)
@@ -18,8 +20,8 @@ def physical_reading(name: str, row: pd.Series, path: Path, design: Design) -> s
     where = LEVEL_WORDS.get(row["level"], "")
     if verdict == "driver":
         interval = f"{row['effect_low_um']:.2f}-{row['effect_high_um']:.2f}"
-        return (f"{label} drives backlash: {row['effect_um']:.2f} um over the observed range "
-                f"(95 % interval {interval} um, {row['effect_shape']}), given the other inputs "
+        return (f"{label} drives backlash: {row['effect_um']:.2f} {unit} over the observed "
+                f"range (95 % interval {interval} {unit}, {row['effect_shape']}), given the other inputs "
                 f"({_p_text(row['p_value'])}, tested {LEVEL_WORDS[row['tested']]}). "
                 f"Physical path: {via}.")
     if verdict == "undecided":
@@ -50,7 +52,7 @@ def physical_reading(name: str, row: pd.Series, path: Path, design: Design) -> s
         return text + "."
     if path.paths:
         return (f"{label} has no measurable influence given the other inputs "
-                f"({_p_text(row['p_value'])}; effect at most {row['effect_high_um']:.2f} um "
+                f"({_p_text(row['p_value'])}; effect at most {row['effect_high_um']:.2f} {unit} "
                 f"over the observed range). Possible path: {via}.")
     tail = f" It acts on the measured position only: {position}." if position else \
         " No effect record gives it a path to lost motion."

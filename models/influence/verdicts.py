@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.readings.schema import unit_of
 from models.influence.design import Design, design_diagnostics, design_groups, nested_labels
 from models.influence.paths import LABELS, TARGET_DERIVED, effect_paths
 from models.influence.prose import physical_reading
@@ -119,7 +120,8 @@ def conditional_influence(X: pd.DataFrame, y_um, meta: pd.DataFrame | None = Non
     table["association"] = assoc
     if dropcolumn is not None:
         table = table.join(dropcolumn)
-    table["physical_reading"] = [physical_reading(c, table.loc[c], paths[c], design)
+    unit = (unit_of(meta["axis"]) if meta is not None and "axis" in meta else "um")
+    table["physical_reading"] = [physical_reading(c, table.loc[c], paths[c], design, unit)
                                  for c in table.index]
     table.insert(0, "label", [LABELS.get(c, c) for c in table.index])
     order = {"driver": 0, "proxy": 1, "undecided": 2, "none": 3}

@@ -33,14 +33,15 @@ def run(args: argparse.Namespace) -> int:
     result = discover(readings_arg(args), format=args.format, baseline=args.baseline, seed=args.seed)
     result.write(args.out)
     tracking.log_result(result)
+    unit = result.discovery.unit
     for step in result.steps:
         print(f"named {step.effect} {step.parameters}: gap {step.rmse_before_um:.3f} -> "
-              f"{step.rmse_after_um:.3f} um (delta BIC {step.delta_bic:.0f}, CV gain "
+              f"{step.rmse_after_um:.3f} {unit} (delta BIC {step.delta_bic:.0f}, CV gain "
               f"{100 * step.cv_gain:.0f} %)", file=sys.stderr)
     for group in result.ambiguous:
         print(f"ambiguous: {', '.join(group)}", file=sys.stderr)
-    print(f"gap {result.rmse_before_um:.3f} -> {result.rmse_after_um:.3f} um, repeatability "
-          f"{result.repeatability_um:.3f} um; report {result.files['html']}", file=sys.stderr)
+    print(f"gap {result.rmse_before_um:.3f} -> {result.rmse_after_um:.3f} {unit}, repeatability "
+          f"{result.repeatability_um:.3f} {unit}; report {result.files['html']}", file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return 0

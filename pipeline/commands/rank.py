@@ -71,7 +71,8 @@ def print_table(result, html_path, file) -> None:
     knn = result.knn
     drivers = ", ".join(t.loc[n, "label"] for n in result.drivers()) or "none measurable"
     print(f"drivers given the other inputs: {drivers}", file=file)
-    print(f"{'input':<20} {'verdict':<9} {'effect [um] (95 %)':<22} {'stands in for':<16} "
+    print(f"{'input':<20} {'verdict':<9} {f'effect [{result.unit}] (95 %)':<22} "
+          f"{'stands in for':<16} "
           f"{'ANOVA -ln(p)':>12}", file=file)
     for name, r in t.iterrows():
         effect = (f"{r['effect_um']:.2f} ({r['effect_low_um']:.2f}-{r['effect_high_um']:.2f})"

@@ -35,8 +35,8 @@ def run(args: argparse.Namespace) -> int:
                      uncertainty=args.uncertainty)
     if args.out:
         result.write(args.out)
-    print(f"{len(result.points)} points, target {result.target_kind}: {result.target_reason}",
-          file=sys.stderr)
+    print(f"{len(result.points)} points in {result.unit}, target {result.target_kind}: "
+          f"{result.target_reason}", file=sys.stderr)
     print(result.table(max_rows=TABLE_ROWS), file=sys.stderr)
     if result.coverage_factor is not None:
         print(f"backlash_U_um: expanded uncertainty, k = {result.coverage_factor:g}",

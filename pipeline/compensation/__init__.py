@@ -166,8 +166,8 @@ CONTROLLERS = {c.name: c for c in (
                units="um, mm", axes=BOTH, files="`.csv` table",
                description="everything per target, signs in the column names",
                per_direction=True,
-               recognise=(("table", r"^[^#\n]*\btarget_(?:mm|deg)\b[^\n]*"
-                                    r"\bcorrection_plus_(?:um|arcsec)\b"),),
+               recognise=(("table", (r"^[^#\n]*\btarget_(?:mm|deg)\b[^\n]*"
+                                     r"\bcorrection_plus_(?:um|arcsec)\b")),),
                axis_patterns=(r"^[^,#\n]*,(?P<axis>[XYZABC]),(?:measured|predicted),",)),
 )}
 SIGNS = ("error", "correction")

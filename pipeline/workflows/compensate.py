@@ -303,6 +303,8 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     conditions = parse_conditions(conditions)
     ahead = {"at_hours": at_hours, "at_date": at_date, "machine": machine, "axis": axis}
     profiles = _profiles(data, format, conditions, ahead, spacing, verify)
+    if isinstance(controller, str) and controller.strip().lower() == "all":
+        names = _covering(names, profiles)
     if verify:  # refuse before any work
         from pipeline.compensation.verify import twin_parameters
 
@@ -348,6 +350,20 @@ def _active(active, profiles, names, options) -> dict:
                          "one with --machine and --axis)", parameter="active")
     p = profiles[0]
     return {(p.machine_id, p.axis): read_active(active, names[0], p, options)}
+
+
+def _covering(names: list[str], profiles) -> list[str]:
+    """``controller="all"``: the controllers that compensate every measured axis's kind
+    (the scalar formats take linear axes only); a note names those left out."""
+    from features.readings.errors import note
+    from features.readings.schema import is_rotary
+
+    kinds = {"rotary" if is_rotary(p.axis) else "linear" for p in profiles}
+    kept = [n for n in names if kinds <= set(CONTROLLERS[n].axes)]
+    left = [n for n in names if n not in kept]
+    if left:
+        note(f"all: {', '.join(left)} left out (they compensate linear axes only)")
+    return kept
 
 
 def _reversal_notes(profiles, reversal, names) -> list[str]:

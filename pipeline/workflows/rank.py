@@ -75,6 +75,13 @@ class RankResult(Result):
         return self.explanation.table
 
     @property
+    def unit(self) -> str:
+        """Unit of every backlash value: um, or arcsec for rotary axes."""
+        from features.readings.schema import unit_of
+
+        return unit_of(self.readings["axis"])
+
+    @property
     def knn(self):
         """The cross-validated weighted k-NN (``features.ranking.KnnResult``)."""
         return self.explanation.knn
@@ -88,7 +95,7 @@ class RankResult(Result):
         from pipeline.rank_report import write_rank_report
 
         self.files = write_rank_report(self.explanation, out, source=self.source,
-                                       target_kind=self.target_kind)
+                                       target_kind=self.target_kind, unit=self.unit)
         return self.files
 
     def to_json(self) -> dict:

@@ -77,13 +77,20 @@ class TargetsResult(Result):
         self.files["targets"] = path
         return self.files
 
+    @property
+    def unit(self) -> str:
+        """Unit of the backlash values: um, or arcsec for rotary axes."""
+        from features.readings.schema import unit_of
+
+        return unit_of(self.points["axis"])
+
     def to_json(self) -> dict:
-        """``target_kind``, ``target_reason``, ``coverage_factor`` (None without a budget) and
-        one object per point; NaN becomes None."""
+        """``target_kind``, ``target_reason``, ``coverage_factor`` (None without a budget),
+        ``unit`` and one object per point; NaN becomes None."""
         from features.readings.fileio import clean_nan
 
         return clean_nan({"target_kind": self.target_kind, "target_reason": self.target_reason,
-                          "coverage_factor": self.coverage_factor,
+                          "coverage_factor": self.coverage_factor, "unit": self.unit,
                           "points": self.points.to_dict("records")})
 
     def table(self, max_rows: int | None = None) -> str:
