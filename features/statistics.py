@@ -15,7 +15,6 @@ from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
-from scipy.interpolate import BSpline
 
 # Share of an input's variance (its sum of squares about the mean) that a level of the design
 # (within visits, between runs, ...) must hold for the input to count as varying there. Below
@@ -115,6 +114,8 @@ def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
     degree = min(degree, n_control - 1)
     inner = np.linspace(0.0, 1.0, n_control - degree + 1)
     knots = np.r_[[0.0] * degree, inner, [1.0] * degree]
+    from scipy.interpolate import BSpline  # on first use: the twin imports this module
+
     return BSpline.design_matrix(t, knots, degree).toarray()
 
 

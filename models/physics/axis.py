@@ -36,12 +36,14 @@ def play(commanded_mm: np.ndarray, width_um: np.ndarray, per_unit=1000.0) -> np.
     ``per_unit``: width units per position unit (1000 um/mm; 3600 arcsec/deg on a rotary
     axis), a scalar or one value per test (tests, 1)."""
     half = width_um / (2.0 * np.asarray(per_unit, float))
-    table = np.empty_like(commanded_mm)
+    # waypoint-major copies: each step of the sequential loop reads and writes one contiguous row
+    low = np.ascontiguousarray((commanded_mm - half).T)
+    high = np.ascontiguousarray((commanded_mm + half).T)
+    table = np.empty_like(low)
     p = commanded_mm[:, 0].copy()
-    for k in range(commanded_mm.shape[1]):
-        p = np.clip(p, commanded_mm[:, k] - half[:, k], commanded_mm[:, k] + half[:, k])
-        table[:, k] = p
-    return table
+    for k in range(len(table)):
+        p = np.clip(p, low[k], high[k], out=table[k])
+    return table.T
 
 
 def run_times_s(path: Path, feed_mm_min: np.ndarray, dwell_s: np.ndarray) -> np.ndarray:
@@ -52,11 +54,17 @@ def run_times_s(path: Path, feed_mm_min: np.ndarray, dwell_s: np.ndarray) -> np.
     return np.cumsum(seconds, axis=1)
 
 
+def warmed_fraction(elapsed_s, tau_s):
+    """Part of its warm-up the screw has reached after ``elapsed_s`` [s]: the screw warms from
+    its start value T0 as T = T0 + dT (1 - exp(-t / tau)), t [s] time since the run's start, dT
+    [K] the warm-up the run's feed drives towards, tau [s] the screw's thermal time constant."""
+    return 1 - np.exp(-elapsed_s / tau_s)
+
+
 def machine_temperature_c(start_c, warmup_k, tau_s, elapsed_s):
     """Screw temperature warming from its start value [degC], shape (tests, waypoints):
-    T = T0 + dT (1 - exp(-t / tau)), t [s] time since the run's start, dT [K] the warm-up the
-    run's feed drives towards, tau [s] the screw's thermal time constant."""
-    return start_c[:, None] + warmup_k[:, None] * (1 - np.exp(-elapsed_s / tau_s))
+    T = T0 + dT (1 - exp(-t / tau)) (``warmed_fraction``)."""
+    return start_c[:, None] + warmup_k[:, None] * warmed_fraction(elapsed_s, tau_s)
 
 
 def machine_temperature_cooling_c(path: Path, feed_mm_min, dwell_s, start_c, warmup_k, tau_s,
@@ -70,17 +78,19 @@ def machine_temperature_cooling_c(path: Path, feed_mm_min, dwell_s, start_c, war
     starting from T0 = ``start_c``. Sequential along the path, vectorised over tests.
     ``ambient_c`` (tests, waypoints) [degC]; ``warmup_k`` per test [K]; time constants [s]."""
     travel = np.abs(np.diff(path.position_mm, prepend=path.position_mm[0]))
-    keep_moving = np.exp(-travel[None, :] / feed_mm_min[:, None] * 60.0 / tau_s)
+    # waypoint-major copies: each step of the sequential loop works on contiguous rows
+    keep_moving = np.exp(-travel[:, None] / feed_mm_min[None, :] * 60.0 / tau_s)
+    ambient = np.ascontiguousarray(np.asarray(ambient_c).T)
     keep_dwell = np.exp(-dwell_s / cooling_tau_s)
     out = np.empty_like(keep_moving)
     t = np.asarray(start_c, float).copy()
-    for k in range(out.shape[1]):
-        hot = ambient_c[:, k] + warmup_k
-        t = hot + (t - hot) * keep_moving[:, k]
+    for k in range(len(out)):
+        hot = ambient[k] + warmup_k
+        t = hot + (t - hot) * keep_moving[k]
         if path.read[k]:
-            t = ambient_c[:, k] + (t - ambient_c[:, k]) * keep_dwell
-        out[:, k] = t
-    return out
+            t = ambient[k] + (t - ambient[k]) * keep_dwell
+        out[k] = t
+    return out.T
 
 
 def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dict, system: str,
@@ -98,61 +108,43 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
     optional ``per_unit`` (per test, default 1000): error units per position unit, 3600 for a
     rotary axis (positions in deg, errors in arcsec).
     Returns arrays of shape (tests, readings): deviation_um, true_backlash_um, one ``effect:<name>`` entry per position effect, the
-    conditions at each reading, and per-reading target, direction and cycle.
+    conditions at each reading, and per-reading target, direction and cycle; the run times
+    once per (feed, dwell) pair, ``pair_elapsed_s`` (pairs, readings), with each test's pair
+    ``pair_of_test``: ``elapsed_s == pair_elapsed_s[pair_of_test]``.
 
     ``compensation`` (optional): one controller model per test (or None), with
     ``motor_path(commanded_mm, direction)`` (``models.physics.controller.Compensation``); its
     offsets are added to the commanded path ahead of the play, as the controller does.
+
+    Every quantity is evaluated only where it is used: the play width along the whole path
+    for an indirect system (the play operator runs along it), at the readings for a direct
+    one; conditions and position errors at the readings. Each value is computed as if along
+    the whole path: the numbers do not depend on it.
     """
     n = len(tests["feed_mm_min"])
     per_unit = np.broadcast_to(np.asarray(tests.get("per_unit", 1000.0), float), (n,))[:, None]
-    elapsed = run_times_s(path, tests["feed_mm_min"], tests["dwell_s"])
-    hours = elapsed / 3600.0
-    # air profiles: the run's start value plus a linear drift along the run (drifts default 0)
-    air = {k: tests[k][:, None] + tests.get(drift, 0.0) * hours for k, drift in (
-        ("ambient_temp_c", "ambient_drift_k_per_h"), ("pressure_hpa", "pressure_drift_hpa_per_h"),
-        ("humidity_pct", "humidity_drift_pct_per_h"))}
-    if tests.get("cooling_tau_s", 0.0) > 0:
-        machine = machine_temperature_cooling_c(
-            path, tests["feed_mm_min"], tests["dwell_s"], tests["machine_temp_start_c"],
-            tests["warmup_k"], tests["warmup_tau_s"], air["ambient_temp_c"], tests["cooling_tau_s"])
-    else:
-        machine = machine_temperature_c(tests["machine_temp_start_c"], tests["warmup_k"],
-                                        tests["warmup_tau_s"], elapsed)
-    conditions = {
-        "feed_mm_min": np.repeat(tests["feed_mm_min"][:, None], len(path.position_mm), 1),
-        "dwell_s": np.repeat(tests["dwell_s"][:, None], len(path.position_mm), 1),
-        "machine_temp_c": machine,
-        "elapsed_s": elapsed,
-        **air,
-    }
-    position = np.broadcast_to(path.position_mm, (n, len(path.position_mm)))
-    width = np.zeros((n, len(path.position_mm)))
-    for name in effects.LOST_MOTION:
-        if name in enabled:
-            width += effects.contribution(name, position, 0, conditions,
-                                          **_column(tests["params"][name]))
-    if np.any(tests.get("wear_local_um", 0.0)):  # local wear: a worn zone growing with hours
-        width += effects.contribution("backlash_position", position, 0, conditions,
-                                      amplitude_um=np.asarray(tests["wear_local_um"])[:, None],
-                                      center_mm=tests["wear_center_mm"],
-                                      width_mm=tests["wear_width_mm"])
-    width = np.maximum(width, 0.0)
-    read = path.read
+    read = np.flatnonzero(path.read)
+    # waypoint columns where the play width is needed, and the readings among them
+    at, to_read = ((np.arange(len(path.position_mm)), read) if system == "indirect"
+                   else (read, slice(None)))
+    clock = _Clock(path, tests["feed_mm_min"], tests["dwell_s"])
+    conditions = _conditions(path, tests, clock, at)
+    width = _play_width(path, tests, enabled, conditions, at)
+    at_read = {k: v[:, to_read] for k, v in conditions.items()}
     target = targets_mm[path.target_index[read]]
     direction = path.direction[read]
+    position = np.broadcast_to(path.position_mm, (n, len(path.position_mm)))
     if system == "indirect" and compensation is not None:
         table = _compensated_table(path, compensation, width, per_unit)
         lost = (table[:, read] - position[:, read]) * per_unit
     elif system == "indirect":
         lost = (play(position, width, per_unit)[:, read] - position[:, read]) * per_unit
     else:
-        lost = -direction * width[:, read] / 2 * path.reversal[read]
+        lost = -direction * width / 2 * path.reversal[read]
         if compensation is not None:  # the scale loop drives the table onto setpoint + offset
-            offsets = _compensated_motor(path, compensation)[:, 1::2] - position
-            lost = lost + offsets[:, read] * per_unit
-    at_read = {k: v[:, read] for k, v in conditions.items()}
-    out = {"true_backlash_um": width[:, read], "lost_motion_um": lost}
+            offsets = _compensated_motor(path, compensation)[:, 1::2][:, read] - position[:, read]
+            lost = lost + offsets * per_unit
+    out = {"true_backlash_um": width[:, to_read], "lost_motion_um": lost}
     deviation = lost.copy()
     for name, params in tests["params"].items():
         if name in effects.LOST_MOTION:
@@ -163,11 +155,68 @@ def simulate_tests(path: Path, targets_mm: np.ndarray, tests: dict, enabled: dic
         out[f"effect:{name}"] = part
         deviation += part
     deviation += rng.normal(0.0, noise_um, deviation.shape)
-    if resolution_um > 0:
-        deviation = np.round(deviation / resolution_um) * resolution_um
+    if resolution_um > 0:  # in place: round(deviation / resolution) * resolution
+        np.divide(deviation, resolution_um, out=deviation)
+        np.round(deviation, out=deviation)
+        np.multiply(deviation, resolution_um, out=deviation)
     out.update(deviation_um=deviation, target=target, direction=direction,
-               cycle=path.cycle[read], **at_read)
+               cycle=path.cycle[read], pair_elapsed_s=clock.seconds[:, read],
+               pair_of_test=clock.of_test, **at_read)
     return out
+
+
+class _Clock:
+    """Time since the run's start [s] of every test at the waypoints. The tests of a block share
+    a handful of (feed, dwell) pairs and a test's clock depends on nothing else: each pair's
+    clock is computed once (``seconds``, pairs x waypoints) and ``of_test`` picks it per test."""
+
+    def __init__(self, path: Path, feed_mm_min: np.ndarray, dwell_s: np.ndarray):
+        pairs, inverse = np.unique(np.c_[feed_mm_min, dwell_s], axis=0, return_inverse=True)
+        self.seconds = run_times_s(path, pairs[:, 0], pairs[:, 1])
+        self.of_test = inverse.ravel()
+
+    def at(self, columns) -> np.ndarray:
+        """Elapsed time of every test at the waypoint ``columns``, shape (tests, columns)."""
+        return self.seconds[:, columns][self.of_test]
+
+
+def _conditions(path: Path, tests: dict, clock: _Clock, at) -> dict:
+    """Conditions of every test at the waypoint columns ``at``, (tests, columns) arrays."""
+    elapsed = clock.at(at)
+    hours = elapsed / 3600.0
+    # air profiles: the run's start value plus a linear drift along the run (drifts default 0)
+    air = {k: tests[k][:, None] + tests.get(drift, 0.0) * hours for k, drift in (
+        ("ambient_temp_c", "ambient_drift_k_per_h"), ("pressure_hpa", "pressure_drift_hpa_per_h"),
+        ("humidity_pct", "humidity_drift_pct_per_h"))}
+    if tests.get("cooling_tau_s", 0.0) > 0:  # a heat balance, sequential along the whole path
+        ambient = (tests["ambient_temp_c"][:, None]
+                   + tests.get("ambient_drift_k_per_h", 0.0) * (clock.at(slice(None)) / 3600.0))
+        machine = machine_temperature_cooling_c(
+            path, tests["feed_mm_min"], tests["dwell_s"], tests["machine_temp_start_c"],
+            tests["warmup_k"], tests["warmup_tau_s"], ambient, tests["cooling_tau_s"])[:, at]
+    else:  # machine_temperature_c, with the warm-up's shape once per (feed, dwell) pair
+        warmed = warmed_fraction(clock.seconds[:, at], tests["warmup_tau_s"])[clock.of_test]
+        machine = tests["machine_temp_start_c"][:, None] + tests["warmup_k"][:, None] * warmed
+    return {"feed_mm_min": np.repeat(tests["feed_mm_min"][:, None], len(at), 1),
+            "dwell_s": np.repeat(tests["dwell_s"][:, None], len(at), 1),
+            "machine_temp_c": machine, "elapsed_s": elapsed, **air}
+
+
+def _play_width(path: Path, tests: dict, enabled: dict, conditions: dict, at) -> np.ndarray:
+    """Play width b [um] of every test at the waypoint columns ``at``: the enabled lost-motion
+    effects and the local wear, never negative."""
+    position = np.broadcast_to(path.position_mm[at], conditions["elapsed_s"].shape)
+    width = np.zeros(position.shape)
+    for name in effects.LOST_MOTION:
+        if name in enabled:
+            width += effects.contribution(name, position, 0, conditions,
+                                          **_column(tests["params"][name]))
+    if np.any(tests.get("wear_local_um", 0.0)):  # local wear: a worn zone growing with hours
+        width += effects.contribution("backlash_position", position, 0, conditions,
+                                      amplitude_um=np.asarray(tests["wear_local_um"])[:, None],
+                                      center_mm=tests["wear_center_mm"],
+                                      width_mm=tests["wear_width_mm"])
+    return np.maximum(width, 0.0, out=width)
 
 
 def _column(params: dict) -> dict:

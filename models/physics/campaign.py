@@ -73,6 +73,7 @@ from typing import Literal
 
 import numpy as np
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 from features.readings import schema
 from features.readings.config import as_table, from_table, read_config
@@ -449,7 +450,7 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     conditions and noise."""
     config = load_config(config)
     rng = np.random.default_rng(seed)
-    plan, env = config.plan, config.environment
+    plan = config.plan
     visits = visit_table(config, rng)
     visits.insert(len(visits.columns) - 1, "reference_backlash_um",
                   reference_backlash_um(config, visits["b0_um"].to_numpy(float),
@@ -457,59 +458,20 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     if session_seed is not None:
         rng = np.random.default_rng([seed, session_seed])
     targets = _targets(plan)
-    grid = pd.MultiIndex.from_product(
-        [range(len(visits)), plan.methods, plan.feeds_mm_min, plan.dwells_s,
-         range(1, plan.repeats + 1)],
-        names=["v", "method", "feed_mm_min", "dwell_s", "repeat"]).to_frame(index=False)
-    tests = grid.join(visits, on="v")
-    tests["test_id"] = (tests["machine_id"] + "-" + tests["axis"] + "-v" + tests["visit"] + "-"
-                        + tests["method"].str[:3] + "-f" + tests["feed_mm_min"].map("{:g}".format)
-                        + "-d" + tests["dwell_s"].map("{:g}".format) + "-r"
-                        + tests["repeat"].astype(str))
-    order = np.arange(len(tests)) % (len(tests) // len(visits))
-    tests["started_at"] = tests["started_at"] + pd.to_timedelta(order * 20, unit="min")
-    n = len(tests)
-    tests["machine_temp_start_c"] = env.machine_temp_c + rng.normal(0, env.machine_temp_spread_k,
-                                                                     n)
-    tests["warmup_k"] = env.warmup_k * tests["feed_mm_min"] / 1000.0
-    tests["ambient_temp_c"] = env.ambient_temp_c + rng.normal(0, env.ambient_spread_k, n)
-    tests["pressure_hpa"] = env.pressure_hpa + rng.normal(0, env.pressure_spread_hpa, n)
-    tests["humidity_pct"] = np.clip(env.humidity_pct + rng.normal(0, env.humidity_spread_pct, n),
-                                    5, 95)
+    tests = _test_table(config, visits, rng)
     # Names as codes: a fleet's readings repeat a few labels millions of times.
     readings, truth = _tables(tests, plan, targets)
-    for method, part in tests.groupby("method", sort=False):
-        p = path(method, targets, plan.cycles, float(plan.overrun_mm))
-        arrays = {c: part[c].to_numpy(float) for c in
-                  ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
-                   "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
-        arrays["per_unit"] = part["axis"].map(schema.deviation_scale).to_numpy(float)
-        arrays["wear_center_mm"] = float(config.fleet.wear_center_mm)
-        arrays["wear_width_mm"] = float(config.fleet.wear_width_mm)
-        for key in ("warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
-                    "humidity_drift_pct_per_h", "cooling_tau_s"):
-            arrays[key] = float(getattr(env, key))
-        arrays["params"] = {name: dict(params) for name, params in config.effects.items()}
-        if "backlash" in arrays["params"]:
-            arrays["params"]["backlash"]["b0_um"] = part["b0_um"].to_numpy(float)
-        # bounded blocks of tests keep the (tests x waypoints) arrays small; the noise is drawn
-        # block after block from one generator, so the numbers do not depend on the block size
-        for start in range(0, len(part), CHUNK_TESTS):
-            block = slice(start, start + CHUNK_TESTS)
-            arrays_block = {k: (v[block] if isinstance(v, np.ndarray) else v)
-                            for k, v in arrays.items() if k != "params"}
-            arrays_block["params"] = {
-                name: {k: (v[block] if isinstance(v, np.ndarray) else v)
-                       for k, v in params.items()} for name, params in arrays["params"].items()}
-            comp = None if compensation is None else [
-                compensation.get(key) for key in zip(part["machine_id"].iloc[block],
-                                                     part["axis"].iloc[block])]
-            out = simulate_tests(p, targets, arrays_block, config.effects, config.system,
-                                 config.noise.noise_um, config.noise.resolution_um,
-                                 rng, compensation=comp)
-            _add_readings(readings, part.iloc[block], out)
-            values = _add_truth(truth, part.iloc[block], out, config)
-            del out
+    methods = readings.codes["method"]
+    # from here on the tests are arrays of the values the blocks use (their labels are codes in
+    # the tables), copied out so the frame goes
+    tests = {c: tests[c].to_numpy(copy=True) for c in TEST_VALUES}
+    # The truth's means are small matrix products, one per block and column: waking a second
+    # BLAS thread for each costs more than it saves, and the thread count changes no number.
+    with threadpool_limits(limits=1, user_api="blas"):
+        for method in pd.unique(methods):  # in the order of the plan
+            values = _simulate_method(config, readings.labels["method"][method], tests,
+                                      np.flatnonzero(methods == method), targets, compensation,
+                                      rng, readings, truth)
     readings = readings.frame(READING_ORDER)
     truth = truth.frame((*KEYS, "target", "direction", *values))
     parameters = {"config": as_table(config), "seed": seed, "targets_mm": targets.tolist(),
@@ -522,7 +484,82 @@ def simulate(config, seed: int = 0, compensation: dict | None = None,
     return Simulation(readings, truth, visits, parameters)
 
 
+def _test_table(config: Campaign, visits: pd.DataFrame, rng: np.random.Generator) -> pd.DataFrame:
+    """One row per test: its visit, method, feed, dwell and repeat, its id and start, and its
+    run conditions (drawn from ``rng``). The index is the test's position (0, 1, ...)."""
+    plan, env = config.plan, config.environment
+    grid = pd.MultiIndex.from_product(
+        [range(len(visits)), plan.methods, plan.feeds_mm_min, plan.dwells_s,
+         range(1, plan.repeats + 1)],
+        names=["v", "method", "feed_mm_min", "dwell_s", "repeat"]).to_frame(index=False)
+    tests = grid.join(visits, on="v")
+    tests["test_id"] = (tests["machine_id"] + "-" + tests["axis"] + "-v" + tests["visit"] + "-"
+                        + tests["method"].str[:3] + "-f" + _formatted(tests["feed_mm_min"])
+                        + "-d" + _formatted(tests["dwell_s"]) + "-r"
+                        + tests["repeat"].astype(str))
+    order = np.arange(len(tests)) % (len(tests) // len(visits))
+    tests["started_at"] = tests["started_at"] + pd.to_timedelta(order * 20, unit="min")
+    n = len(tests)
+    tests["machine_temp_start_c"] = env.machine_temp_c + rng.normal(0, env.machine_temp_spread_k,
+                                                                     n)
+    tests["warmup_k"] = env.warmup_k * tests["feed_mm_min"] / 1000.0
+    tests["ambient_temp_c"] = env.ambient_temp_c + rng.normal(0, env.ambient_spread_k, n)
+    tests["pressure_hpa"] = env.pressure_hpa + rng.normal(0, env.pressure_spread_hpa, n)
+    tests["humidity_pct"] = np.clip(env.humidity_pct + rng.normal(0, env.humidity_spread_pct, n),
+                                    5, 95)
+    return tests
+
+
+def _formatted(values: pd.Series) -> pd.Series:
+    """``{:g}`` text of each value, formatted once per distinct value."""
+    return values.map({v: f"{v:g}" for v in values.unique()})
+
+
+def _simulate_method(config: Campaign, method: str, tests: dict, positions: np.ndarray,
+                     targets: np.ndarray, compensation, rng: np.random.Generator,
+                     readings: _Table, truth: _Table) -> list[str]:
+    """The tests of one method (at ``positions`` in the per-test arrays ``tests``) through
+    their shared path, block after block, into the readings and truth tables; returns the
+    truth's value columns."""
+    plan, env = config.plan, config.environment
+    p = path(method, targets, plan.cycles, float(plan.overrun_mm))
+    grouping = _truth_groups(targets[p.target_index[p.read]], p.direction[p.read])
+    axes = readings.labels["axis"]
+    scale = np.array([schema.deviation_scale(a) for a in axes])  # per axis label
+    scalars = {key: float(getattr(env, key)) for key in (
+        "warmup_tau_s", "ambient_drift_k_per_h", "pressure_drift_hpa_per_h",
+        "humidity_drift_pct_per_h", "cooling_tau_s")}
+    scalars["wear_center_mm"] = float(config.fleet.wear_center_mm)
+    scalars["wear_width_mm"] = float(config.fleet.wear_width_mm)
+    # bounded blocks of tests keep the (tests x waypoints) arrays small; the noise is drawn
+    # block after block from one generator, so the numbers do not depend on the block size
+    for start in range(0, len(positions), CHUNK_TESTS):
+        rows = positions[start:start + CHUNK_TESTS]
+        block = {c: tests[c][rows].astype(float) for c in
+                 ("feed_mm_min", "dwell_s", "machine_temp_start_c", "warmup_k",
+                  "ambient_temp_c", "pressure_hpa", "humidity_pct", "wear_local_um")}
+        block["per_unit"] = scale[readings.codes["axis"][rows]]
+        block.update(scalars)
+        block["params"] = {name: dict(values) for name, values in config.effects.items()}
+        if "backlash" in block["params"]:
+            block["params"]["backlash"]["b0_um"] = tests["b0_um"][rows].astype(float)
+        comp = None if compensation is None else [
+            compensation.get((readings.labels["machine_id"][m], axes[a])) for m, a in
+            zip(readings.codes["machine_id"][rows], readings.codes["axis"][rows])]
+        out = simulate_tests(p, targets, block, config.effects, config.system,
+                             config.noise.noise_um, config.noise.resolution_um,
+                             rng, compensation=comp)
+        _add_readings(readings, tests, rows, out)
+        values = _add_truth(truth, tests, rows, out, grouping, config)
+        del out
+    return values
+
+
 CHUNK_TESTS = 2048
+# per-test values the blocks of tests use
+TEST_VALUES = ("feed_mm_min", "dwell_s", "repeat", "started_at", "operating_hours", "b0_um",
+               "wear_local_um", "machine_temp_start_c", "warmup_k", "ambient_temp_c",
+               "pressure_hpa", "humidity_pct")
 KEYS = ("machine_id", "axis", "visit", "test_id", "method", "feed_mm_min", "dwell_s", "repeat")
 # Labels held as categories. ``visit`` stays text: visits are compared by order
 # (``readings["visit"] < "08"``), which unordered categories refuse.
@@ -540,36 +577,50 @@ class _Table:
     """A frame's columns allocated once at their final length and filled block of tests after
     block, so a fleet's rows are never held twice (as blocks and as their concatenation).
     Label columns hold codes into their ``labels`` until ``frame``: categories for those in
-    ``categorical``, Arrow text for the others."""
+    ``categorical``, Arrow text for the others.
 
-    def __init__(self, n_rows: int, labels: dict, categorical):
+    A block is ``rows`` rows for each of its tests (``start``); ``put`` writes a block's values
+    straight into the columns, broadcast against (tests, rows): a value per test as a column
+    (tests, 1), a value per row of the test as a row (rows,), so no repeated or tiled copy of
+    either is ever made."""
+
+    def __init__(self, n_rows: int, labels: dict, codes: dict, categorical):
         self.n, self.at, self.labels = n_rows, 0, labels
+        self.codes = codes  # per label column, every test's code (by the test's position)
         self.categorical = set(categorical)
         self.columns: dict[str, np.ndarray] = {}
         self.text: dict[str, list] = {}  # Arrow chunks of the text label columns
+        self.shape = (0, 0)
+
+    def start(self, n_tests: int, rows: int) -> None:
+        """Begin a block of ``n_tests`` tests, ``rows`` rows each."""
+        self.shape = (n_tests, rows)
+
+    def end(self) -> None:
+        """Move past the block just written."""
+        self.at += self.shape[0] * self.shape[1]
 
     def put(self, name: str, values, dtype=None) -> None:
         values = np.asarray(values)
         if name not in self.columns:
             self.columns[name] = np.empty(self.n, dtype or values.dtype)
-        self.columns[name][self.at:self.at + len(values)] = values
+        size = self.shape[0] * self.shape[1]
+        self.columns[name][self.at:self.at + size].reshape(self.shape)[...] = values
 
-    def put_tests(self, tests: pd.DataFrame, columns, times: int) -> None:
-        """Columns of the tests, each test's value repeated ``times``."""
+    def put_tests(self, tests: dict, rows: np.ndarray, columns) -> None:
+        """Columns of the block's tests (``rows`` of the per-test arrays ``tests`` and of the
+        label codes), each test's value on each of its rows."""
         import pyarrow as pa
 
         for column in columns:
-            values = tests[column]
-            if column in self.labels:
-                codes = self.labels[column].get_indexer(values)
-                values = pd.Series(codes, dtype=np.min_scalar_type(-len(self.labels[column])))
-            values = np.repeat(values.to_numpy(), times)
+            values = (self.codes if column in self.codes else tests)[column][rows]
             if column in self.labels and column not in self.categorical:
                 # Arrow text, block by block: never a Python string per row
+                values = np.repeat(values, self.shape[1])
                 self.text.setdefault(column, []).append(pa.DictionaryArray.from_arrays(
                     values, pa.array(self.labels[column].to_numpy(str))).cast(pa.large_string()))
             else:
-                self.put(column, values, SMALL.get(column, values.dtype))
+                self.put(column, values[:, None], SMALL.get(column, values.dtype))
 
     def frame(self, order) -> pd.DataFrame:
         import pyarrow as pa
@@ -595,57 +646,70 @@ def _tables(tests: pd.DataFrame, plan: Plan, targets: np.ndarray) -> tuple[_Tabl
         p = path(method, targets, plan.cycles, float(plan.overrun_mm))
         reads[method] = int(p.read.sum())
         pairs[method] = len(set(zip(p.target_index[p.read], p.direction[p.read])))
-    labels = {c: pd.Index(sorted(tests[c].unique())) for c in (*LABELS, "visit")}
+    labels, codes = {}, {}
+    for c in (*LABELS, "visit"):  # sorted labels and every test's code into them, in one pass
+        found, labels[c] = pd.factorize(tests[c], sort=True)
+        codes[c] = found.astype(np.min_scalar_type(-len(labels[c])))
     labels["direction"] = pd.Index(["+", "-"])
     categorical = (*LABELS, "direction")
     method = tests["method"].astype(str)
-    return (_Table(int(method.map(reads).sum()), labels, categorical),
-            _Table(int(method.map(pairs).sum()), labels, categorical))
+    return (_Table(int(method.map(reads).sum()), labels, codes, categorical),
+            _Table(int(method.map(pairs).sum()), labels, codes, categorical))
 
 
 READING_ORDER = (*KEYS, "started_at", "operating_hours", "target", "direction", "cycle",
                  "deviation_um", "measured_at", *ENVIRONMENT)
 
 
-def _add_readings(table: _Table, tests: pd.DataFrame, out: dict) -> None:
-    n_tests, n_reads = out["deviation_um"].shape
-    table.put_tests(tests, (*KEYS, "started_at", "operating_hours"), n_reads)
-    table.put("target", np.tile(out["target"], n_tests), float)
-    table.put("direction", np.tile(out["direction"] < 0, n_tests), np.int8)  # codes of +, -
-    table.put("cycle", np.tile(out["cycle"], n_tests), SMALL["cycle"])
-    table.put("deviation_um", out["deviation_um"].ravel(), float)
-    started = pd.to_datetime(np.repeat(tests["started_at"].to_numpy(), n_reads))
-    table.put("measured_at", (started + pd.to_timedelta(out["elapsed_s"].ravel(), "s"))
-              .to_numpy(), "datetime64[ns]")
+def _add_readings(table: _Table, tests: dict, rows: np.ndarray, out: dict) -> None:
+    table.start(*out["deviation_um"].shape)
+    table.put_tests(tests, rows, (*KEYS, "started_at", "operating_hours"))
+    table.put("target", out["target"], float)
+    table.put("direction", out["direction"] < 0, np.int8)  # codes of +, -
+    table.put("cycle", out["cycle"], SMALL["cycle"])
+    table.put("deviation_um", out["deviation_um"], float)
+    # run times in whole nanoseconds as pandas rounds them, once per (feed, dwell) pair rather
+    # than per reading; the start plus the run time as pandas adds them
+    pairs = out["pair_elapsed_s"]
+    elapsed = pd.to_timedelta(pairs.ravel(), "s").to_numpy().reshape(pairs.shape)
+    started = tests["started_at"][rows].astype("datetime64[ns]")
+    table.put("measured_at", started[:, None] + elapsed[out["pair_of_test"]], "datetime64[ns]")
     for column in ENVIRONMENT:
-        table.put(column, np.round(out[column].ravel(), 3), SMALL["environment"])
-    table.at += n_tests * n_reads
+        table.put(column, np.round(out[column], 3), SMALL["environment"])
+    table.end()
 
 
-def _add_truth(table: _Table, tests: pd.DataFrame, out: dict, config: Campaign) -> list[str]:
-    """Mean over cycles per test, target and direction of the true lost motion and of every
-    effect's contribution [um], and the wear (uniform plus local) at the target [um]; returns
-    the names of the value columns."""
-    key = pd.MultiIndex.from_arrays([out["target"], out["direction"]])
-    codes, groups = pd.factorize(key)
+def _truth_groups(target: np.ndarray, direction: np.ndarray) -> tuple[pd.MultiIndex, np.ndarray]:
+    """The (target, direction) pairs of a path's readings in order of appearance, and the
+    matrix that averages the readings over the cycles of each pair (readings, pairs)."""
+    codes, groups = pd.factorize(pd.MultiIndex.from_arrays([target, direction]))
     onehot = np.zeros((len(codes), len(groups)))
     onehot[np.arange(len(codes)), codes] = 1.0
     onehot /= onehot.sum(axis=0)  # column means over the cycles
-    n = len(tests)
-    table.put_tests(tests, KEYS, len(groups))
-    target = np.tile(groups.get_level_values(0).to_numpy(float), n)
+    return groups, onehot
+
+
+def _add_truth(table: _Table, tests: dict, rows: np.ndarray, out: dict, grouping: tuple,
+               config: Campaign) -> list[str]:
+    """Mean over cycles per test, target and direction of the true lost motion and of every
+    effect's contribution [um], and the wear (uniform plus local) at the target [um]; returns
+    the names of the value columns. ``grouping``: the path's ``_truth_groups``."""
+    groups, onehot = grouping
+    table.start(len(rows), len(groups))
+    table.put_tests(tests, rows, KEYS)
+    target = groups.get_level_values(0).to_numpy(float)
     table.put("target", target)
-    table.put("direction", np.tile(groups.get_level_values(1).to_numpy() < 0, n), np.int8)
+    table.put("direction", groups.get_level_values(1).to_numpy() < 0, np.int8)
     columns = {"true_backlash_um": "true_backlash_um", "lost_motion_um": "lost_motion_um",
                **{k: k.removeprefix("effect:") + "_um" for k in out if k.startswith("effect:")}}
     for key_name, column in columns.items():
-        table.put(column, (out[key_name] @ onehot).ravel(), SMALL["truth"])
+        table.put(column, out[key_name] @ onehot, SMALL["truth"])
     fleet = config.fleet
-    hours = np.repeat(tests["operating_hours"].to_numpy(float), len(groups))
-    peak = np.repeat(tests["wear_local_um"].to_numpy(float), len(groups))
+    hours = tests["operating_hours"][rows].astype(float)[:, None]
+    peak = tests["wear_local_um"][rows].astype(float)[:, None]
     table.put("wear_um", fleet.wear_um_per_1000h * hours / 1000
-              + local_wear_um(target, fleet, peak))
-    table.at += n * len(groups)
+              + local_wear_um(target, fleet, peak), float)
+    table.end()
     return [*columns.values(), "wear_um"]
 
 
