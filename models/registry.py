@@ -57,7 +57,9 @@ class Predictor:
         axis (the wear clock restarts there), where a per-point model uses every row.
     forecasts : bool
         Predicts a plan of a visit not measured yet (operating hours and conditions only, no
-        linear-test deviations), with a 95 % interval.
+        linear-test deviations), with a 95 % interval. Scored on the hold-out, then saved
+        refit on every point: a forecast must not lose a target's or a visit's history to the
+        hold-out (an axis with two visits can have a target whose points all fall in it).
     per_axis : bool
         Knows every machine axis: fitted on inputs that carry ``machine_id`` and ``axis``
         (``AXIS_KEYS``), one model per axis pooled across the fleet.

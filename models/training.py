@@ -28,10 +28,11 @@ class Fit:
     metrics: dict = field(default_factory=dict)
     truth_um: np.ndarray | None = None
     inputs: pd.DataFrame | None = None    # what the estimator saw (with the axes, per axis)
+    refit_all: bool = False               # ``estimator`` refit on every row after the scores
 
     def trained_model(self, meta: dict | None = None) -> registry.TrainedModel:
         """The fitted estimator with what monitoring needs (input ranges, training inputs)."""
-        X_train = self.table.X.iloc[self.train_index]
+        X_train = self.table.X if self.refit_all else self.table.X.iloc[self.train_index]
         ranges = {c: (float(X_train[c].min()), float(X_train[c].max())) for c in X_train}
         axes = _known_axes(self.estimator)
         return registry.TrainedModel(
@@ -78,6 +79,9 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
                for k, v in evaluation.scores_by_unit(y[rows], predicted[rows], rotary[rows],
                                                      mixed).items()}
     fit = Fit(name, estimator, table, train, test, predicted, metrics, inputs=X)
+    if registry.predictor(name).forecasts:  # scored on the hold-out, saved fitted on it all
+        fit.estimator = registry.make(name, random_state).fit(X, table.y, **extra)
+        fit.refit_all = True
     if truth is not None:
         fit.truth_um = evaluation.true_backlash(table.meta, truth, table.target_kind)
         known = test[np.isfinite(fit.truth_um[test])]

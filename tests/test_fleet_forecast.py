@@ -85,11 +85,23 @@ def test_pooled_forecast_against_the_truth(fleets):
     for result, _, _ in fleets.values():
         visits |= {(a["machine_id"], a["axis"]): a["visits"] for a in result.trained.meta["axes"]}
     few = np.array([visits[k] < 3 for k in zip(scored["machine_id"], scored["axis"])])
-    # measured: 1.0-1.5x the noise of one measured target over seeds 0-4
-    assert rmse(scored["error"]) <= 1.5 * noise
-    assert rmse(scored.loc[~few, "error"]) <= 1.6 * noise
-    assert rmse(scored.loc[few, "error"]) <= 2.5 * noise   # two visits: mostly the fleet's
-    assert 0.85 <= scored["covered"].mean() <= 1.0
+    # measured over seeds 0-4: all axes 0.91-1.33x the noise of one measured target, axes
+    # with three or more visits 0.92-1.39x, two-visit axes 0.86-1.37x, coverage 92-93 %
+    assert rmse(scored["error"]) <= 1.4 * noise
+    assert rmse(scored.loc[~few, "error"]) <= 1.4 * noise
+    assert rmse(scored.loc[few, "error"]) <= 2.0 * noise   # two visits: mostly the fleet's
+    assert 0.85 <= scored["covered"].mean() <= 0.99
+
+
+def test_the_saved_forecaster_keeps_every_targets_history(fleets):
+    """Scored on a random hold-out, then refit on every point: a two-visit axis whose points
+    at one target all fell in the hold-out is still forecast there, not held at its
+    neighbour's value (before: 2.0 um off at one target of seed 3, 9.7x the noise)."""
+    for result, scored, _ in fleets.values():
+        assert result.fit.refit_all
+        assert len(result.trained.training_inputs_) == len(result.fit.table.y)
+        noise = result.metrics["noise_floor_um"]
+        assert scored["error"].abs().max() < 5 * noise
 
 
 def test_pooling_beats_one_model_per_axis(fleets):

@@ -90,11 +90,13 @@ def test_scores_are_given_per_unit(fleets):
 
 
 def test_each_unit_is_pooled_alone(fleets):
-    """(a) The same training rows and wear clocks, each unit's axes fitted alone: the same
-    numbers, so the fleet distribution of one unit never informs the other."""
+    """(a) The same rows (the saved forecaster is refit on every point) and wear clocks, each
+    unit's axes fitted alone: the same numbers, so the fleet distribution of one unit never
+    informs the other."""
     for _, result, scored in fleets.values():
         fit, estimator = result.fit, result.trained.estimator
-        X, y = fit.inputs.iloc[fit.train_index], fit.table.y.iloc[fit.train_index]
+        assert fit.refit_all
+        X, y = fit.inputs, fit.table.y
         origin = dict(zip(estimator.axes_, estimator.hours_origin_))
         plan = served_inputs(result.trained, scored[PLAN_KEYS], "plan")
         together = np.array(estimator.predict_interval(plan))
@@ -188,7 +190,7 @@ def test_a_unit_with_one_axis_is_fitted_as_that_axis_alone():
     axis = {(a["machine_id"], a["axis"]): a for a in result.trained.meta["axes"]}[("M1", "A")]
     assert axis["unit"] == "arcsec" and axis["borrowed"] == 0.0 and axis["visits"] == 7
     fit = result.fit
-    X, y = fit.inputs.iloc[fit.train_index], fit.table.y.iloc[fit.train_index]
+    X, y = fit.inputs, fit.table.y  # the saved forecaster is refit on every point
     rows = (X["axis"] == "A").to_numpy()
     points = interior(plan)
     points = points.loc[(points["machine_id"] == "M1") & (points["axis"] == "A"), PLAN_KEYS]
