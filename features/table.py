@@ -174,21 +174,24 @@ def point_inputs(readings: pd.DataFrame, methods: tuple[str, ...] | None = None)
     over the readings of the tests in ``methods`` (default both tests of the pair; a point
     without such readings falls back to both)."""
     keys = list(POINT_KEYS)
-    linear = readings[readings["method"] == "linear"]
+    # rows are selected from the columns used only: copying the others (text among them)
+    # would cost more than the grouping itself
+    linear = readings.loc[readings["method"] == "linear", [*keys, "direction", "deviation_um"]]
     deviation = (linear.groupby([*keys, "direction"], dropna=False)["deviation_um"].mean()
                  .unstack("direction")
                  .rename(columns={"+": "deviation_up_um", "-": "deviation_down_um"}))
     env = [c for c in ENVIRONMENT if c in readings]
     inputs = deviation
+    points = readings.groupby(keys, dropna=False)  # grouped once: both uses share the codes
     if env:
-        conditions = readings.groupby(keys, dropna=False)[env].mean()
+        conditions = points[env].mean()
         if methods:
-            chosen = readings[readings["method"].isin(methods)]
+            chosen = readings.loc[readings["method"].isin(methods), [*keys, *env]]
             conditions = (chosen.groupby(keys, dropna=False)[env].mean()
                           .combine_first(conditions))
         inputs = inputs.join(conditions, how="left")
     if "started_at" in readings:
-        inputs = inputs.join(readings.groupby(keys, dropna=False)["started_at"].min(), how="left")
+        inputs = inputs.join(points["started_at"].min(), how="left")
     return inputs.reset_index()
 
 

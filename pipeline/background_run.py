@@ -1,4 +1,5 @@
-"""An MLflow run whose slow start overlaps the command's own work.
+"""An MLflow run whose slow start overlaps the command's own work, and other work done beside
+the command's (``BackgroundTask``).
 
 Importing mlflow and opening its store take about three seconds, longer than reading and
 fitting a typical campaign. ``BackgroundRun`` hands that to a forked child process as the
@@ -9,7 +10,8 @@ same calls run in-process, in the same order, so both ways log the same run.
 
 Protocol, one JSON line per message on a private pipe (never pickle):
 
-1. the child imports mlflow and the store's modules, touching nothing on disk;
+1. the child imports mlflow and the store's modules, touching nothing on disk, and runs the
+   optional ``prepare()`` (work the logging would otherwise do on first use);
 2. ``start(run_name)``: the input is valid, so the child opens the store and starts the run;
 3. ``log(record)``, any number of times: the child logs ``record`` with the given function;
 4. ``finish()``: the child ends the run and answers with the merged results of the log
@@ -44,9 +46,9 @@ def allow_fork() -> None:
     _allowed = True
 
 
-def _can_fork() -> bool:
-    return (_allowed and hasattr(os, "fork") and "mlflow" not in sys.modules
-            and threading.active_count() == 1)
+def _can_fork(mlflow_free: bool = True) -> bool:
+    return (_allowed and hasattr(os, "fork") and threading.active_count() == 1
+            and not (mlflow_free and "mlflow" in sys.modules))
 
 
 class _Aborted(Exception):
@@ -56,13 +58,16 @@ class _Aborted(Exception):
 class BackgroundRun:
     """``with BackgroundRun(experiment, log) as run``: ``run.start(name)``, ``run.log(record)``
     (``log(record) -> dict`` is called inside the MLflow run), ``result = run.finish()``.
+    ``prepare()``, if given, runs in the child before it waits for the run: what the logging
+    needs on first use is ready by then (in-process, the logging does it when it comes).
 
     Create it after importing what both processes use (pandas, which mlflow imports too) and
     before what only the command uses: the child is forked at once and shares the former.
     """
 
-    def __init__(self, experiment: str, log: Callable[[dict], dict]):
-        self._experiment, self._log = experiment, log
+    def __init__(self, experiment: str, log: Callable[[dict], dict],
+                 prepare: Callable[[], None] | None = None):
+        self._experiment, self._log, self._prepare = experiment, log, prepare
         self._pid = self._pipes = None
         self._started = False
         self._inline = None  # the in-process run: its context stack and merged results
@@ -135,7 +140,8 @@ class BackgroundRun:
         if pid == 0:
             os.close(down_w)
             os.close(up_r)
-            _child(os.fdopen(down_r, "r"), os.fdopen(up_w, "w"), self._experiment, self._log)
+            _child(os.fdopen(down_r, "r"), os.fdopen(up_w, "w"), self._experiment, self._log,
+                   self._prepare)
         os.close(down_r)
         os.close(up_w)
         self._pid = pid
@@ -153,7 +159,79 @@ class BackgroundRun:
         return json.loads(line) if line else None
 
 
-def _child(inbox, outbox, experiment: str, log) -> None:
+class BackgroundTask:
+    """``with BackgroundTask(work) as task``: ``work()`` runs in a forked child while the
+    caller goes on, and ``task.result()`` waits for what it returned (plain JSON data).
+
+    The child is a copy of the caller at the fork, so it needs nothing sent; whatever else it
+    changes stays its own. Where the process may not fork (as ``BackgroundRun``, except that
+    mlflow may be imported), ``work`` runs in-process when ``result()`` is called. Leaving the
+    ``with`` block on an exception stops a child still at work: a failed command leaves
+    nothing behind that its clean-up would miss.
+    """
+
+    def __init__(self, work: Callable[[], object]):
+        self._work, self._pid, self._inbox = work, None, None
+        if _can_fork(mlflow_free=False):
+            self._fork()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type, *_) -> None:
+        if self._pid is not None:
+            if exc_type is not None:
+                os.kill(self._pid, signal.SIGKILL)
+            self._inbox.close()
+            os.waitpid(self._pid, 0)
+            self._pid = None
+
+    def result(self):
+        """What ``work()`` returned; its error (an ``InputError`` as such) if it failed."""
+        if self._pid is None:
+            return self._work()
+        line = self._inbox.readline()
+        self.__exit__(None)
+        reply = json.loads(line) if line else {"error": "the background task ended without "
+                                                        "an answer"}
+        if "error" in reply:
+            if reply.get("input"):
+                raise InputError(reply["error"])
+            raise RuntimeError(f"background task failed:\n{reply['error']}")
+        return reply["value"]
+
+    def _fork(self) -> None:
+        up_r, up_w = os.pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()  # or the child would print the parent's buffered text again
+        pid = os.fork()
+        if pid == 0:
+            os.close(up_r)
+            _answer(os.fdopen(up_w, "w"), self._work)
+        os.close(up_w)
+        self._pid, self._inbox = pid, os.fdopen(up_r, "r")
+
+
+def _answer(outbox, work) -> None:
+    """Body of a task's child: ``work()``'s value or error on ``outbox``; never returns."""
+    gc.disable()  # short-lived: its garbage goes back with the process
+    code = 0
+    try:
+        reply = {"value": work()}
+    except InputError as err:
+        reply = {"error": err.line(), "input": True}
+    except BaseException:  # noqa: BLE001 - a bug: the parent raises it with this traceback
+        reply, code = {"error": traceback.format_exc()}, 1
+    try:
+        outbox.write(json.dumps(reply) + "\n")
+        outbox.flush()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(code)
+
+
+def _child(inbox, outbox, experiment: str, log, prepare) -> None:
     """Body of the forked child; never returns (``os._exit``), so the parent's ``finally``
     blocks, atexit handlers and buffered files are never run twice."""
     # Short-lived and ended by os._exit: cyclic garbage goes back with the process, and no
@@ -161,7 +239,7 @@ def _child(inbox, outbox, experiment: str, log) -> None:
     gc.disable()
     code = 0
     try:
-        reply = _serve(inbox, experiment, log)
+        reply = _serve(inbox, experiment, log, prepare)
     except _Aborted:
         reply = None
     except InputError as err:
@@ -178,10 +256,12 @@ def _child(inbox, outbox, experiment: str, log) -> None:
         os._exit(code)
 
 
-def _serve(inbox, experiment: str, log) -> dict:
+def _serve(inbox, experiment: str, log, prepare) -> dict:
     from pipeline import tracking
 
     tracking.import_store()
+    if prepare is not None:
+        prepare()
     start = _next(inbox)
     with tracking.run(experiment, start["run_name"]) as active:
         result = {"run_id": active.info.run_id}

@@ -130,6 +130,20 @@ def import_store():
     return mlflow
 
 
+def prepare_model_logging() -> None:
+    """Do ahead what logging the first model in a process costs besides the store: import
+    ``mlflow.pyfunc`` and build MLflow's map of installed packages to their modules, which
+    ``log_model`` reads to check the model's requirements against the installed versions
+    (it reads the file list of every installed package: about half a second). A process
+    that waits for a model to log (``pipeline.background_run``) calls it while it waits."""
+    import mlflow.pyfunc  # noqa: F401
+    from mlflow.utils import requirements_utils
+
+    build = getattr(requirements_utils, "_init_modules_to_packages_map", None)
+    if build is not None:  # a private cache of MLflow's: a version without it builds its own
+        build()
+
+
 def client():
     """An ``MlflowClient`` on the configured store."""
     return mlflow_module().MlflowClient()

@@ -222,14 +222,17 @@ def to_int(series, path, col, rows) -> pd.Series:
 
 
 def to_datetime(series, path, col, rows) -> pd.Series:
-    given = series.notna() & series.astype(str).str.strip().ne("")
-    values = pd.to_datetime(series.where(given), errors="coerce", utc=True, format="ISO8601")
-    bad = values.isna() & given
+    # Parse each distinct text once, as ``to_float`` does: the readings of a test share its
+    # start time, and a reading's time often repeats across tests.
+    codes, distinct = _distinct(series)
+    given = distinct.notna() & distinct.astype(str).str.strip().ne("")
+    parsed = pd.to_datetime(distinct.where(given), errors="coerce", utc=True, format="ISO8601")
+    bad = (parsed.isna() & given).to_numpy()[codes]
     if bad.any():
         i = _first_bad(bad)
         raise InputError(f"{series.iloc[i]!r} is not an ISO 8601 date-time", file=path,
                          row=row_of(rows, i), column=col)
-    return values
+    return pd.Series(parsed.array.take(codes), index=series.index, name=series.name)
 
 
 def _map_labels(frame, col, aliases, path, expected) -> pd.Series:

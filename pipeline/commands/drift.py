@@ -31,17 +31,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
+    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
+
     from features.readings.fileio import dumps
     from pipeline import tracking
+    from pipeline.background_run import BackgroundRun
     from pipeline.commands.data import readings_arg
     from pipeline.workflows.drift import drift
 
     tracking.check_uri()
-    result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
-                   model=args.model, warn_months=args.warn_months, alpha=args.alpha,
-                   min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
-    result.write(args.out)
-    tracking.log_result(result)
+    with BackgroundRun("drift", tracking.log_into) as mlflow_run:
+        result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
+                       model=args.model, warn_months=args.warn_months, alpha=args.alpha,
+                       min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
+        mlflow_run.start(result.run_name)  # the input is valid: the run may start
+        result.write(args.out)
+        mlflow_run.log(tracking.record_data(result.tracking_record()))
+        mlflow_run.finish()
     print_summary(result.series, result.files["html"], file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

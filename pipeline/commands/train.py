@@ -29,11 +29,11 @@ def run(args: argparse.Namespace) -> int:
     import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
 
     from pipeline import tracking
-    from pipeline.background_run import BackgroundRun
+    from pipeline.background_run import BackgroundRun, BackgroundTask
     from pipeline.commands.data import data_params, readings_arg
 
     tracking.check_uri()
-    with BackgroundRun("train", tracking.log_into) as mlflow_run:
+    with BackgroundRun("train", tracking.log_into, tracking.prepare_model_logging) as mlflow_run:
         from pipeline.workflows.train import train
 
         result = train(readings_arg(args), model=args.model, split=args.split,
@@ -41,8 +41,13 @@ def run(args: argparse.Namespace) -> int:
         mlflow_run.start(f"train {result.model}")  # the input is valid: the run may start
         print(f"{result.n_points} backlash points, target {result.target_kind}: "
               f"{result.target_reason}", file=sys.stderr)
-        model_dir = result.write(args.out)["model"]
-        mlflow_run.log(tracking.record_data(result.tracking_record()))
+        model_dir = result.save(args.out)
+        # A second child draws the figures while this process scores the backtest for the
+        # model's record and the MLflow child logs and registers the model.
+        with BackgroundTask(lambda: [str(p) for p in result.draw()]) as drawing:
+            mlflow_run.log(tracking.record_data(result.tracking_record()))
+            result.drawn(drawing.result())
+        mlflow_run.log(tracking.record_data(result.figures_record()))
         logged = mlflow_run.finish()
     print_metrics(result.model, result.metrics, file=sys.stderr)
     print(f"model -> {model_dir}/; MLflow run {logged['run_id']}, "

@@ -3,7 +3,8 @@
 The CLI (``pipeline.commands``), experiment files (``pipeline.experiment``) and Python users
 (``pipeline.api``) all call these functions. A workflow checks what it is given with
 ``check_params`` (scikit-learn's constraint language, the same as the estimators'
-``_parameter_constraints``), never prints (notes are ``BacklashWarning`` or result fields,
+``_parameter_constraints``; ``pipeline.workflows.constraints`` speaks it without importing
+scikit-learn), never prints (notes are ``BacklashWarning`` or result fields,
 progress goes to the ``progress`` callback) and names Python parameters in its errors.
 """
 
@@ -21,7 +22,8 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
     ----------
     constraints : dict
         Parameter name -> list of constraints (``Interval``, ``StrOptions``, types,
-        ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``.
+        ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``; those
+        of ``pipeline.workflows.constraints`` are checked without importing scikit-learn.
     values : dict
         Parameter name -> value given.
     caller : str
@@ -32,18 +34,32 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
     InputError
         Naming the first parameter that breaks its constraint (``.parameter`` is its name).
     """
+    from pipeline.workflows import constraints as light
+
+    for name, value in values.items():
+        if name not in constraints:
+            continue
+        given = constraints[name]
+        if light.understood(given):
+            message = light.violation(given, value, name, caller)
+        else:
+            message = _sklearn_violation(given, value, name, caller)
+        if message is not None:
+            raise InputError(_constraint_text(message, name), parameter=name)
+
+
+def _sklearn_violation(given: list, value, name: str, caller: str) -> str | None:
+    """scikit-learn's message for ``value`` breaking ``given``, or None when it meets them."""
     from sklearn.utils._param_validation import (
         InvalidParameterError,
         validate_parameter_constraints,
     )
 
-    for name, value in values.items():
-        if name not in constraints:
-            continue
-        try:
-            validate_parameter_constraints({name: constraints[name]}, {name: value}, caller)
-        except InvalidParameterError as err:
-            raise InputError(_constraint_text(str(err), name), parameter=name) from None
+    try:
+        validate_parameter_constraints({name: given}, {name: value}, caller)
+    except InvalidParameterError as err:
+        return str(err)
+    return None
 
 
 def _constraint_text(message: str, name: str) -> str:

@@ -11,12 +11,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
-from sklearn.utils._param_validation import StrOptions
 
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params, each_once
+from pipeline.workflows.constraints import StrOptions
 from pipeline.workflows.train import DATA_PARAMETERS, SPLITS, model_data
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")

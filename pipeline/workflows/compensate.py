@@ -27,13 +27,13 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of
 
 def _parameters() -> dict:
     """The constraints of ``compensate``'s parameters (scikit-learn's constraint language),
-    built on first use: importing scikit-learn and pandas would slow every command's start."""
+    built on first use: the CLI reads the workflow records on every start."""
     import datetime as dt
 
     import pandas as pd
-    from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
     from features.uncertainty import UncertaintyBudget
+    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
     return {
         "data": [str, os.PathLike, pd.DataFrame, HasMethods(["predict"])],

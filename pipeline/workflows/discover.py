@@ -22,8 +22,8 @@ DEFAULT_BASELINE = "backlash,lead_error_linear"
 
 def _parameters() -> dict:
     """The constraints of ``discover``'s parameters (scikit-learn's constraint language),
-    built on first use: importing scikit-learn would slow every command's start."""
-    from sklearn.utils._param_validation import Interval, StrOptions
+    built on first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows.constraints import Interval, StrOptions
 
     return {
         "format": [StrOptions(set(schema.FORMATS))],

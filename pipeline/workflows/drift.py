@@ -21,9 +21,9 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of,
 
 
 def _parameters() -> dict:
-    """The constraints of ``drift``'s parameters (scikit-learn's constraint language), built on
-    first use: importing scikit-learn would slow every command's start."""
-    from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+    """The constraints of ``drift``'s parameters (scikit-learn's constraint language, checked
+    without importing scikit-learn: drift fits no estimator)."""
+    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
     return {
         "format": [StrOptions(set(schema.FORMATS))],
@@ -81,6 +81,11 @@ class DriftResult(Result):
 
         return clean_nan({"series": [s.to_json() for s in self.series]})
 
+    @property
+    def run_name(self) -> str:
+        """The name of its MLflow run: ``drift`` and the data's file name."""
+        return f"drift {os.path.basename(self.source)}"
+
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``drift``: parameters, per-series figures, the report files."""
         from pipeline.tracking import data_hash
@@ -104,7 +109,7 @@ class DriftResult(Result):
             metrics[f"n_change_points_{key}"] = float(len(s.change_points))
             if s.coverage_factor is not None:
                 metrics[f"backlash_U_um_{key}"] = float(s.visits["backlash_U_um"].iloc[-1])
-        return TrackingRecord("drift", f"drift {os.path.basename(self.source)}", params=params,
+        return TrackingRecord("drift", self.run_name, params=params,
                               metrics=metrics, artifacts=list(self.files.values()),
                               artifact_path="drift")
 

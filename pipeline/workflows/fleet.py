@@ -48,8 +48,8 @@ NEXT_VISIT_REASONS = ("above_threshold", "crossing", "interval")
 
 def _parameters() -> dict:
     """The constraints of ``fleet``'s parameters (scikit-learn's constraint language), built on
-    first use: importing scikit-learn would slow every command's start."""
-    from sklearn.utils._param_validation import Interval, StrOptions
+    first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows.constraints import Interval, StrOptions
 
     positive = Interval(Real, 0, None, closed="neither")
     return {

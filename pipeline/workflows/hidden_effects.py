@@ -24,8 +24,8 @@ FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "scor
 
 def _parameters() -> dict:
     """The constraints of ``hidden_effects``'s parameters (scikit-learn's constraint
-    language), built on first use: importing scikit-learn would slow every command's start."""
-    from sklearn.utils._param_validation import HasMethods, Interval
+    language), built on first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows.constraints import HasMethods, Interval
 
     return {
         "scenarios": [str, os.PathLike, dict, HasMethods(["check"])],

@@ -23,11 +23,11 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of
 
 def _parameters() -> dict:
     """The constraints of the parameters (scikit-learn's constraint language), built on first
-    use: importing scikit-learn would slow every command's start."""
+    use: the CLI reads the workflow records on every start."""
     import pandas as pd
-    from sklearn.utils._param_validation import StrOptions
 
     from features.readings import schema
+    from pipeline.workflows.constraints import StrOptions
 
     return {
         "files": [str, os.PathLike, pd.DataFrame, list, tuple],

@@ -39,9 +39,10 @@ UNCERTAINTY_KEYS = unc.TEST_UNCERTAINTY_KEYS
 
 def _parameters() -> dict:
     """The constraints of ``iso``'s parameters (scikit-learn's constraint language), built on
-    first use: importing scikit-learn would slow every command's start."""
+    first use: the CLI reads the workflow records on every start."""
     import pandas as pd
-    from sklearn.utils._param_validation import StrOptions
+
+    from pipeline.workflows.constraints import StrOptions
 
     return {
         "data": [str, os.PathLike, pd.DataFrame, list, tuple],

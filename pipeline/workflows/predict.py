@@ -13,13 +13,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
-from sklearn.utils._param_validation import StrOptions
 
 from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
 from models.registry import TrainedModel
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows.constraints import StrOptions
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")

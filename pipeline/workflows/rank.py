@@ -22,8 +22,8 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of,
 
 def _parameters() -> dict:
     """The constraints of ``rank``'s parameters (scikit-learn's constraint language), built on
-    first use: importing scikit-learn would slow every command's start."""
-    from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+    first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
     return {
         "format": [StrOptions(set(schema.FORMATS))],

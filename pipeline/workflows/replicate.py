@@ -21,9 +21,10 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of,
 
 def _parameters() -> dict:
     """The constraints of ``replicate``'s parameters (scikit-learn's constraint language),
-    built on first use: importing scikit-learn would slow every command's start."""
+    built on first use: the CLI reads the workflow records on every start."""
     import pandas as pd
-    from sklearn.utils._param_validation import Interval, StrOptions
+
+    from pipeline.workflows.constraints import Interval, StrOptions
 
     return {
         "format": [StrOptions(set(schema.FORMATS))],

@@ -24,9 +24,8 @@ def _parameters() -> dict:
     twin are slow to import, and every command's start imports this module)."""
     from numbers import Integral
 
-    from sklearn.utils._param_validation import Interval
-
     from models.physics.campaign import Campaign
+    from pipeline.workflows.constraints import Interval
 
     seed = Interval(Integral, 0, MAX_SEED, closed="both")
     return {"config": [str, os.PathLike, dict, Campaign, None],

@@ -24,9 +24,10 @@ TABLE_COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repea
 
 def _parameters() -> dict:
     """The constraints of ``targets``' parameters (scikit-learn's constraint language), built
-    on first use: importing scikit-learn would slow every command's start."""
+    on first use: the CLI reads the workflow records on every start."""
     import pandas as pd
-    from sklearn.utils._param_validation import StrOptions
+
+    from pipeline.workflows.constraints import StrOptions
 
     return {
         "data": [str, os.PathLike, pd.DataFrame],

@@ -15,7 +15,6 @@ from numbers import Integral
 from pathlib import Path
 
 import pandas as pd
-from sklearn.utils._param_validation import Interval, StrOptions
 
 from features.readings.errors import InputError, note
 from features.readings.schema import FORMATS
@@ -23,6 +22,7 @@ from features.uncertainty import UncertaintyBudget
 from models import registry
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params, each_once, readings_of, source_of
+from pipeline.workflows.constraints import Interval, StrOptions
 
 MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
 TARGETS = ("auto", "paper", "iso")
@@ -120,14 +120,29 @@ class TrainResult(Result):
     def write(self, out) -> dict[str, Path]:
         """Save the model directory ``out`` (``model.json``, the estimator, the training
         inputs) and the figures of the fit in ``out/figures``."""
+        self.save(out)
+        self.draw()
+        return self.files
+
+    def save(self, out) -> Path:
+        """The first half of ``write``: the model directory ``out`` without its figures."""
+        self.files = {"model": registry.save_model(self.trained, out)}
+        return self.files["model"]
+
+    def draw(self) -> list[Path]:
+        """The second half of ``write``: the figures of the fit in the saved model directory's
+        ``figures`` folder."""
         from pipeline import model_tracking
         from pipeline.model_report import write_figures
 
-        model_dir = registry.save_model(self.trained, out)
-        self.figures = write_figures(self.fit, model_dir / model_tracking.FIGURES,
-                                     U_um=self.metrics.get("U_B_um"))
-        self.files = {"model": model_dir, **{p.stem: p for p in self.figures}}
-        return self.files
+        return self.drawn(write_figures(self.fit, self.files["model"] / model_tracking.FIGURES,
+                                        U_um=self.metrics.get("U_B_um")))
+
+    def drawn(self, figures: list) -> list[Path]:
+        """Take ``figures`` (paths ``draw`` wrote, maybe in another process) as the result's."""
+        self.figures = [Path(p) for p in figures]
+        self.files.update({p.stem: p for p in self.figures})
+        return self.figures
 
     def to_json(self) -> dict:
         from models.evaluation import resolution_verdict
@@ -140,7 +155,9 @@ class TrainResult(Result):
 
     def tracking_record(self):
         """Params, metrics, the figures and the model (registered; champion if best on the
-        same data). A result not written yet is written to a temporary folder first."""
+        same data). A result not written yet is written to a temporary folder first; one
+        saved but not drawn yet (``save`` without ``draw``) has no figures in its record:
+        ``figures_record`` logs them once drawn."""
         import tempfile
 
         from pipeline import model_tracking
@@ -153,6 +170,15 @@ class TrainResult(Result):
             metrics=self.metrics, artifacts=list(self.figures),
             artifact_path=model_tracking.FIGURES,
             model=model_tracking.model_record(self.fit, self.files["model"]), promote=True)
+
+    def figures_record(self):
+        """The figures alone, for the run ``tracking_record`` started before they were drawn:
+        the model is logged while they are drawn."""
+        from pipeline import model_tracking
+        from pipeline.results import TrackingRecord
+
+        return TrackingRecord(experiment="train", run_name=f"train {self.model}",
+                              artifacts=list(self.figures), artifact_path=model_tracking.FIGURES)
 
 
 def train(data, *, model: str | None = None, format: str = "auto", target: str = "auto",

@@ -13,11 +13,10 @@ from dataclasses import dataclass, field
 from numbers import Integral
 from pathlib import Path
 
-from sklearn.utils._param_validation import Interval
-
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
 from pipeline.workflows import Workflow, check_params
+from pipeline.workflows.constraints import Interval
 from pipeline.workflows.train import DATA_PARAMETERS, model_data
 
 PARAMETERS = {

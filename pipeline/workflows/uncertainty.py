@@ -26,7 +26,7 @@ from pipeline.workflows import Constraints, Workflow, check_params
 def _parameters() -> dict:
     """The constraints of ``uncertainty``'s parameters, built on first use (importing
     scikit-learn would slow every command's start)."""
-    from sklearn.utils._param_validation import StrOptions
+    from pipeline.workflows.constraints import StrOptions
 
     return {
         "budget": [str, os.PathLike, dict, unc.UncertaintyBudget],
