@@ -10,6 +10,7 @@ import sys
 from numbers import Integral, Real
 from pathlib import Path
 
+import numpy as np
 import pytest
 from sklearn.utils import _param_validation as sk
 
@@ -19,7 +20,8 @@ from pipeline.workflows import constraints as light
 
 REPO = Path(__file__).resolve().parents[1]
 VALUES = [None, 0, 0.0, -1, 1, 2, 0.5, 0.25, float("nan"), float("inf"), -float("inf"), True,
-          "x", "csv", [1], {}, 3.0, 7, 2.0, -1.5, Path("a.csv")]
+          "x", "csv", [1], {}, 3.0, 7, 2.0, -1.5, Path("a.csv"), np.bool_(False),
+          np.array([2.0, 4.0]), np.float64(3.0), (1, 2)]
 
 
 def _pairs():
@@ -38,6 +40,9 @@ def _pairs():
                   [str, os.PathLike, sk.HasMethods(["predict"]), None]),
         "estimator": ([light.HasMethods(["fit", "predict"])], [sk.HasMethods(["fit", "predict"])]),
         "budget": ([str, os.PathLike, dict, None], [str, os.PathLike, dict, None]),
+        "verify": (["boolean"], ["boolean"]),
+        "classes": ([light.Interval(Integral, 2, None, closed="left"), str, "array-like"],
+                    [sk.Interval(Integral, 2, None, closed="left"), str, "array-like"]),
     }
 
 

@@ -62,10 +62,12 @@ def _set(frame, row, col, value):
 
 
 def _mixed_units(frame, row):
-    """One reading written in mm among readings in um (1000x too small)."""
+    """One reading written in mm among readings in um (1000x too small), or in deg among
+    arcsec on a rotary axis (3600x)."""
     value = frame.loc[row, "deviation_um"]
+    factor = 3600.0 if frame.loc[row, "axis"] in ("A", "B", "C") else 1000.0
     return _set(frame.assign(deviation_um=frame["deviation_um"]), row, "deviation_um",
-                value / 1000.0 if abs(value) >= 1.0 else value * 1000.0)
+                value / factor if abs(value) >= 1.0 else value * factor)
 
 
 # name -> (mutation(frame, row, data) -> frame, or text edit, words expected in the line)

@@ -109,6 +109,34 @@ class _InstanceOf(_Constraint):
         return f"an instance of {_type_name(self.type)!r}"
 
 
+class _Boolean(_Constraint):
+    """scikit-learn's "boolean": a Python or a numpy bool."""
+
+    def is_satisfied_by(self, value) -> bool:
+        import numpy as np
+
+        return isinstance(value, (bool, np.bool_))
+
+    def __str__(self) -> str:
+        return "an instance of 'bool' or an instance of 'numpy.bool'"
+
+
+class _ArrayLike(_Constraint):
+    """scikit-learn's "array-like": a sized or array-convertible value that is not a scalar."""
+
+    def is_satisfied_by(self, value) -> bool:
+        import numpy as np
+
+        return (hasattr(value, "__len__") or hasattr(value, "shape")
+                or hasattr(value, "__array__")) and not np.isscalar(value)
+
+    def __str__(self) -> str:
+        return "an array-like"
+
+
+NAMED = {"boolean": _Boolean, "array-like": _ArrayLike}
+
+
 class _IsNone(_Constraint):
     def is_satisfied_by(self, value) -> bool:
         return value is None
@@ -128,9 +156,11 @@ def _type_name(t: type) -> str:
 
 
 def understood(constraints: list) -> bool:
-    """Whether this module checks every constraint of a parameter: its own classes, types
-    and None (anything else, such as scikit-learn's classes, goes to scikit-learn)."""
-    return all(c is None or isinstance(c, (type, _Constraint)) for c in constraints)
+    """Whether this module checks every constraint of a parameter: its own classes, types,
+    None, "boolean" and "array-like" (anything else, such as scikit-learn's classes, goes to
+    scikit-learn)."""
+    return all(c is None or isinstance(c, (type, _Constraint)) or c in NAMED
+               for c in constraints)
 
 
 def violation(constraints: list, value, name: str, caller: str) -> str | None:
@@ -149,4 +179,6 @@ def _constraint(c) -> _Constraint:
         return _IsNone()
     if isinstance(c, type):
         return _InstanceOf(c)
+    if isinstance(c, str):
+        return NAMED[c]()
     return c
