@@ -107,13 +107,7 @@ class BackgroundRun:
         self._send({"finish": True})
         reply = self._receive()
         self.close()
-        if reply is None:
-            raise RuntimeError("the MLflow logging process ended without an answer")
-        if "error" in reply:
-            if reply.get("input"):
-                raise InputError(reply["error"])
-            raise RuntimeError(f"MLflow logging failed:\n{reply['error']}")
-        return reply
+        return _checked(reply, "MLflow logging")
 
     def close(self, exc_type=None, exc=None, tb=None) -> None:
         """End what is open: a run left by an exception ends FAILED (a child sees its pipe
@@ -192,13 +186,7 @@ class BackgroundTask:
             return self._work()
         line = self._inbox.readline()
         self.__exit__(None)
-        reply = json.loads(line) if line else {"error": "the background task ended without "
-                                                        "an answer"}
-        if "error" in reply:
-            if reply.get("input"):
-                raise InputError(reply["error"])
-            raise RuntimeError(f"background task failed:\n{reply['error']}")
-        return reply["value"]
+        return _checked(json.loads(line) if line else None, "background task")["value"]
 
     def _fork(self) -> None:
         up_r, up_w = os.pipe()
@@ -210,6 +198,17 @@ class BackgroundTask:
             _answer(os.fdopen(up_w, "w"), self._work)
         os.close(up_w)
         self._pid, self._inbox = pid, os.fdopen(up_r, "r")
+
+
+def _checked(reply: dict | None, what: str) -> dict:
+    """A child's reply, or its error raised here (an ``InputError`` as such)."""
+    if reply is None:
+        raise RuntimeError(f"{what} ended without an answer")
+    if "error" in reply:
+        if reply.get("input"):
+            raise InputError(reply["error"])
+        raise RuntimeError(f"{what} failed:\n{reply['error']}")
+    return reply
 
 
 def _answer(outbox, work) -> None:
