@@ -128,9 +128,7 @@ class BackgroundRun:
     def _fork(self) -> None:
         down_r, down_w = os.pipe()
         up_r, up_w = os.pipe()
-        sys.stdout.flush()
-        sys.stderr.flush()  # or the child would print the parent's buffered text again
-        pid = os.fork()
+        pid = _fork_flushed()
         if pid == 0:
             os.close(down_w)
             os.close(up_r)
@@ -190,14 +188,20 @@ class BackgroundTask:
 
     def _fork(self) -> None:
         up_r, up_w = os.pipe()
-        sys.stdout.flush()
-        sys.stderr.flush()  # or the child would print the parent's buffered text again
-        pid = os.fork()
+        pid = _fork_flushed()
         if pid == 0:
             os.close(up_r)
             _answer(os.fdopen(up_w, "w"), self._work)
         os.close(up_w)
         self._pid, self._inbox = pid, os.fdopen(up_r, "r")
+
+
+def _fork_flushed() -> int:
+    """``os.fork()`` after flushing stdout and stderr, or the child would print the parent's
+    buffered text again."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    return os.fork()
 
 
 def _checked(reply: dict | None, what: str) -> dict:
