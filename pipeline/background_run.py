@@ -218,20 +218,7 @@ def _checked(reply: dict | None, what: str) -> dict:
 def _answer(outbox, work) -> None:
     """Body of a task's child: ``work()``'s value or error on ``outbox``; never returns."""
     gc.disable()  # short-lived: its garbage goes back with the process
-    code = 0
-    try:
-        reply = {"value": work()}
-    except InputError as err:
-        reply = {"error": err.line(), "input": True}
-    except BaseException:  # noqa: BLE001 - a bug: the parent raises it with this traceback
-        reply, code = {"error": traceback.format_exc()}, 1
-    try:
-        outbox.write(json.dumps(reply) + "\n")
-        outbox.flush()
-        sys.stdout.flush()
-        sys.stderr.flush()
-    finally:
-        os._exit(code)
+    _reply_and_exit(outbox, lambda: {"value": work()})
 
 
 def _child(inbox, outbox, experiment: str, log, prepare) -> None:
@@ -240,9 +227,16 @@ def _child(inbox, outbox, experiment: str, log, prepare) -> None:
     # Short-lived and ended by os._exit: cyclic garbage goes back with the process, and no
     # collector passes over the growing heap while mlflow imports (15 % of the import time).
     gc.disable()
+    _reply_and_exit(outbox, lambda: _serve(inbox, experiment, log, prepare))
+
+
+def _reply_and_exit(outbox, body) -> None:
+    """Run a child's ``body``, write its reply (or its error) as one JSON line on ``outbox``
+    and end the process with ``os._exit``: 1 after a bug, else 0. An aborted run (the parent
+    went away) writes nothing."""
     code = 0
     try:
-        reply = _serve(inbox, experiment, log, prepare)
+        reply = body()
     except _Aborted:
         reply = None
     except InputError as err:
