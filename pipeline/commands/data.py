@@ -65,12 +65,17 @@ def selected(args, skip: tuple[str, ...] = ()) -> dict:
     return {name: value for name, value in given.items() if value is not None}
 
 
-def add_data_arguments(parser: argparse.ArgumentParser) -> None:
-    """DATA and the options of the model commands (train, compare, tune)."""
-    add_readings_argument(parser)
+def add_target_argument(parser: argparse.ArgumentParser) -> None:
+    """``--target``: which backlash definition the points use (``features.targets``)."""
     parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
                         help="backlash definition: pendulum minus linear (paper), ISO reversal "
                              "value (iso) or chosen from the measuring-system evidence (auto)")
+
+
+def add_data_arguments(parser: argparse.ArgumentParser) -> None:
+    """DATA and the options of the model commands (train, compare, tune)."""
+    add_readings_argument(parser)
+    add_target_argument(parser)
     parser.add_argument("--features", help="comma-separated feature-table columns (default: the "
                                            "paper's inputs the data supply, plus dwell_s and "
                                            "operating_hours)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.data import add_readings_argument
+from pipeline.commands.data import add_readings_argument, add_target_argument
 from pipeline.workflows.targets import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -15,9 +15,7 @@ TABLE_ROWS = 40  # rows printed; targets.csv and --json hold every point
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_readings_argument(parser)
     parser.add_argument("--out", help="output folder: write targets.csv")
-    parser.add_argument("--target", default="auto", choices=("auto", "paper", "iso"),
-                        help="backlash definition: pendulum minus linear (paper), ISO reversal "
-                             "value (iso) or chosen from the measuring-system evidence (auto)")
+    add_target_argument(parser)
     parser.add_argument("--uncertainty", metavar="BUDGET.toml",
                         help="ISO/TR 230-9 budget: add backlash_U_um (the expanded uncertainty "
                              "of each point's backlash)")
