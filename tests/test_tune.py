@@ -94,11 +94,13 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     storage = f"sqlite:///{tmp_path / 'optuna.db'}"
     common = ["--folds", "2", "--storage", storage, "--heartbeat-s", "1"]
     proc = backlash("tune", str(readings_csv), "--trials", "200", *common, cwd=tmp_path)
-    deadline = time.monotonic() + 120
+    deadline, seen = time.monotonic() + 120, None
     while time.monotonic() < deadline:  # kill it inside a trial after one finished
         now = states(storage)
         if now.count("COMPLETE") >= 1 and now[-1:] == ["RUNNING"]:
-            break
+            if seen is not None and len(now) > seen:
+                break  # a trial that began since the last look: far from its end
+            seen = seen or len(now)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         time.sleep(0.1)
     else:
