@@ -4,5 +4,4 @@ The package layout stays ``features/``, ``models/``, ``pipeline/``; this name re
 ``pipeline.api`` (see ``docs/api.md``).
 """
 
-from pipeline.api import (BacklashWarning, InputError, __all__, __dir__,  # noqa: F401
-                          __getattr__)
+from pipeline.api import BacklashWarning, InputError, __all__, __dir__, __getattr__  # noqa: F401

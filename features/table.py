@@ -52,13 +52,16 @@ CONDITION_METHODS = {"paper": ("pendulum",), "iso": None}
 class FeatureTable:
     """Inputs ``X``, target ``y`` [um] and ``meta`` (point keys, date, the point's
     ``target_kind``) aligned row by row; ``target_kind`` of the table is 'paper', 'iso' or
-    'mixed' (axes with different definitions)."""
+    'mixed' (axes with different definitions). ``earlier``: rows set aside from this
+    table that a model may still learn from but is never scored on (the visits before an
+    adjustment that left the hour counter running on)."""
 
     X: pd.DataFrame
     y: pd.Series
     meta: pd.DataFrame
     target_kind: str
     reason: str = ""
+    earlier: FeatureTable | None = None
 
 
 def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:

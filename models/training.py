@@ -69,7 +69,8 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     estimator = registry.make(name, random_state)
     registry.check_inputs(name, estimator, table.X.columns, source)
     X, extra = model_inputs(table, name, hours_origin)
-    estimator.fit(X.iloc[train], table.y.iloc[train], **extra)
+    earlier = earlier_inputs(table, name)
+    estimator.fit(*with_earlier(X.iloc[train], table.y.iloc[train], earlier), **extra)
     predicted = np.asarray(estimator.predict(X), float)
     y = table.y.to_numpy(float)
     rotary = (table.meta["axis"].map(is_rotary).to_numpy(bool) if "axis" in table.meta
@@ -80,7 +81,8 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
                                                      mixed).items()}
     fit = Fit(name, estimator, table, train, test, predicted, metrics, inputs=X)
     if registry.predictor(name).forecasts:  # scored on the hold-out, saved fitted on it all
-        fit.estimator = registry.make(name, random_state).fit(X, table.y, **extra)
+        fit.estimator = registry.make(name, random_state).fit(
+            *with_earlier(X, table.y, earlier), **extra)
         fit.refit_all = True
     if truth is not None:
         fit.truth_um = evaluation.true_backlash(table.meta, truth, table.target_kind)
@@ -94,6 +96,26 @@ def fit_model(table: FeatureTable, name: str, split: str = "random", random_stat
     if noise_floor_um is not None:
         metrics["noise_floor_um"] = float(noise_floor_um)
     return fit
+
+
+def earlier_inputs(table: FeatureTable, name: str):
+    """The inputs and targets of the visits ``since_adjustment`` set aside before an
+    adjustment that left the hour counter running on, for a fleet's per-axis predictor (it
+    tells them by their axis's hours origin and may keep them for the wear rate); None
+    otherwise. They are trained on, never held out nor scored."""
+    earlier = table.earlier
+    if (earlier is None or not registry.predictor(name).per_axis
+            or table.meta.groupby(["machine_id", "axis"], observed=True).ngroups < 2):
+        return None
+    return model_inputs(earlier, name)[0], earlier.y
+
+
+def with_earlier(X: pd.DataFrame, y: pd.Series, earlier) -> tuple[pd.DataFrame, pd.Series]:
+    """``X``, ``y`` followed by the rows of ``earlier_inputs`` (when there are any)."""
+    if earlier is None:
+        return X, y
+    return (pd.concat([X, earlier[0]], ignore_index=True),
+            pd.concat([y, earlier[1]], ignore_index=True))
 
 
 def model_inputs(table: FeatureTable, name: str, hours_origin: dict | None = None):
@@ -137,7 +159,36 @@ def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None):
     kept = FeatureTable(table.X[mask].reset_index(drop=True),
                         table.y[mask].reset_index(drop=True),
                         table.meta[mask].reset_index(drop=True), table.target_kind, table.reason)
+    kept.earlier = earlier_epoch(table, mask, notes, adjustments)
     return kept, note
+
+
+def earlier_epoch(table: FeatureTable, mask: np.ndarray, notes: list[dict],
+                  adjustments: pd.DataFrame | None):
+    """The wear epoch just before the last adjustment of each machine axis whose hour counter
+    ran on through it (a wear map may keep those visits for the wear rate, with a level of
+    their own), or None. ``mask``, ``notes``: ``wear_epochs`` of the table."""
+    from models.wear_map import wear_epochs
+
+    if "machine_id" not in table.meta or "axis" not in table.meta:
+        return None
+    running = {(n["machine_id"], n["axis"]) for n in notes
+               if n["dropped"] and "operating hours drop" not in n["reason"]}
+    if not running or "operating_hours" not in table.X:
+        return None
+    rest = ~mask
+    meta = table.meta[rest].reset_index(drop=True)
+    events = meta.get("event")
+    before, _ = wear_epochs(meta, table.X["operating_hours"][rest].reset_index(drop=True),
+                            events, adjustments)
+    axes = pd.MultiIndex.from_frame(meta[["machine_id", "axis"]].astype(str))
+    rows = np.zeros(len(mask), bool)
+    rows[rest] = before & axes.isin(list(running))
+    if not rows.any():
+        return None
+    return FeatureTable(table.X[rows].reset_index(drop=True),
+                        table.y[rows].reset_index(drop=True),
+                        table.meta[rows].reset_index(drop=True), table.target_kind, table.reason)
 
 
 def hours_origins(table: FeatureTable, notes: list[dict]) -> dict:

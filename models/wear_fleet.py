@@ -7,14 +7,20 @@ the wear map (``models.wear_map``) fits every axis its own maps and condition te
   different lengths share one B-spline basis;
 - on its own wear clock: hours count from the axis's ``hours_origin`` (an adjustment that left
   the hour counter running on);
+- with its visits before such an adjustment (rows whose hours precede the origin) kept for the
+  wear rate when cross-validation on the visits since the adjustments prefers it: that earlier
+  epoch gets a level map of its own (its difference from the level since the adjustment, pooled
+  like the per-target deviations) and shares the rate map, its hours counted from 0; else
+  the rate restarts with the level and those visits are left out;
 - with its own per-target wear-rate deviations (hat functions on its own targets), since a
   screw wears where that machine works, in a shape no common basis follows;
 - sharing strength by partial pooling (``models.pooling``): an axis with few visits borrows
   from the fleet's distribution of maps, an axis with many visits follows its own data.
 
-The number of control points is chosen by cross-validation over the fleet (fold k holds out
-every axis's visits of rank k), and what the held-out visits missed beyond the model's own
-variance (``misfit_um_``: the shape no basis follows) widens every interval. A plan for an
+The number of control points is chosen by rolling-origin cross-validation over the fleet
+(``forecast_folds``: each fold forecasts every axis's next visit), and what the held-out
+visits missed beyond the model's own variance (``misfit_um_``: the shape no basis follows)
+widens every interval. A plan for an
 axis the model does not know is forecast from the fleet's distribution, with its spread of
 maps and of per-target deviations in the interval.
 
@@ -46,8 +52,13 @@ from models.wear_basis import (
 # the fitted state of a model that knows its machine axes (saved with the rest)
 FLEET_STATE = ("pooled_", "axes_", "axis_units_", "axis_range_", "hours_origin_",
                "axis_visits_", "axis_sigma_um_", "misfit_um_", "axis_knots_", "deviation_sd_",
-               "axis_coef_", "axis_covariance_", "prior_covariance_", "shrinkage_")
+               "axis_coef_", "axis_covariance_", "prior_covariance_", "shrinkage_",
+               "epoch_shared_", "epoch_columns_", "epoch_axes_")
 FLEET_ARRAYS = ("axis_coef_", "axis_covariance_", "prior_covariance_")
+# one-visit-ahead folds of the fleet's cross-validation (``forecast_folds``)
+HORIZONS = 3
+# 1 on the rows of an axis's visits before its adjustment (its earlier wear epoch)
+EPOCH = "__epoch__"
 
 
 class FleetWearMap:
@@ -56,7 +67,7 @@ class FleetWearMap:
     single-axis design (``_design``, ``_solve``, ``_learn_inputs``) of the estimator."""
 
     def _fit_fleet(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
-                   hours_origin: dict):
+                   hours_origin: dict, earlier=None):
         axis = self._axis_index(labels)
         x = frame[POSITION].to_numpy(float) if POSITION in frame else np.zeros(len(frame))
         self.axis_range_ = [[float(x[axis == a].min()), float(x[axis == a].max())]
@@ -68,11 +79,16 @@ class FleetWearMap:
         local = self._local(frame, axis)
         self.axis_knots_ = [np.unique(local[POSITION].to_numpy(float)[axis == a]).tolist()
                             if POSITION in local else [0.0] for a in range(len(self.axes_))]
-        self._learn_inputs(local.drop(columns=AXIS_INDEX))
+        self._learn_inputs(local.drop(columns=AXIS_INDEX), axis)
         self.range_mm_ = (float(x.min()), float(x.max()))
         self.cv_scores_ = {}
+        self.epoch_shared_, self.epoch_columns_ = False, 0
+        self.epoch_axes_ = [False] * len(self.axes_)
         if self.use_position_:
             self.n_control_, fitted = self._choose_fleet(local, y, axis)
+            old = self._earlier_local(earlier) if self.use_hours_ else None
+            if old is not None:
+                local, y, axis, fitted = self._shared_rate(local, y, axis, old, fitted)
         else:
             self.n_control_ = 1
         A = self._fleet_design(local, self.n_control_)
@@ -92,6 +108,62 @@ class FleetWearMap:
         self.dof_ = max(len(y) - A.shape[1], 1)
         self.can_forecast_ = bool(self.use_hours_)
         return self
+
+    def _earlier_local(self, earlier):
+        """The visits before an adjustment (``earlier``: frame, y, labels) of the axes whose
+        wear clock restarted with the hour counter running on, in their local frame with the
+        hours counted from 0 and ``EPOCH`` 1; None when there are none."""
+        if earlier is None:
+            return None
+        frame, y, labels = earlier
+        axis = self._axis_index(labels)
+        origin = np.array([self.hours_origin_[a] if a >= 0 else 0.0 for a in axis])
+        hours = frame[HOURS].to_numpy(float)
+        keep = (axis >= 0) & (origin > 0) & (hours < origin)
+        if not keep.any():
+            return None
+        local = self._local(frame[keep].reset_index(drop=True), axis[keep])
+        local[HOURS] = hours[keep]
+        local[EPOCH] = 1.0
+        return local, y[keep], axis[keep]
+
+    def _earlier_epoch(self, local: pd.DataFrame, frame: pd.DataFrame) -> pd.DataFrame:
+        """``local`` with the rows of a known axis before its wear clock restarted marked as
+        its earlier epoch (hours from 0, ``EPOCH`` 1), when the model keeps that epoch."""
+        if not getattr(self, "epoch_shared_", False) or HOURS not in local:
+            return local
+        axis = local[AXIS_INDEX].to_numpy(int)
+        origin = np.array([self.hours_origin_[a] if a >= 0 else 0.0 for a in axis])
+        hours = frame[HOURS].to_numpy(float)
+        old = (axis >= 0) & (origin > 0) & (hours < origin)
+        if not old.any():
+            return local
+        local = local.copy()
+        local.loc[old, HOURS] = hours[old]
+        local[EPOCH] = old.astype(float)
+        return local
+
+    def _shared_rate(self, local, y, axis, old, fitted):
+        """Keep the visits before an adjustment for the wear rate, with a level map of their
+        own (``EPOCH`` columns), when the fleet's cross-validation on the visits since the
+        adjustments prefers it to a rate that restarts; returns the rows and fit chosen."""
+        if not self.cv_scores_:
+            return local, y, axis, fitted
+        restart = (dict(self.cv_scores_), self.misfit_um_, self.n_control_)
+        old_local, old_y, old_axis = old
+        both = pd.concat([local.assign(**{EPOCH: 0.0}), old_local], ignore_index=True)
+        y2, axis2 = np.r_[y, old_y], np.r_[axis, old_axis]
+        self.epoch_shared_ = True
+        self.epoch_axes_ = [bool(np.any(old_axis == a)) for a in range(len(self.axes_))]
+        self.cv_scores_ = {}
+        choice, shared = self._choose_fleet(both, y2, axis2, both[EPOCH].to_numpy(float) > 0)
+        if min(self.cv_scores_.values()) < min(restart[0].values()):
+            self.n_control_ = choice
+            return both, y2, axis2, shared
+        self.cv_scores_, self.misfit_um_, self.n_control_ = restart
+        self.epoch_shared_, self.epoch_columns_ = False, 0
+        self.epoch_axes_ = [False] * len(self.axes_)
+        return local, y, axis, fitted
 
     def _borrowed(self, A: np.ndarray, axis: np.ndarray, fitted) -> list[float]:
         """How much of each axis's mean wear rate rests on the fleet: its posterior variance
@@ -137,7 +209,14 @@ class FleetWearMap:
     def _fleet_design(self, local: pd.DataFrame, choice) -> np.ndarray:
         """The shared design (``_design``: maps on the common 0..1 basis and the condition
         terms) followed by each axis's own per-target wear-rate deviations."""
-        return np.hstack([self._design(local, choice), self._deviation_design(local)])
+        A = np.hstack([self._design(local, choice), self._deviation_design(local)])
+        if not getattr(self, "epoch_shared_", False):
+            return A
+        # the earlier epoch's own level: its difference from the level since the adjustment
+        flag = (local[EPOCH].to_numpy(float) if EPOCH in local else np.zeros(len(local)))
+        levels = self._basis(local[POSITION].to_numpy(float), choice) * flag[:, None]
+        self.epoch_columns_ = levels.shape[1]
+        return np.hstack([A, levels])
 
     def _deviation_design(self, local: pd.DataFrame) -> np.ndarray:
         """Hat functions on each axis's own targets (padded to the fleet's most targets) for
@@ -172,7 +251,13 @@ class FleetWearMap:
         start = (0.05 * max(float(np.std(y)), 1e-6)) ** 2
         if self.use_hours_:
             start /= max(float(np.ptp(local[HOURS])) / 1000.0, 1e-6) ** 2
-        return Deviations(np.zeros(width, int), used, np.array([start]))
+        if not getattr(self, "epoch_shared_", False):
+            return Deviations(np.zeros(width, int), used, np.array([start]))
+        # the earlier epochs' level differences: one more group, used by the adjusted axes
+        n = self.epoch_columns_
+        used = np.hstack([used, np.repeat(np.array(self.epoch_axes_, bool)[:, None], n, 1)])
+        return Deviations(np.r_[np.zeros(width, int), np.ones(n, int)], used,
+                          np.array([start, (0.3 * max(float(np.std(y)), 1e-6)) ** 2]))
 
     def _blocks(self, A: np.ndarray, y: np.ndarray, axis: np.ndarray, local: pd.DataFrame):
         from models.pooling import VisitBlocks
@@ -193,10 +278,12 @@ class FleetWearMap:
         return pool(blocks, start, np.maximum(scale, 1e-9), deviations, warm,
                     MAX_ITERATIONS if warm is None else FOLD_ITERATIONS)
 
-    def _choose_fleet(self, local: pd.DataFrame, y: np.ndarray, axis: np.ndarray):
-        """Control points by cross-validation over the fleet: fold k holds out every axis's
-        visits of rank k (mod the folds), so each fold forecasts visits the pooled fit has not
-        seen, as the model will. Returns the choice and its fit on all the rows."""
+    def _choose_fleet(self, local: pd.DataFrame, y: np.ndarray, axis: np.ndarray,
+                      old: np.ndarray | None = None):
+        """Control points by cross-validation over the fleet (``forecast_folds``: each fold
+        forecasts every axis's visit one ahead of those it fits, as the model will). Returns
+        the choice and its fit on all the rows. ``old``: the rows of earlier wear epochs,
+        always trained on, never scored."""
         smallest = min(len(np.unique(local[POSITION].to_numpy(float)[axis == a]))
                        for a in range(len(self.axes_)))
         if self.n_control == "targets":
@@ -204,7 +291,8 @@ class FleetWearMap:
                              "axis has per-target deviations from the common B-spline maps")
         candidates = ([self.n_control] if self.n_control is not None
                       else list(range(1, min(self.max_control, smallest) + 1)))
-        folds, by_visit = visit_folds(local, axis)
+        folds = forecast_folds(local, axis, old)
+        scored = max(sum(int(test.sum()) for _, test, _ in folds), 1)
         excess, fits = {}, {}
         for choice in candidates:
             scores = list(self.cv_scores_.values())
@@ -216,9 +304,8 @@ class FleetWearMap:
             if len(candidates) == 1:
                 break
             sse, expected = 0.0, 0.0
-            for k in np.unique(folds):
-                train, test = folds != k, folds == k
-                part = (blocks.subset(block_folds(blocks, folds.max() + 1) != k) if by_visit
+            for train, test, keep in folds:
+                part = (blocks.subset(keep) if keep is not None
                         else self._blocks(A[train], y[train], axis[train], local[train]))
                 fitted = self._pool(A[train], y[train], local[train], part, whole)
                 a = axis[test]
@@ -226,8 +313,8 @@ class FleetWearMap:
                 expected += float(np.sum(
                     np.einsum("ij,ijk,ik->i", A[test], fitted.covariances[a], A[test])
                     + fitted.tau ** 2 + fitted.sigma[a] ** 2))
-            self.cv_scores_[str(choice)] = float(np.sqrt(sse / len(y)))
-            excess[choice] = max(0.0, (sse - expected) / len(y))
+            self.cv_scores_[str(choice)] = float(np.sqrt(sse / scored))
+            excess[choice] = max(0.0, (sse - expected) / scored)
         best = min(fits) if len(fits) == 1 else int(min(self.cv_scores_,
                                                          key=self.cv_scores_.get))
         # what the held-out visits missed by beyond what the posterior, the visit offset and
@@ -277,23 +364,44 @@ class FleetWearMap:
         return pd.concat(maps, ignore_index=True)
 
 
-def block_folds(blocks, n_folds: int) -> np.ndarray:
-    """Fold of every visit block (n_axes, V): its rank within its axis modulo the folds, as
-    ``visit_folds`` gives its rows."""
-    return np.broadcast_to(np.arange(blocks.size.shape[1]) % n_folds, blocks.size.shape)
+def forecast_folds(local: pd.DataFrame, axis: np.ndarray, old: np.ndarray | None = None,
+                   horizons: int = HORIZONS) -> list[tuple]:
+    """Rolling-origin folds over the fleet, as the model is used: fold j holds out every
+    axis's j-th last visit and trains on the visits before it, so each fold forecasts one
+    visit ahead of what the pooled fit has seen [Hyndman2021]_, sec. 5.10. An axis with fewer
+    than j + 2 visits is not scored in fold j (it still trains on its visits before the
+    cut). ``old``: rows of earlier wear epochs, always trained on, never scored.
 
+    Returns ``(train rows, test rows, visit blocks to keep)`` per fold; the blocks (n_axes,
+    most visits) match ``_blocks`` when there are no ``old`` rows, else None. Without an
+    axis of three visits, five folds by row (no blocks).
 
-def visit_folds(local: pd.DataFrame, axis: np.ndarray, n_folds: int = 5):
-    """Fold of every row: its visit's rank within its axis (by hours) modulo the folds, and
-    True; five folds by row when the axes have fewer than three visits, and False."""
+    References
+    ----------
+    .. [Hyndman2021] R. J. Hyndman, G. Athanasopoulos, *Forecasting: Principles and
+       Practice*, 3rd ed., OTexts, 2021.
+    """
     hours = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(local))
-    rank = np.zeros(len(local), int)
+    new = np.ones(len(local), bool) if old is None else ~old
+    rank, count = np.zeros(len(local), int), np.zeros(len(local), int)
+    per_axis = np.zeros(int(axis.max()) + 1, int)
     for a in np.unique(axis):
-        rows = axis == a
+        rows = (axis == a) & new
         rank[rows] = np.unique(hours[rows], return_inverse=True)[1]
-    if rank.max() < 2:
-        return np.arange(len(local)) % n_folds, False
-    return rank % min(n_folds, rank.max() + 1), True
+        count[rows] = per_axis[a] = rank[rows].max() + 1 if rows.any() else 0
+    if per_axis.max() < 3:
+        by_row = np.where(new, np.arange(len(local)) % 5, -1)
+        return [(by_row != k, by_row == k, None) for k in range(5)]
+    folds = []
+    for j in range(1, horizons + 1):
+        cut = count - j
+        test = new & (rank == cut) & (cut >= 2)
+        if not test.any():
+            break
+        keep = (np.arange(per_axis.max())[None, :] < (per_axis - j)[:, None]
+                if old is None else None)
+        folds.append(((new & (rank < cut)) | ~new, test, keep))
+    return folds
 
 
 # per-axis state of a model that knows its machine axes, in ``axes_`` order
@@ -309,7 +417,7 @@ class UnitGroups:
     ``fit``), and their per-axis state merged in ``axes_`` order."""
 
     def _fit_units(self, frame: pd.DataFrame, y: np.ndarray, labels: np.ndarray,
-                   hours_origin: dict):
+                   hours_origin: dict, earlier=None):
         from sklearn.base import clone
 
         units = row_units(labels)
@@ -318,7 +426,14 @@ class UnitGroups:
             rows = units == unit
             X = pd.concat([pd.DataFrame(labels[rows].tolist(), columns=list(GROUPS)),
                            frame[rows].reset_index(drop=True)], axis=1)
-            self.unit_maps_[unit] = clone(self).fit(X, y[rows], hours_origin=hours_origin)
+            own = y[rows]
+            if earlier is not None:  # its rows before a restart of the wear clock
+                mine = row_units(earlier[2]) == unit
+                X = pd.concat([X, pd.concat(
+                    [pd.DataFrame(earlier[2][mine].tolist(), columns=list(GROUPS)),
+                     earlier[0][mine].reset_index(drop=True)], axis=1)], ignore_index=True)
+                own = np.r_[own, earlier[1][mine]]
+            self.unit_maps_[unit] = clone(self).fit(X, own, hours_origin=hours_origin)
         self._merge_units(hours_origin)
         return self
 

@@ -156,8 +156,11 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
 
         ``hours_origin`` maps (machine_id, axis) to the operating hours [h] at which that
         axis's wear clock restarts (an adjustment that left the hour counter running on);
-        the axis's hours count from there. ``y`` is in each axis's unit (arcsec for a rotary
-        axis); rotary and linear axes are pooled apart (``models.wear_fleet.UnitGroups``).
+        the axis's hours count from there. Its rows before that origin are its earlier wear
+        epoch: a fleet keeps them for the wear rate, with a level of their own, when
+        cross-validation prefers it (one axis alone leaves them out). ``y`` is in each axis's
+        unit (arcsec for a rotary axis); rotary and linear axes are pooled apart
+        (``models.wear_fleet.UnitGroups``).
         """
         labels, X = split_groups(X)
         names = (self._names(X, X.shape[1])
@@ -165,6 +168,11 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         values, y = validate_data(self, X, y, reset=True, y_numeric=True)
         frame = pd.DataFrame(values, columns=names or self._names(values, values.shape[1]))
         y = np.asarray(y, float)
+        earlier = None
+        old = _before_origin(frame, labels, hours_origin or {})
+        if old.any():
+            earlier = (frame[old].reset_index(drop=True), y[old], labels[old])
+            frame, y, labels = frame[~old].reset_index(drop=True), y[~old], labels[~old]
         # the machine axis of each row is its identity, not an input: feature_names_in_ keeps
         # the numeric inputs only
         self.axes_ = sorted({tuple(k) for k in labels}) if labels is not None else []
@@ -173,9 +181,9 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         self.axis_units_ = [deviation_unit(a) for _, a in self.axes_]
         vars(self).pop("unit_maps_", None)  # a refit of one unit
         if len(set(self.axis_units_)) > 1:
-            return self._fit_units(frame, y, labels, hours_origin or {})
+            return self._fit_units(frame, y, labels, hours_origin or {}, earlier)
         if self.pooled_:
-            return self._fit_fleet(frame, y, labels, hours_origin or {})
+            return self._fit_fleet(frame, y, labels, hours_origin or {}, earlier)
         return self._fit_axis(frame, y)
 
     def _fit_axis(self, frame: pd.DataFrame, y: np.ndarray):
@@ -197,13 +205,16 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         self.can_forecast_ = bool(self.use_hours_)
         return self
 
-    def _learn_inputs(self, frame: pd.DataFrame) -> None:
-        """Which inputs the model uses, their ranges, means and spreads."""
+    def _learn_inputs(self, frame: pd.DataFrame, axis: np.ndarray | None = None) -> None:
+        """Which inputs the model uses, their ranges, means and spreads. On a fleet (``axis``:
+        each row's machine axis) a condition must vary within some axis: one that is constant
+        on every axis (a machine's usual feed) cannot be told from the axes' own levels."""
         names = list(frame.columns)
         self.use_position_ = POSITION in names and np.ptp(frame[POSITION]) > 0
         self.use_hours_ = HOURS in names and np.ptp(frame[HOURS]) > 0
         self.conditions_ = [c for c in CONDITIONS if c in names and np.ptp(frame[c]) > 0
-                            and not self._confounded_with_wear(frame, c)]
+                            and not self._confounded_with_wear(frame, c)
+                            and (axis is None or _varies_within(frame[c], axis))]
         self.condition_means_ = {c: float(frame[c].mean()) for c in self.conditions_}
         self.condition_sd_ = {c: float(frame[c].std(ddof=1)) for c in self.conditions_}
         self.used_features_ = [c for c in (POSITION, HOURS, *self.conditions_)
@@ -343,7 +354,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
             mean, var = self._moments(frame, self.coef_, self.covariance_)
             return mean, mean - z * np.sqrt(var), mean + z * np.sqrt(var)
         axis = self._axis_index(labels)
-        local = self._local(frame, axis, labels)
+        local = self._earlier_epoch(self._local(frame, axis, labels), frame)
         mean, var = np.zeros(len(frame)), np.zeros(len(frame))
         for a in np.unique(axis):
             rows = axis == a
@@ -363,6 +374,8 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         offset = A.shape[1] - len(self.conditions_)
         if getattr(self, "pooled_", False):
             A = np.hstack([A, self._deviation_design(frame)])
+        if getattr(self, "epoch_shared_", False):  # with an earlier epoch's own level
+            A = self._fleet_design(frame, self.n_control_)
         mean = A @ coef
         # the forecast visit carries its own common offset too
         var = np.einsum("ij,jk,ik->i", A, cov, A) + self.visit_sd_um_ ** 2
@@ -476,6 +489,21 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         tags.regressor_tags.poor_score = True
         tags.input_tags.allow_nan = False
         return tags
+
+
+def _varies_within(values: pd.Series, axis: np.ndarray) -> bool:
+    """Whether ``values`` change within at least one group of ``axis``."""
+    spread = values.groupby(axis).agg(lambda v: np.ptp(v.to_numpy(float)))
+    return bool((spread > 0).any())
+
+
+def _before_origin(frame: pd.DataFrame, labels, hours_origin: dict) -> np.ndarray:
+    """Rows of an axis whose wear clock restarted with the hour counter running on
+    (``hours_origin``) that precede the restart: its earlier wear epoch."""
+    if labels is None or not hours_origin or HOURS not in frame:
+        return np.zeros(len(frame), bool)
+    origin = np.array([float(hours_origin.get(tuple(k), 0.0)) for k in labels])
+    return (origin > 0) & (frame[HOURS].to_numpy(float) < origin)
 
 
 def _check_fitted(model) -> None:

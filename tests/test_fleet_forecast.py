@@ -8,11 +8,13 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
-from independent_fleet import plan_and_truth
+from independent_fleet import fleet, plan_and_truth
 
 import backlash as bl
 from features.readings.errors import BacklashWarning
 from models.pooling import VisitBlocks, pool
+from models.wear_basis import AXIS_INDEX, HOURS
+from models.wear_fleet import forecast_folds
 from models.wear_map import WearMap
 from pipeline.cli import main
 
@@ -85,12 +87,69 @@ def test_pooled_forecast_against_the_truth(fleets):
     for result, _, _ in fleets.values():
         visits |= {(a["machine_id"], a["axis"]): a["visits"] for a in result.trained.meta["axes"]}
     few = np.array([visits[k] < 3 for k in zip(scored["machine_id"], scored["axis"])])
-    # measured over seeds 0-4: all axes 0.91-1.33x the noise of one measured target, axes
-    # with three or more visits 0.92-1.39x, two-visit axes 0.86-1.37x, coverage 92-93 %
-    assert rmse(scored["error"]) <= 1.4 * noise
-    assert rmse(scored.loc[~few, "error"]) <= 1.4 * noise
-    assert rmse(scored.loc[few, "error"]) <= 2.0 * noise   # two visits: mostly the fleet's
+    # measured, seeds 0-2 pooled: all axes 1.005x the noise of one measured target, axes
+    # with three or more visits 0.955x, two-visit axes 1.18x, coverage 93 %; seeds 0-4:
+    # 1.012x, 0.972x, 1.16x, 95 % (one seed alone: 0.91-1.09x)
+    assert rmse(scored["error"]) <= 1.1 * noise
+    assert rmse(scored.loc[~few, "error"]) <= 1.05 * noise
+    assert rmse(scored.loc[few, "error"]) <= 1.4 * noise   # two visits: mostly the fleet's
     assert 0.85 <= scored["covered"].mean() <= 0.99
+
+
+def test_adjusted_axes_keep_their_wear_rate_from_before_the_adjustment(fleets):
+    """M2 and M4 were adjusted with their counters running on: the visits before the
+    adjustment get a level of their own and share the wear rate, which the one-visit-ahead
+    cross-validation prefers to a rate that restarts from three or four visits (before:
+    1.57x and 1.41x the noise over seeds 0-4)."""
+    scored = pd.concat([s for _, s, _ in fleets.values()])
+    noise = np.mean([r.metrics["noise_floor_um"] for r, _, _ in fleets.values()])
+    adjusted = scored["machine_id"].isin(["M2", "M4"])
+    for result, _, _ in fleets.values():
+        estimator = result.trained.estimator
+        assert estimator.epoch_shared_
+        # the earlier visits train the model but are never scored nor monitored
+        assert result.fit.table.earlier is not None
+        assert len(result.trained.training_inputs_) == len(result.fit.table.y)
+    assert rmse(scored.loc[adjusted, "error"]) <= 1.15 * noise   # measured 1.05x
+
+
+def test_a_condition_constant_on_every_axis_is_not_a_wear_map_input(fleets):
+    """Each machine runs its own feed, so the feed cannot be told from the axes' own levels:
+    it is left out, and the level at 0 h (b0) is the axis's own (before: the feed term took
+    the fleet's mean level and b0 read 2 um low)."""
+    for seed, (result, _, _) in fleets.items():
+        estimator = result.trained.estimator
+        assert "feed_mm_min" not in estimator.conditions_
+        _, _, axes = fleet(seed)
+        rates = estimator.wear_rate_map()
+        for ax in axes:
+            if ax.machine.machine_id not in ("M1", "M3"):  # measured from 0 h on
+                continue
+            mine = rates[(rates["machine_id"] == ax.machine.machine_id)
+                         & (rates["axis"] == ax.axis)]
+            truth = ax.level(mine["position_mm"].to_numpy(), adjusted=False)
+            assert rmse(mine["b0_um"] - truth) < 0.3, (seed, ax.machine.machine_id, ax.axis)
+
+
+def test_cross_validation_forecasts_one_visit_ahead():
+    """Fold j holds out each axis's j-th last visit and trains on the visits before it; an
+    axis too short for that fold is not scored; earlier-epoch rows always train."""
+    hours = [0, 1, 2, 3, 4] + [7, 8] + [0.5, 1.5]
+    axis = np.array([0] * 5 + [1] * 2 + [0] * 2)
+    old = np.array([False] * 7 + [True] * 2)
+    local = pd.DataFrame({HOURS: np.array(hours, float), AXIS_INDEX: axis})
+    folds = forecast_folds(local, axis, old)
+    assert len(folds) == 3
+    for j, (train, test, keep) in enumerate(folds, start=1):
+        assert keep is None  # earlier-epoch rows: blocks are rebuilt per fold
+        assert np.flatnonzero(test).tolist() == [5 - j]
+        assert np.flatnonzero(train).tolist() == [*range(5 - j), *range(5, 5 + max(2 - j, 0)), 7, 8]
+    # without earlier rows the folds come with the visit blocks to keep
+    fresh = forecast_folds(local[~old], axis[~old])
+    np.testing.assert_array_equal(fresh[0][2], [[True] * 4 + [False], [True] + [False] * 4])
+    # no axis with three visits: five folds by row
+    short = local[axis == 1].reset_index(drop=True)
+    assert len(forecast_folds(short, np.ones(2, int) - 1)) == 5
 
 
 def test_the_saved_forecaster_keeps_every_targets_history(fleets):
