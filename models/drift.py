@@ -12,7 +12,13 @@ the first visit:
   its jump exceeds ``min_jump_sigma`` (3) standard errors of the two segment lines there. The sigma
   is the larger of ``backlash_u_um`` and a robust (MAD) estimate of the scatter between visits (from 7
   visits on), because conditions that change from visit to visit usually scatter more than the
-  laser repeats.
+  laser repeats. A fleet's series analysed together (``analyse_visits``) share strength: each
+  series' scatter is shrunk toward the fleet's pooled scatter (the same unit's series) with the
+  weight of ``SCATTER_PRIOR_RESIDUALS`` residuals, as the pooled wear map shrinks each axis's
+  noise. Seven visits give five residuals, and a step spoils two of them: alone, such a series
+  can hide an adjustment behind the scatter the adjustment itself makes. A series too short
+  for a scatter of its own keeps u alone: when a whole fleet was adjusted at once, its short
+  series' residuals are half steps, and their pooled scatter would hide every adjustment.
 - trend since the last change point: Theil-Sen slope with its confidence interval
   (``scipy.stats.theilslopes``) and the Mann-Kendall test (Kendall's tau of value against time,
   ``scipy.stats.kendalltau``; the same statistic, with the tie correction).
@@ -59,6 +65,10 @@ from scipy import stats
 from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between, visit_backlash
 
 MIN_VISITS_FOR_SCATTER = 7
+# Residuals' worth of weight the fleet's pooled scatter has in each series' own.
+SCATTER_PRIOR_RESIDUALS = 10.0
+# The fleet's pooled scatter needs this many residuals, from two series or more.
+MIN_FLEET_RESIDUALS = 10
 # What each kind of change within the measurement uncertainty is, in words.
 WITHIN_KINDS = {"change_point": "the step", "last_visit": "the last visit's departure from "
                 "the trend", "trend": "the rise of the trend"}
@@ -73,6 +83,46 @@ def uncertainty_column(visits: pd.DataFrame) -> str:
 
 
 # --------------------------------------------------------------------------- statistics
+def _second_differences(t, y) -> np.ndarray:
+    """r_i / sqrt(1 + w² + (1-w)²) of ``scatter_sigma_um``, one per inner point."""
+    w = (t[2:] - t[1:-1]) / (t[2:] - t[:-2])
+    return (y[1:-1] - (w * y[:-2] + (1 - w) * y[2:])) / np.sqrt(1 + w ** 2 + (1 - w) ** 2)
+
+
+def _mad_sigma(r: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def fleet_scatter_um(visits: pd.DataFrame) -> dict[str, float]:
+    """The fleet's pooled scatter between visits, per deviation unit (``um``, ``arcsec``):
+    the MAD estimate of ``scatter_sigma_um`` over the second differences of every series of
+    that unit with three visits or more; a unit with fewer than ``MIN_FLEET_RESIDUALS`` of
+    them, or from one series alone, gets none."""
+    from features.readings.schema import deviation_unit
+
+    residuals: dict[str, list[np.ndarray]] = {}
+    for (_, axis), group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True):
+        if len(group) < 3:
+            continue
+        g = group.sort_values("date", kind="stable")
+        t = np.asarray(months_between(g["date"], g["date"].iloc[0]), float)
+        residuals.setdefault(deviation_unit(axis), []).append(
+            _second_differences(t, g["backlash_um"].to_numpy(float)))
+    return {unit: _mad_sigma(np.concatenate(parts)) for unit, parts in residuals.items()
+            if len(parts) >= 2 and sum(map(len, parts)) >= MIN_FLEET_RESIDUALS}
+
+
+def shrunk_scatter_um(own: float, n_visits: int, fleet: float | None) -> float:
+    """A series' scatter [um] shrunk toward the fleet's: the variance-weighted mean with its
+    own ``n_visits - 2`` residuals against ``SCATTER_PRIOR_RESIDUALS`` of the fleet's; its own
+    (NaN for a short series) when there is no fleet or it has none."""
+    if fleet is None or not np.isfinite(fleet) or not np.isfinite(own):
+        return own
+    m = max(n_visits - 2, 0)
+    return float(np.sqrt((m * own ** 2 + SCATTER_PRIOR_RESIDUALS * fleet ** 2)
+                         / (m + SCATTER_PRIOR_RESIDUALS)))
+
+
 def scatter_sigma_um(t_month, y_um) -> float:
     """Robust scatter of a piecewise linear series from its second differences [um].
 
@@ -84,9 +134,7 @@ def scatter_sigma_um(t_month, y_um) -> float:
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     if len(y) < 3:
         return float("nan")
-    w = (t[2:] - t[1:-1]) / (t[2:] - t[:-2])
-    r = (y[1:-1] - (w * y[:-2] + (1 - w) * y[2:])) / np.sqrt(1 + w ** 2 + (1 - w) ** 2)
-    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+    return _mad_sigma(_second_differences(t, y))
 
 
 def _segment_costs(t, y, w):
@@ -325,8 +373,12 @@ def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
                    alpha: float = 0.05, min_jump_sigma: float = 3.0,
                    penalty: float | None = None, warn_months: float = 6.0,
                    horizon_months: float = 120.0,
-                   coverage_factor: float | None = None) -> DriftSeries:
+                   coverage_factor: float | None = None,
+                   fleet_scatter: float | None = None) -> DriftSeries:
     """Change points, trend since the last one, threshold forecast and alerts of one series.
+
+    ``fleet_scatter``: the pooled scatter [um] of the fleet the series belongs to
+    (``fleet_scatter_um``), which its own is shrunk toward (module docstring).
 
     ``visits`` holds one machine axis: ``visit``, ``date``, ``backlash_um`` [um] and its
     standard uncertainty ``backlash_u_um`` [um] (``u_um``, the name before, is read too).
@@ -338,6 +390,7 @@ def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
     t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
     # Below 5 second differences the MAD is dominated by a single step; trust u alone there.
     scatter = scatter_sigma_um(t, y) if len(y) >= MIN_VISITS_FOR_SCATTER else float("nan")
+    scatter = shrunk_scatter_um(scatter, len(y), fleet_scatter)
     u = v[uncertainty_column(v)].fillna(0.0).to_numpy(float)
     floor = np.nanmax([scatter, np.nanmedian(u) if np.isfinite(u).any() else 0.0, 1e-3])
     v["sigma_um"] = np.fmax(u, floor)
@@ -478,10 +531,20 @@ def _alert(kind: str, message: str) -> dict:
 def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
             **options) -> list[DriftSeries]:
     """Drift of every machine axis with two or more visits (see ``analyse_series``)."""
-    table = visit_backlash(readings)
-    return [analyse_series(group, threshold_um=threshold_um, **options)
-            for _, group in table.groupby(list(SERIES_KEYS), sort=True)
-            if len(group) >= 2]
+    return analyse_visits(visit_backlash(readings), threshold_um=threshold_um, **options)
+
+
+def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
+                   **options) -> list[DriftSeries]:
+    """``analyse_series`` of every machine axis in ``visits`` (``visit_backlash`` rows) with
+    ``min_visits`` or more, in (machine_id, axis) order, each with its fleet's pooled scatter
+    (``fleet_scatter_um``)."""
+    from features.readings.schema import deviation_unit
+
+    fleet = fleet_scatter_um(visits)
+    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)), **options)
+            for (_, axis), group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)
+            if len(group) >= min_visits]
 
 
 # --------------------------------------------------------------------------- model alerts

@@ -94,10 +94,8 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     from models import drift
 
     rows = []
-    for _, group in visits.groupby(["machine_id", "axis"], sort=True, observed=True):
-        if len(group) < 4:  # two segments of two visits at least
-            continue
-        series = drift.analyse_series(group)
+    # two segments of two visits at least
+    for series in drift.analyse_visits(visits, min_visits=4):
         for change in series.change_points:
             if change["jump_um"] < 0:
                 visit = str(series.visits["visit"].iloc[change["index"]])

@@ -50,6 +50,57 @@ def test_scatter_sigma_recovers_noise_despite_steps():
     assert np.max(estimates) < 0.2
 
 
+def short_fleet(seed: int, n: int = 7, step_at: int | None = None) -> pd.DataFrame:
+    """Visit series (``visit_backlash`` columns) of four axes: steady wear, visit scatter
+    0.1 um, u = 0.05 um; ``step_at``: M1 X drops by 1 um from that visit on."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for machine, axis in (("M1", "X"), ("M1", "Y"), ("M2", "X"), ("M2", "Y")):
+        for k in range(n):
+            level = 2.0 + 0.1 * k - (1.0 if (machine, axis) == ("M1", "X") and step_at
+                                     is not None and k >= step_at else 0.0)
+            rows.append({"machine_id": machine, "axis": axis, "visit": str(k + 1),
+                         "date": START + pd.Timedelta(days=91 * k),
+                         "backlash_um": level + rng.normal(0, 0.1), "backlash_u_um": 0.05})
+    return pd.DataFrame(rows)
+
+
+def test_fleet_scatter_is_pooled_per_unit_and_shrinks_each_series():
+    fleet = short_fleet(0, n=30)
+    pooled = drift.fleet_scatter_um(fleet)
+    assert set(pooled) == {"um"} and pooled["um"] == pytest.approx(0.1, rel=0.2)
+    # one series is no fleet; a rotary axis pools with rotary axes only
+    assert drift.fleet_scatter_um(fleet[fleet["axis"] == "X"][fleet["machine_id"] == "M1"]) == {}
+    rotary = fleet.assign(axis=fleet["axis"].map({"X": "A", "Y": "C"}))
+    assert set(drift.fleet_scatter_um(pd.concat([fleet, rotary]))) == {"um", "arcsec"}
+    # seven visits: five own residuals against ten of the fleet's
+    assert drift.shrunk_scatter_um(0.3, 7, 0.1) == pytest.approx(np.sqrt((5 * 0.09 + 0.1) / 15))
+    assert drift.shrunk_scatter_um(0.3, 7, None) == 0.3
+    assert np.isnan(drift.shrunk_scatter_um(float("nan"), 4, 0.1))  # u alone, as before
+
+
+def test_a_fleet_finds_the_step_its_own_scatter_hides():
+    """Seven visits with a 1 um drop at visit 4 on one axis of four: the step spoils two of
+    the series' five second differences and lifts its own scatter. Shrunk toward the fleet's,
+    the drop is found more often and the steady axes raise fewer false change points
+    (measured over 100 fleets: found 57 -> 77, false 17 -> 7 of 300 steady series)."""
+    found = {"alone": 0, "fleet": 0}
+    false = {"alone": 0, "fleet": 0}
+    for seed in range(100):
+        visits_ = short_fleet(seed, step_at=3)
+        together = {(s.machine_id, s.axis): s for s in drift.analyse_visits(visits_)}
+        for key, series in together.items():
+            mine = visits_[(visits_["machine_id"] == key[0]) & (visits_["axis"] == key[1])]
+            for how, cps in (("fleet", series.change_points),
+                             ("alone", drift.analyse_series(mine).change_points)):
+                if key == ("M1", "X"):
+                    found[how] += [c["index"] for c in cps] == [3]
+                else:
+                    false[how] += bool(cps)
+    assert found["fleet"] >= found["alone"] + 10 and found["fleet"] >= 70
+    assert false["fleet"] < false["alone"] and false["fleet"] <= 12
+
+
 def test_theil_sen_interval_and_crossing_interval_cover_truth():
     covered_slope = covered_cross = 0
     for seed in range(40):

@@ -10,8 +10,11 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from independent_fleet import plan_and_truth
 
+import backlash as bl
 from features.table import FeatureTable, feature_table
+from features.visits import visit_backlash
 from models.backtest import backtest
 from models.evaluation import target_noise_floor, true_backlash
 from models.physics.campaign import simulate
@@ -179,3 +182,17 @@ def test_train_says_which_visits_it_used_and_why(tmp_path, capsys):
     (series,) = meta["wear_clock"]["series"]
     assert series["visits"] == ["06", "07", "08", "09", "10"] and series["dropped"] == 5
     assert meta["wear_clock"]["change_points"] == "searched"
+
+
+def test_independent_fleet_adjustments_found_with_the_fleets_scatter():
+    """The independent fleet's two machines adjusted with the hour counter running on (four
+    axes a seed), seeds 0-9: each axis's scatter shrunk toward the fleet's finds 39 of the 40
+    adjustments with no false one; each series alone found 38 with two false."""
+    found, false = 0, 0
+    for seed in range(10):
+        readings = plan_and_truth(seed)[0]
+        steps = found_adjustments(visit_backlash(bl.validate(readings)))
+        adjusted = steps["machine_id"].isin(["M2", "M4"])
+        found += steps[adjusted].drop_duplicates(["machine_id", "axis"]).shape[0]
+        false += int((~adjusted).sum())
+    assert found >= 39 and false == 0

@@ -181,10 +181,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
              for (m, a), c in counts.items() if c < 2]
     for text in notes:
         note(text)
-    series = [drift_model.analyse_series(g, threshold_um=threshold_um, alpha=alpha,
-                                         min_jump_sigma=min_jump_sigma, warn_months=warn_months,
-                                         coverage_factor=k)
-              for _, g in visits.groupby(list(SERIES_KEYS), sort=True) if len(g) >= 2]
+    series = drift_model.analyse_visits(visits, threshold_um=threshold_um, alpha=alpha,
+                                        min_jump_sigma=min_jump_sigma,
+                                        warn_months=warn_months, coverage_factor=k)
     if predictor is not None:
         drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
     for s in series:

@@ -298,15 +298,14 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
     from features import iso230
-    from features.visits import SERIES_KEYS, visit_backlash
-    from models.drift import analyse_series
+    from features.visits import visit_backlash
+    from models.drift import analyse_visits
 
     readings = readings_of(data, format)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
     visits = visit_backlash(readings, stats)
-    series = [analyse_series(g, threshold_um=threshold_um, alpha=alpha,
-                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
-              for _, g in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)]
+    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um, alpha=alpha,
+                            min_jump_sigma=min_jump_sigma, warn_months=warn_months)
     notes = [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
              if len(s.visits) < 2]
     for text in notes:
