@@ -114,8 +114,9 @@ class Axis:
         start = self.level_after_adjust_um if adjusted else self.level_um
         return start + self.level_slope_um * (np.asarray(x, float) - self.targets[0]) / length
 
-    def lost_motion(self, x, hours_since: float, adjusted: bool):
-        return self.level(x, adjusted) + self.rate(x) * hours_since / 1000.0
+    def lost_motion(self, x, hours_since: float, adjusted: bool, rate_after: float = 1.0):
+        rate = self.rate(x) * (rate_after if adjusted else 1.0)
+        return self.level(x, adjusted) + rate * hours_since / 1000.0
 
 
 def make_axes(rng: np.random.Generator, kind: Kind = LINEAR) -> list[Axis]:
@@ -148,8 +149,10 @@ def _cycle(method: str, n: int):
                 yield (i, -1, c, True)
 
 
-def fleet(seed: int = 0, visits: int = 8, rotary: bool = False):
-    """Readings, truth and axes of the fleet (module docstring); ``rotary``: its rotary axes."""
+def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: float = 1.0):
+    """Readings, truth and axes of the fleet (module docstring); ``rotary``: its rotary axes;
+    ``rate_after``: the wear rate after an adjustment relative to before (a new nut that
+    wears at another pace; 1: the adjustment resets the clearance only)."""
     kind = ROTARY if rotary else LINEAR
     rng = np.random.default_rng(kind.seed + seed)
     axes = make_axes(rng, kind)
@@ -164,7 +167,8 @@ def fleet(seed: int = 0, visits: int = 8, rotary: bool = False):
             if adjusted and hours_at_adjust is None:  # adjusted a few weeks before the visit
                 hours_at_adjust = hours - m.hours_per_month * rng.uniform(0.5, 1.5)
             since = hours - hours_at_adjust if adjusted else hours
-            true = ax.lost_motion(ax.targets, since, adjusted) + rng.normal(0, kind.visit_sd)
+            true = (ax.lost_motion(ax.targets, since, adjusted, rate_after)
+                    + rng.normal(0, kind.visit_sd))
             truth += [{"machine_id": m.machine_id, "axis": ax.axis, "visit": str(visit),
                        "target": float(x), "backlash_true_um": float(b),
                        "operating_hours": hours, "hours_since_adjustment": since}
@@ -203,10 +207,11 @@ def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start
     return out
 
 
-def plan_and_truth(seed: int = 0, visits: int = 8, rotary: bool = False):
+def plan_and_truth(seed: int = 0, visits: int = 8, rotary: bool = False,
+                   rate_after: float = 1.0):
     """Training readings (every visit but the last), the plan of the last visit (targets and
     conditions, no deviations) and its true lost motion (``rotary``: of the rotary axes)."""
-    readings, truth, axes = fleet(seed, visits, rotary)
+    readings, truth, axes = fleet(seed, visits, rotary, rate_after)
     last = readings["visit"] == str(visits)
     keys = ["machine_id", "axis", "target", "operating_hours", "feed_mm_min", "dwell_s",
             "machine_temp_c"]
