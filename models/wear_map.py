@@ -372,9 +372,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         ``coef`` with covariance ``cov``."""
         A = self._design(frame, self.n_control_)
         offset = A.shape[1] - len(self.conditions_)
-        if getattr(self, "pooled_", False):
-            A = np.hstack([A, self._deviation_design(frame)])
-        if getattr(self, "epoch_shared_", False):  # with an earlier epoch's own level
+        if getattr(self, "pooled_", False):  # each axis's own columns follow the shared ones
             A = self._fleet_design(frame, self.n_control_)
         mean = A @ coef
         # the forecast visit carries its own common offset too
