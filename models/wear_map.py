@@ -491,8 +491,8 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
 
 def _varies_within(values: pd.Series, axis: np.ndarray) -> bool:
     """Whether ``values`` change within at least one group of ``axis``."""
-    spread = values.groupby(axis).agg(lambda v: np.ptp(v.to_numpy(float)))
-    return bool((spread > 0).any())
+    groups = values.groupby(axis)
+    return bool(((groups.max() - groups.min()) > 0).any())
 
 
 def _before_origin(frame: pd.DataFrame, labels, hours_origin: dict) -> np.ndarray:
