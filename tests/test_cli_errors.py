@@ -235,6 +235,33 @@ def test_sigterm_during_convert_removes_the_temporary_file(tmp_path, big_csv):
     assert list(out.iterdir()) == []
 
 
+# SIGTERM sent to itself between the temporary file's creation and its registration, where
+# the handler would not know the file (the race the convert test above hits now and then)
+SIGTERM_AT_CREATION = """
+import os, signal, sys, tempfile
+from features.readings import fileio
+real = tempfile.mkstemp
+def mkstemp(*args, **kwargs):
+    out = real(*args, **kwargs)
+    os.kill(os.getpid(), signal.SIGTERM)
+    return out
+tempfile.mkstemp = mkstemp
+with fileio.atomic_path(sys.argv[1]) as tmp:
+    tmp.write_text("half")
+"""
+
+
+def test_sigterm_as_the_temporary_file_is_created_leaves_nothing(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.run([sys.executable, "-c", SIGTERM_AT_CREATION, str(out / "x.csv")],
+                          env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert list(out.iterdir()) == []
+
+
 def test_temporary_file_of_a_sigkilled_convert_is_removed_by_the_next_run(tmp_path, big_csv):
     out = tmp_path / "out"
     proc = _cli("convert", str(big_csv), "--out", str(out / "big.csv"))

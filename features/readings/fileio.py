@@ -5,7 +5,8 @@ only on success. Temporary files are named ``.<name>.<random>.backlash-tmp-<pid>
 
 - on a Python exception they are removed by ``atomic_path`` itself;
 - on SIGTERM a handler removes every temporary file the process still has open, then the
-  process exits with 143 (128 + SIGTERM);
+  process exits with 143 (128 + SIGTERM); SIGTERM is held back while a file is created and
+  registered, so no file exists that the handler does not know;
 - a SIGKILL cannot be caught, so the next run that writes into the same folder (or names it
   with ``--out``) removes the temporary files of processes that are no longer alive.
 """
@@ -36,8 +37,24 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 _open_temps: set[str] = set()
 _swept: set[str] = set()
-_lock = threading.Lock()
+# re-entrant: the SIGTERM handler runs in the main thread, which may hold it at that moment
+_lock = threading.RLock()
 _handler: dict = {}
+
+
+@contextlib.contextmanager
+def _sigterm_held():
+    """SIGTERM held back (in the main thread) while a temporary file is created and
+    registered: delivered at the end, it finds the file registered and removes it."""
+    if (threading.current_thread() is not threading.main_thread()
+            or not hasattr(signal, "pthread_sigmask")):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager
@@ -49,15 +66,16 @@ def atomic_path(path: str | os.PathLike):
     _make_folder(path.parent)
     sweep_orphans(path.parent)
     _install_sigterm_handler()
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
-                                   suffix=f"{TEMP_MARK}{os.getpid()}{path.suffix}",
-                                   dir=path.parent)
-    except OSError as err:
-        raise _user_error(err, path) from None
-    os.close(fd)
-    with _lock:
-        _open_temps.add(tmp)
+    with _sigterm_held():
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
+                                       suffix=f"{TEMP_MARK}{os.getpid()}{path.suffix}",
+                                       dir=path.parent)
+        except OSError as err:
+            raise _user_error(err, path) from None
+        os.close(fd)
+        with _lock:
+            _open_temps.add(tmp)
     try:
         yield Path(tmp)
         if "terminating" in _handler:  # SIGTERM came where its SystemExit was swallowed
@@ -83,13 +101,14 @@ def temp_folder(beside: str | os.PathLike) -> Path:
     _make_folder(beside.parent)
     sweep_orphans(beside.parent)
     _install_sigterm_handler()
-    try:
-        tmp = tempfile.mkdtemp(prefix=f".{beside.name}.", suffix=f"{TEMP_MARK}{os.getpid()}",
-                               dir=beside.parent)
-    except OSError as err:
-        raise _user_error(err, beside) from None
-    with _lock:
-        _open_temps.add(tmp)
+    with _sigterm_held():
+        try:
+            tmp = tempfile.mkdtemp(prefix=f".{beside.name}.",
+                                   suffix=f"{TEMP_MARK}{os.getpid()}", dir=beside.parent)
+        except OSError as err:
+            raise _user_error(err, beside) from None
+        with _lock:
+            _open_temps.add(tmp)
     return Path(tmp)
 
 
