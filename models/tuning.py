@@ -64,6 +64,9 @@ def objective(X, y, folds: int, random_state: int, tag: str, stop=None):
         trial.set_user_attr("worker_pid", os.getpid())
         params = suggest(trial)
         rmse = cv_rmse(X, y, params, folds, random_state)
+        if stop is not None and stop.is_set():
+            # a SIGTERM whose interrupt was swallowed (it landed in a finaliser): fail now
+            raise KeyboardInterrupt
         trial.set_user_attr("cv_rmse_std_um", float(rmse.std()))
         return float(rmse.mean())
 
@@ -188,13 +191,16 @@ class terminate_as_interrupt:
 
 
 def _on_terminate(signum, frame):
+    # set first: the interrupt below is lost when the signal lands in a finaliser or weakref
+    # callback, and the objective and the callbacks then stop on the flag
+    STOP.set()
     names = set()
     while frame is not None:
         names.add(frame.f_code.co_name)
         frame = frame.f_back
     if "run_trial" in names or "_optimize_sequential" not in names:
         raise KeyboardInterrupt  # inside the objective, or not optimising: stop now
-    STOP.set()  # inside Optuna's bookkeeping: the objective or a callback stops next
+    # inside Optuna's bookkeeping: the objective or a callback stops next, on the flag
 
 
 def _worker(work_args: dict, trials: int, worker: int) -> None:

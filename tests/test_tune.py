@@ -167,6 +167,27 @@ def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
     assert len(seeds) == 4
 
 
+def test_a_swallowed_terminate_still_fails_the_running_trial(monkeypatch):
+    """A SIGTERM landing in a finaliser loses its KeyboardInterrupt ("Exception ignored");
+    the flag the handler sets first still fails the trial, instead of letting the search run
+    on to its last trial."""
+    import threading
+
+    from models import tuning
+
+    stop = threading.Event()
+
+    def cv_rmse_terminated(*args):  # the signal arrives during the folds, its raise is lost
+        stop.set()
+        return tuning.np.array([0.1, 0.2])
+
+    monkeypatch.setattr(tuning, "cv_rmse", cv_rmse_terminated)
+    study = optuna.create_study()
+    with pytest.raises(KeyboardInterrupt):
+        study.optimize(tuning.objective(None, None, 2, 0, "tag", stop), n_trials=5)
+    assert [t.state.name for t in study.trials] == ["FAIL"]
+
+
 def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path):
     storage = f"sqlite:///{tmp_path / 'optuna.db'}"
     proc = backlash("tune", str(readings_csv), "--trials", "200", "--folds", "2",
