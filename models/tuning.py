@@ -17,12 +17,14 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 import warnings
 
 import numpy as np
 
 DEFAULT_STORAGE = "sqlite:///optuna.db"
 HEARTBEAT_S = 10
+SCHEMA_ATTEMPTS = 5  # tries to open a storage that other workers are creating at the same time
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
 TRAINERS = ("lm", "adam")
 STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
@@ -84,11 +86,28 @@ def open_storage(url: str, heartbeat_s: int = HEARTBEAT_S):
     connect = {"timeout": 60} if url.startswith("sqlite") else {}  # workers wait for the lock
     if url.startswith("postgresql"):
         connect = {"connect_timeout": 10}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-        return optuna.storages.RDBStorage(url, heartbeat_interval=heartbeat_s,
-                                          grace_period=2 * heartbeat_s,
-                                          engine_kwargs={"connect_args": connect})
+    for attempt in range(SCHEMA_ATTEMPTS):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                return optuna.storages.RDBStorage(url, heartbeat_interval=heartbeat_s,
+                                                  grace_period=2 * heartbeat_s,
+                                                  engine_kwargs={"connect_args": connect})
+        except Exception as error:
+            # two workers creating a fresh storage at once: the loser's insert of the schema
+            # version (or its CREATE TABLE) collides with the winner's; the schema is there now
+            if attempt == SCHEMA_ATTEMPTS - 1 or not _lost_schema_race(error):
+                raise
+            time.sleep(0.2 * (attempt + 1))
+
+
+def _lost_schema_race(error: Exception) -> bool:
+    import sqlalchemy.exc
+
+    if isinstance(error, sqlalchemy.exc.IntegrityError):
+        return True
+    return (isinstance(error, (sqlalchemy.exc.ProgrammingError, sqlalchemy.exc.OperationalError))
+            and "already exists" in str(error))
 
 
 def sampler_seed(seed: int, worker: int = 0, start: int = 0) -> int:

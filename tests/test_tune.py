@@ -6,9 +6,11 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
 
 import mlflow
@@ -83,11 +85,47 @@ def backlash(*args: str, cwd: Path) -> subprocess.Popen:
 
 
 def states(storage: str) -> list[str]:
+    """Trial states of the study in a SQLite ``storage``, read without writing: an observer
+    that opened the storage through Optuna would create its schema alongside ``tune``."""
+    path = storage.removeprefix("sqlite:///")
     try:
-        study = optuna.load_study(study_name="backlash-network", storage=storage)
-    except KeyError:  # not created yet
+        with closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60)) as db:
+            rows = db.execute("SELECT state FROM trials ORDER BY number").fetchall()
+    except sqlite3.OperationalError:  # no file or no tables yet
         return []
-    return [t.state.name for t in study.trials]
+    return [state for (state,) in rows]
+
+
+def test_workers_creating_one_fresh_storage_at_once_all_open_it(tmp_path):
+    """Workers started together on a new storage all try to create its schema; the ones that
+    lose the race open what the winner made instead of failing."""
+    storage = f"sqlite:///{tmp_path / 'optuna.db'}"
+    start = time.time() + 2  # all four past their imports before any opens the storage
+    code = ("import sys, time; from models.tuning import open_storage\n"
+            f"time.sleep(max(0, {start} - time.time())); open_storage(sys.argv[1], 1)")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    procs = [subprocess.Popen([sys.executable, "-c", code, storage], env=env,
+                              stderr=subprocess.PIPE, text=True) for _ in range(4)]
+    errors = [proc.communicate(timeout=120)[1] for proc in procs]
+    assert [proc.returncode for proc in procs] == [0] * 4, errors
+    assert states(storage) == []  # schema made once and readable
+
+
+def test_a_storage_error_other_than_the_schema_race_is_not_retried(tmp_path, monkeypatch):
+    import sqlalchemy.exc
+
+    from models import tuning
+
+    calls = []
+
+    def refuse(*args, **kwargs):
+        calls.append(args)
+        raise sqlalchemy.exc.OperationalError("open", {}, Exception("disk I/O error"))
+
+    monkeypatch.setattr(optuna.storages, "RDBStorage", refuse)
+    with pytest.raises(sqlalchemy.exc.OperationalError, match="disk I/O"):
+        tuning.open_storage(f"sqlite:///{tmp_path / 'optuna.db'}", 1)
+    assert len(calls) == 1
 
 
 def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path, capsys):
