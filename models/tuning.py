@@ -55,15 +55,13 @@ def cv_rmse(X, y, params: dict, folds: int = 5, random_state: int = 0) -> np.nda
     return -cross_val_score(estimator, X, y, cv=split, scoring="neg_root_mean_squared_error")
 
 
-def objective(X, y, folds: int, random_state: int, tag: str, stop=None):
+def objective(X, y, folds: int, random_state: int, stop=None):
     """Optuna objective: CV RMSE [um] of the drawn network. ``stop`` (a ``threading.Event``):
     once set, a trial that starts fails at once, as if interrupted."""
 
     def run_trial(trial) -> float:  # name known to the SIGTERM handler (_on_terminate)
         if stop is not None and stop.is_set():
             raise KeyboardInterrupt
-        trial.set_user_attr("tag", tag)  # first, so a trial killed while running is traceable
-        trial.set_user_attr("worker_pid", os.getpid())
         params = suggest(trial)
         rmse = cv_rmse(X, y, params, folds, random_state)
         if stop is not None and stop.is_set():
@@ -117,16 +115,37 @@ def sampler_seed(seed: int, worker: int = 0, start: int = 0) -> int:
     return int(np.random.SeedSequence([seed, worker, start]).generate_state(1)[0])
 
 
-def create_study(name: str, storage, seed: int, heartbeat_s: int = HEARTBEAT_S):
+def create_study(name: str, storage, seed: int, heartbeat_s: int = HEARTBEAT_S,
+                 tag: str | None = None):
     """The named study (created if new) with a TPE sampler seeded by ``seed``; ``storage`` is
-    a URL or an opened storage."""
+    a URL or an opened storage. With ``tag`` (the search's label), each trial this study runs
+    is labelled with it and its worker's pid as it is created."""
     import optuna
 
     if isinstance(storage, str):
         storage = open_storage(storage, heartbeat_s)
-    sampler = optuna.samplers.TPESampler(seed=seed)
+    sampler = tagging_sampler(seed, tag, storage) if tag else optuna.samplers.TPESampler(seed=seed)
     return optuna.create_study(study_name=name, storage=storage, direction="minimize",
                                sampler=sampler, load_if_exists=True)
+
+
+def tagging_sampler(seed: int, tag: str, storage):
+    """TPE sampler that, as Optuna creates a trial and before its heartbeat thread starts,
+    records the trial's first heartbeat and then labels it with ``tag`` and the worker's pid.
+
+    A worker killed at any later moment leaves a trial that goes stale and names its search,
+    so the next ``tune`` can end that search's MLflow run; labelled inside the objective, a
+    trial killed between its first heartbeat and the label went stale without a name."""
+    import optuna
+
+    class TaggingSampler(optuna.samplers.TPESampler):
+        def before_trial(self, study, trial) -> None:
+            storage.record_heartbeat(trial._trial_id)
+            storage.set_trial_user_attr(trial._trial_id, "tag", tag)
+            storage.set_trial_user_attr(trial._trial_id, "worker_pid", os.getpid())
+            super().before_trial(study, trial)
+
+    return TaggingSampler(seed=seed)
 
 
 def fail_stale_trials(study) -> list[int]:
@@ -169,8 +188,8 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
     if threads:
         torch.set_num_threads(threads)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s)
-    study.optimize(objective(X, y, folds, seed, tag, stop), n_trials=trials,
+    study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s, tag)
+    study.optimize(objective(X, y, folds, seed, stop), n_trials=trials,
                    callbacks=list(callbacks))
 
 

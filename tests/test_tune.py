@@ -84,16 +84,25 @@ def backlash(*args: str, cwd: Path) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def states(storage: str) -> list[str]:
-    """Trial states of the study in a SQLite ``storage``, read without writing: an observer
-    that opened the storage through Optuna would create its schema alongside ``tune``."""
+def read(storage: str, query: str) -> list[tuple]:
+    """Rows of ``query`` on a SQLite ``storage``, read without writing: an observer that
+    opened the storage through Optuna would create its schema alongside ``tune``."""
     path = storage.removeprefix("sqlite:///")
     try:
         with closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=60)) as db:
-            rows = db.execute("SELECT state FROM trials ORDER BY number").fetchall()
+            return db.execute(query).fetchall()
     except sqlite3.OperationalError:  # no file or no tables yet
         return []
-    return [state for (state,) in rows]
+
+
+def states(storage: str) -> list[str]:
+    return [state for (state,) in read(storage, "SELECT state FROM trials ORDER BY number")]
+
+
+def labelled(storage: str, number: int) -> bool:
+    """Whether trial ``number`` carries its search's tag (recorded after its first heartbeat)."""
+    return bool(read(storage, "SELECT 1 FROM trial_user_attributes a JOIN trials t "
+                              f"USING (trial_id) WHERE t.number = {number} AND a.key = 'tag'"))
 
 
 def test_workers_creating_one_fresh_storage_at_once_all_open_it(tmp_path):
@@ -136,7 +145,7 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     while time.monotonic() < deadline:  # kill it inside a trial after one finished
         now = states(storage)
         if now.count("COMPLETE") >= 1 and now[-1:] == ["RUNNING"]:
-            if seen is not None and len(now) > seen:
+            if seen is not None and len(now) > seen and labelled(storage, len(now) - 1):
                 break  # a trial that began since the last look: far from its end
             seen = seen or len(now)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
@@ -178,6 +187,20 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
     assert main(["tune", str(readings_csv), *common[:-1], "5"]) == 2
     err = capsys.readouterr().err
     assert "--heartbeat-s" in err and "runs with a heartbeat of 1 s" in err
+
+
+def test_a_trial_is_labelled_and_beating_from_its_creation(tmp_path):
+    """A worker killed before its objective starts leaves a trial that goes stale and names
+    its search: the sampler records the first heartbeat and the tag as Optuna creates it."""
+    from models import tuning
+
+    study = tuning.create_study("s", f"sqlite:///{tmp_path / 'optuna.db'}", 0, 1, tag="abc")
+    with pytest.warns(UserWarning, match="Heartbeat"):  # no heartbeat thread: "killed" at once
+        trial = study.ask()
+    assert study.trials[0].user_attrs == {"tag": "abc", "worker_pid": os.getpid()}
+    time.sleep(3.5)  # past the grace period of 2 s on SQLite's whole-second clock
+    assert tuning.fail_stale_trials(study) == [trial.number]
+    assert study.trials[0].state == optuna.trial.TrialState.FAIL
 
 
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
@@ -222,7 +245,7 @@ def test_a_swallowed_terminate_still_fails_the_running_trial(monkeypatch):
     monkeypatch.setattr(tuning, "cv_rmse", cv_rmse_terminated)
     study = optuna.create_study()
     with pytest.raises(KeyboardInterrupt):
-        study.optimize(tuning.objective(None, None, 2, 0, "tag", stop), n_trials=5)
+        study.optimize(tuning.objective(None, None, 2, 0, stop), n_trials=5)
     assert [t.state.name for t in study.trials] == ["FAIL"]
 
 
