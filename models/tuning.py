@@ -28,7 +28,8 @@ SCHEMA_ATTEMPTS = 5  # tries to open a storage that other workers are creating a
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
 TRAINERS = ("lm", "adam")
 STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
-STOP = threading.Event()  # set by a SIGTERM that must wait for the current trial's storage
+STOP = threading.Event()  # set by a SIGTERM: the search stops at its next check
+INTERRUPTIBLE = {"cv_rmse", "run_workers"}  # where a SIGTERM interrupts at once (no writes)
 
 
 def suggest(trial) -> dict:
@@ -42,6 +43,12 @@ def suggest(trial) -> dict:
     if params["trainer"] == "adam":
         params["learning_rate"] = trial.suggest_float("learning_rate", 1e-3, 1e-1, log=True)
     return params
+
+
+def stopped(stop) -> None:
+    """Raise KeyboardInterrupt if the ``stop`` event (a SIGTERM's flag) is set."""
+    if stop is not None and stop.is_set():
+        raise KeyboardInterrupt
 
 
 def cv_rmse(X, y, params: dict, folds: int = 5, random_state: int = 0) -> np.ndarray:
@@ -59,14 +66,12 @@ def objective(X, y, folds: int, random_state: int, stop=None):
     """Optuna objective: CV RMSE [um] of the drawn network. ``stop`` (a ``threading.Event``):
     once set, a trial that starts fails at once, as if interrupted."""
 
-    def run_trial(trial) -> float:  # name known to the SIGTERM handler (_on_terminate)
-        if stop is not None and stop.is_set():
-            raise KeyboardInterrupt
-        params = suggest(trial)
-        rmse = cv_rmse(X, y, params, folds, random_state)
-        if stop is not None and stop.is_set():
-            # a SIGTERM whose interrupt was swallowed (it landed in a finaliser): fail now
-            raise KeyboardInterrupt
+    def run_trial(trial) -> float:
+        stopped(stop)
+        params = suggest(trial)  # storage reads and writes: a SIGTERM here only sets the flag
+        stopped(stop)
+        rmse = cv_rmse(X, y, params, folds, random_state)  # interrupted at once by a SIGTERM
+        stopped(stop)  # a SIGTERM whose interrupt was lost (it landed in a finaliser)
         trial.set_user_attr("cv_rmse_std_um", float(rmse.std()))
         return float(rmse.mean())
 
@@ -183,12 +188,16 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
     is passed to the objective.
     """
     import optuna
+    import sklearn.model_selection  # noqa: F401 - imported before a SIGTERM may interrupt cv_rmse
     import torch
+
+    import models.network  # noqa: F401
 
     if threads:
         torch.set_num_threads(threads)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s, tag)
+    stopped(stop)
     study.optimize(objective(X, y, folds, seed, stop), n_trials=trials,
                    callbacks=list(callbacks))
 
@@ -205,26 +214,29 @@ def search(work_args: dict, trials: int, workers: int = 1) -> None:
 
 
 class terminate_as_interrupt:
-    """SIGTERM stops the search the way Ctrl-C does, so the running trial is marked FAIL on the
-    way out instead of being left RUNNING. A signal that arrives while Optuna stores a finished
-    trial or draws the next one takes effect once that is done (interrupting a storage write
-    would leave the trial RUNNING): the drawn trial fails at its start, the stored one is
-    logged first (callbacks check ``STOP``)."""
+    """SIGTERM and Ctrl-C (SIGINT) stop the search as an interrupt, so the running trial is
+    marked FAIL on the way out instead of being left RUNNING. The interrupt is raised at once only where nothing
+    is half-written: while a trial's folds are fitted (``cv_rmse``) or while this process waits
+    for its workers. Anywhere else (Optuna storing a trial or drawing parameters, an open
+    transaction, an import) the signal sets ``STOP``, and the objective, the callbacks and
+    ``work`` stop at their next check: a read interrupted with its cursor open keeps the SQLite
+    lock, and the trial could not then be marked FAIL."""
 
     def __enter__(self):
         import signal
 
-        self._old = None
+        self._old = {}
         STOP.clear()
         if threading.current_thread() is threading.main_thread():
-            self._old = signal.signal(signal.SIGTERM, _on_terminate)
+            for signum in (signal.SIGTERM, signal.SIGINT):  # Ctrl-C obeys the same rules
+                self._old[signum] = signal.signal(signum, _on_terminate)
         return self
 
     def __exit__(self, *exc):
         import signal
 
-        if self._old is not None:
-            signal.signal(signal.SIGTERM, self._old)
+        for signum, handler in self._old.items():
+            signal.signal(signum, handler)
         return False
 
 
@@ -236,9 +248,8 @@ def _on_terminate(signum, frame):
     while frame is not None:
         names.add(frame.f_code.co_name)
         frame = frame.f_back
-    if "run_trial" in names or "_optimize_sequential" not in names:
-        raise KeyboardInterrupt  # inside the objective, or not optimising: stop now
-    # inside Optuna's bookkeeping: the objective or a callback stops next, on the flag
+    if names & INTERRUPTIBLE:
+        raise KeyboardInterrupt
 
 
 def _worker(work_args: dict, trials: int, worker: int) -> None:

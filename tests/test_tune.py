@@ -249,7 +249,52 @@ def test_a_swallowed_terminate_still_fails_the_running_trial(monkeypatch):
     assert [t.state.name for t in study.trials] == ["FAIL"]
 
 
-def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path):
+def test_a_sigterm_during_a_storage_read_lets_it_finish(tmp_path, monkeypatch):
+    """A SIGTERM landing while the sampler reads the study only sets the flag: the read
+    completes and the trial fails at the next check. Interrupted there, the read's open cursor
+    kept SQLite's lock, marking the trial FAIL waited 60 s for it and failed, and the trial
+    stayed RUNNING. Inside the folds a SIGTERM interrupts at once."""
+    import sys
+
+    import sqlalchemy.engine.default
+
+    from models import tuning
+
+    execute = sqlalchemy.engine.default.DefaultDialect.do_execute
+    fired = []
+
+    def execute_then_terminate(self, cursor, statement, *args):
+        out = execute(self, cursor, statement, *args)
+        if statement.lstrip().startswith("SELECT") and not fired and in_suggest():
+            fired.append(statement)
+            tuning._on_terminate(signal.SIGTERM, sys._getframe())
+        return out
+
+    def in_suggest() -> bool:
+        frame = sys._getframe()
+        while frame is not None and frame.f_code.co_name != "suggest":
+            frame = frame.f_back
+        return frame is not None
+
+    monkeypatch.setattr(sqlalchemy.engine.default.DefaultDialect, "do_execute",
+                        execute_then_terminate)
+    monkeypatch.setattr(tuning, "STOP", tuning.threading.Event())
+    study = tuning.create_study("s", f"sqlite:///{tmp_path / 'optuna.db'}", 0, 1, tag="t")
+    with pytest.raises(KeyboardInterrupt):
+        study.optimize(tuning.objective(None, None, 2, 0, tuning.STOP), n_trials=3)
+    assert fired
+    (trial,) = study.trials
+    assert trial.state.name == "FAIL" and "activation" in trial.params
+
+    def cv_rmse():  # the interruptible place
+        tuning._on_terminate(signal.SIGTERM, sys._getframe())
+
+    with pytest.raises(KeyboardInterrupt):
+        cv_rmse()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path, signum):
     storage = f"sqlite:///{tmp_path / 'optuna.db'}"
     proc = backlash("tune", str(readings_csv), "--trials", "200", "--folds", "2",
                     "--storage", storage, cwd=tmp_path)
@@ -257,7 +302,7 @@ def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path)
     while states(storage)[-1:] != ["RUNNING"]:
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1][-2000:]
         time.sleep(0.1)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)  # drain the pipes: a full one would block the writer
     assert proc.returncode == 130, err[-2000:]
     after = states(storage)
