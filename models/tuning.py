@@ -28,8 +28,8 @@ SCHEMA_ATTEMPTS = 5  # tries to open a storage that other workers are creating a
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
 TRAINERS = ("lm", "adam")
 STORAGE_SCHEMES = ("sqlite", "postgresql", "mysql")
-STOP = threading.Event()  # set by a SIGTERM: the search stops at its next check
-INTERRUPTIBLE = {"cv_rmse", "run_workers"}  # where a SIGTERM interrupts at once (no writes)
+STOP = threading.Event()  # set by SIGTERM or SIGINT: the search stops at its next check
+INTERRUPTIBLE = {"cv_rmse", "run_workers"}  # where the signal interrupts at once (no storage)
 
 
 def suggest(trial) -> dict:
@@ -215,12 +215,13 @@ def search(work_args: dict, trials: int, workers: int = 1) -> None:
 
 class terminate_as_interrupt:
     """SIGTERM and Ctrl-C (SIGINT) stop the search as an interrupt, so the running trial is
-    marked FAIL on the way out instead of being left RUNNING. The interrupt is raised at once only where nothing
-    is half-written: while a trial's folds are fitted (``cv_rmse``) or while this process waits
-    for its workers. Anywhere else (Optuna storing a trial or drawing parameters, an open
-    transaction, an import) the signal sets ``STOP``, and the objective, the callbacks and
-    ``work`` stop at their next check: a read interrupted with its cursor open keeps the SQLite
-    lock, and the trial could not then be marked FAIL."""
+    marked FAIL on the way out instead of being left RUNNING.
+
+    The interrupt is raised at once only where nothing is half-done: while a trial's folds are
+    fitted (``cv_rmse``) or while this process waits for its workers. Anywhere else (Optuna
+    storing a trial or drawing parameters, an import) the signal sets ``STOP``, and the
+    objective, the callbacks and ``work`` stop at their next check: a read interrupted with
+    its cursor open keeps the SQLite lock, and the trial could not then be marked FAIL."""
 
     def __enter__(self):
         import signal
