@@ -110,12 +110,11 @@ class TrialLogger:
         self.parent_run_id = parent_run_id
 
     def __call__(self, study, trial) -> None:
-        from models.tuning import STOP
+        from models.tuning import STOP, stopped
         from pipeline.tracking import log_child
 
         log_child(self.experiment_id, self.parent_run_id, trial_record(study, trial))
-        if STOP.is_set():  # a SIGTERM arrived while this trial was being stored
-            raise KeyboardInterrupt
+        stopped(STOP)  # a SIGTERM arrived while this trial was being stored
 
 
 def tune(data, *, trials: int = 30, storage: str | None = None,
