@@ -19,7 +19,7 @@ from features.readings.errors import BacklashWarning, InputError
 # ``import backlash`` stays light).
 _WHERE = {
     "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
-    "ingest": "ingest",
+    "ingest": "ingest", "check_store": "store", "void": "void",
     "iso": "iso", "report": "report", "simulate": "simulate",
     "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
     "backtest": "compare", "tune": "tune",
@@ -28,9 +28,9 @@ _WHERE = {
     "fleet": "fleet", "targets": "targets",
 }
 __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
-    "BacklashWarning", "InputError", "backtest", "compare", "compensate", "convert", "discover",
+    "BacklashWarning", "InputError", "backtest", "check_store", "compare", "compensate", "convert", "discover",
     "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "predict", "rank", "read", "replicate", "report",
-    "simulate", "targets", "train", "tune", "uncertainty", "validate", "write",
+    "simulate", "targets", "train", "tune", "uncertainty", "validate", "void", "write",
 ]
 
 

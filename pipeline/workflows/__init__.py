@@ -160,7 +160,7 @@ import importlib
 from dataclasses import dataclass
 
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
-NAMES = ("convert", "ingest", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
+NAMES = ("convert", "ingest", "store", "void", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
          "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
          "uncertainty")
 
