@@ -42,8 +42,8 @@ MODELS = ("traditional", "abbe")
 # Offsets of the laser's optics from the spindle reference for each axis' test [mm] (the paper
 # does not give them; plausible for optics clamped beside and above a long tool), and where the
 # standing axes wait during each test (x, y, z) [mm].
-PAPER_LASER_MM = {"X": np.array([0.0, 220.0, 60.0]), "Y": np.array([-240.0, 0.0, 60.0]),
-                  "Z": np.array([200.0, 180.0, -200.0])}
+PAPER_LASER_MM = {"X": np.array([0.0, 250.0, 150.0]), "Y": np.array([-250.0, 0.0, 150.0]),
+                  "Z": np.array([200.0, 200.0, -150.0])}
 PAPER_ORIGIN_MM = np.array([750.0, -1800.0, -350.0])
 PAPER_NOISE = {"positioning_um": 0.3, "straightness_um": 0.5, "angle_urad": 0.3,
                "roll_urad": 1.0, "diagonal_um": 0.3}
@@ -260,3 +260,72 @@ def measure_positioning(machine: twin.Machine, setup: Setup, rng: np.random.Gene
                                  targets=setup.targets, bidirectional=False, noise=noise,
                                  rng=rng, compensation=correction)
             for axis in twin.AXES}
+
+
+STAGES = ("before", *MODELS)
+
+
+@dataclass
+class Comparison:
+    """Before and after compensation with each model, on one twin and one seed.
+
+    Attributes
+    ----------
+    models : dict of str to Geometry
+        The traditional and the Abbe-aware identifications.
+    diagonals : DataFrame
+        Every diagonal reading: ``diagonal``, ``stage`` (before, traditional, abbe),
+        ``target``, ``distance_mm``, ``deviation_um``.
+    positioning : DataFrame
+        Every axis' positioning reading at the tool point: ``axis``, ``stage``, ``target``,
+        ``distance_mm``, ``deviation_um``.
+    """
+
+    models: dict
+    diagonals: pd.DataFrame
+    positioning: pd.DataFrame
+
+    def extremes(self, what: str = "diagonals") -> dict:
+        """Per diagonal (or axis): the extreme deviation [um] of each stage, the paper's
+        "maximum": {name: {"before_um", "traditional_um", "abbe_um"}}."""
+        frame, key = (self.diagonals, "diagonal") if what == "diagonals" else (
+            self.positioning, "axis")
+        return {name: {f"{stage}_um": extreme_um(part.loc[part["stage"] == stage,
+                                                          "deviation_um"])
+                       for stage in STAGES}
+                for name, part in frame.groupby(key, sort=False)}
+
+
+def _stacked(runs: dict, key: str) -> pd.DataFrame:
+    """{stage: {name: readings}} -> one frame with ``key`` and ``stage`` columns."""
+    return pd.concat([f[["target", "distance_mm", "deviation_um"]].assign(**{key: name},
+                                                                           stage=stage)
+                      for stage, by_name in runs.items() for name, f in by_name.items()],
+                     ignore_index=True)[[key, "stage", "target", "distance_mm", "deviation_um"]]
+
+
+def compare(machine: twin.Machine, setup: Setup, seed: int = 0) -> Comparison:
+    """Measure the axes, identify both models, and measure the diagonals and the axes'
+    positioning before and after compensation with each (one random stream: the same seed
+    gives the same numbers)."""
+    rng = np.random.default_rng(seed)
+    models = identify_both(machine, setup, measure_axes(machine, setup, rng))
+    corrections = {"before": None, **{n: compensation(g, machine.tool_mm)
+                                      for n, g in models.items()}}
+    diagonals = {s: measure_diagonals(machine, setup, rng, c) for s, c in corrections.items()}
+    axes = {s: measure_positioning(machine, setup, rng, c) for s, c in corrections.items()}
+    return Comparison(models=models, diagonals=_stacked(diagonals, "diagonal"),
+                      positioning=_stacked(axes, "axis"))
+
+
+def identification_error(model: twin.Geometry, truth: twin.Geometry, samples: int = 301) -> dict:
+    """How far an identification is from the truth: per axis and channel the largest
+    |identified - true| over the travel [um or urad], and per pair the squareness error [urad]."""
+    out = {}
+    for axis in twin.AXES:
+        q = np.linspace(*truth.travel_mm[axis], samples)
+        gap = np.abs(model.errors[axis](q) - truth.errors[axis](q)).max(axis=0)
+        out[axis] = dict(zip(twin.CHANNELS, map(float, gap)))
+    out["squareness_urad"] = {k: float(model.squareness_urad[k] - truth.squareness_urad[k])
+                              for k in twin.SQUARENESS}
+    return out
