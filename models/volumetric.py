@@ -9,7 +9,7 @@ translations and three angles while k moves and the other axes stand still. To f
 
 s_k = -1 for the table axes. The angles give eps_k directly (they are the same anywhere on a
 rigid carriage). Identification inverts the relation for delta_k at the reading head,
-given the lever it believes in [VolumetricAbbe]_ eq. (2)-(3):
+given the lever it believes in [Chen2022]_ eq. (2)-(3):
 
 - **traditional**: the optics are taken to be at the tool point (lever_k(h_T)), so the
   measured translations are used as the tool's and the Abbe error eps_k x (h_L - h_T) stays
@@ -24,7 +24,7 @@ three squareness errors, the convention of the twin (ISO 230-1).
 
 References
 ----------
-.. [VolumetricAbbe] seed 001, "Modeling Method of CNC Machine Tools' Volume Error Considering
+.. [Chen2022] G. Chen et al. (seed 001), "Modeling Method of CNC Machine Tools' Volume Error Considering
    Abbe Error", equations (1)-(4), Table 1.
 .. ISO 230-1 (geometric accuracy), ISO 230-2 (positioning), ISO 230-6 (body diagonals).
 """

@@ -1,6 +1,6 @@
 """The three-axis machine twin: 21 geometric errors, Abbe offsets and three feed drives.
 
-A vertical machining centre of the seed paper's kind [VolumetricAbbe]_ (XHK714, "XYTZ"): the
+A vertical machining centre of the seed paper's kind [Chen2022]_ (XHK714, "XYTZ"): the
 workpiece rides on the X table, the X table on the Y saddle, the saddle on the bed; the tool
 rides on the Z ram. Each axis k carries six error motions of its position q_k, stated at its
 scale's reading head R_k (the point the control measures): three translations delta_k(q_k)
@@ -31,7 +31,7 @@ Units: positions and offsets in mm, translations in um, angles in urad (um/m).
 
 References
 ----------
-.. [VolumetricAbbe] seed 001, "Modeling Method of CNC Machine Tools' Volume Error Considering
+.. [Chen2022] G. Chen et al. (seed 001), "Modeling Method of CNC Machine Tools' Volume Error Considering
    Abbe Error" (equations (1)-(4), Table 1).
 .. ISO 230-1 (geometric accuracy), ISO 230-2 (positioning), ISO 230-4 (circular tests),
    ISO 230-6 (body diagonals).
@@ -157,7 +157,7 @@ def tool_error_um(geometry: Geometry, position_mm, point_mm) -> np.ndarray:
     """First-order error of a spindle point relative to the workpiece [um], shape (n, 3).
 
     E(P, h) = -sum_{k=X,Y} [delta_k + eps_k x (h + z e_z - R_k)] + delta_Z + eps_Z x (h - R_Z)
-    + (a_XY y + a_XZ z, a_YZ z, 0)  [VolumetricAbbe]_ eq. (1), (3).
+    + (a_XY y + a_XZ z, a_YZ z, 0)  [Chen2022]_ eq. (1), (3).
 
     Parameters
     ----------
@@ -211,7 +211,7 @@ def chain_transform(geometry: Geometry, position_mm) -> np.ndarray:
 
     Each carriage moves along its direction (the tables by -q, so that the tool moves by +q
     relative to the workpiece), is displaced by delta and turned by eps about its reading head,
-    a point fixed in its parent's frame [VolumetricAbbe]_ section 1.
+    a point fixed in its parent's frame [Chen2022]_ section 1.
     """
     p = np.atleast_2d(np.asarray(position_mm, float))
     d = _directions(geometry)

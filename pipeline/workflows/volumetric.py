@@ -10,7 +10,7 @@ The twin (``models.physics.machine.paper_machine``) is the paper's XHK714 with i
 errors sized on its Figure 5; six-channel laser tests off the tool point identify the 21
 errors (``models.volumetric``) twice, once taking the optics to be at the tool point
 (traditional) and once at their true offset (Abbe-aware); the control compensates with each,
-and the four ISO 230-6 body diagonals are measured before and after [VolumetricAbbe]_.
+and the four ISO 230-6 body diagonals are measured before and after [Chen2022]_.
 """
 
 from __future__ import annotations
@@ -137,7 +137,7 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0
 
     References
     ----------
-    .. [VolumetricAbbe] seed 001, Table 1; ISO 230-6 (body diagonals).
+    .. [Chen2022] G. Chen et al. (seed 001), Table 1; ISO 230-6 (body diagonals).
     """
     check_params(_parameters(), {"seed": seed, "targets": targets, "radius_mm": radius_mm},
                  "volumetric")
