@@ -152,8 +152,12 @@ def identify(tests: dict, setup: Setup, travel_mm: dict, reading_head_mm: dict,
              measured_at: dict, samples: int = 1501) -> twin.Geometry:
     """The 21 geometric errors from the three axes' laser tests.
 
-    Axes are identified in the order X, Y, Z: the Z test sees the tables' angles where they
-    stand (times z), which the X and Y fits remove.
+    Per axis: the angles are fitted from the angular channels; the translations at the
+    reading head are the target means of the linear channels less eps x lever(``measured_at``)
+    (the paper's eq. (3) inverted), then fitted. The straightness channels are read against
+    a reference aligned with the machine's axes (an optical square, ISO 230-1), so their
+    lines give the squareness. Axes are identified in the order X, Y, Z: the Z test sees the
+    tables' angles where they stand (times z), which the X and Y fits remove.
 
     Parameters
     ----------
@@ -184,21 +188,13 @@ def identify(tests: dict, setup: Setup, travel_mm: dict, reading_head_mm: dict,
         distance, means = _target_means(tests[axis])
         q = lo + distance * np.sign(hi - lo)
         positions = start + np.outer(distance / np.linalg.norm(end - start), end - start)
-        eps = sign * means[:, 3:]  # the spindle turns by -eps of a table
-        fits = [fit_smooth(q, eps[:, c]) for c in range(3)]
+        # the spindle turns by -eps of a table; angles are zero at the start of travel
+        fits = [f - f(lo) for f in (fit_smooth(q, sign * means[:, 3 + c]) for c in range(3))]
         angle_fits[axis] = fits
-        # the standing tables' angles times the change of their lever (z moves only on Z's test)
-        standing = np.zeros_like(positions)
-        for other in twin.TABLE_AXES if axis not in twin.TABLE_AXES else ():
-            i = twin.AXES.index(other)
-            here = np.array([[f(setup.origin_mm[i]) - f(travel_mm[other][0])
-                              for f in angle_fits[other]]])
-            moved = positions - positions[0]
-            standing -= twin._cross_um(np.repeat(here, len(q), 0),
-                                       np.c_[0 * q, 0 * q, moved[:, 2]])
-        eps_fit = np.stack([f(q) for f in fits], axis=1)
+        standing = _standing_tilt_um(axis, positions, setup.origin_mm, angle_fits)
+        eps = np.stack([f(q) for f in fits], axis=1)
         lever = _lever(axis, positions, measured_at[axis], reading_head_mm[axis])
-        delta = sign * (means[:, :3] - standing) - twin._cross_um(eps_fit, lever)
+        delta = sign * (means[:, :3] - standing) - twin.cross_um(eps, lever)
         u = np.linspace(0.0, 1.0, samples)
         grid = lo + u * (hi - lo)
         values = np.column_stack([fit_smooth(q, delta[:, c])(grid) for c in range(3)]
@@ -207,13 +203,37 @@ def identify(tests: dict, setup: Setup, travel_mm: dict, reading_head_mm: dict,
             if c != j:
                 slopes[axis, c] = np.polyfit(grid, values[:, c], 1)[0] * 1e3  # [urad]
         tables[axis] = twin.ErrorTable(grid, twin.conventional(axis, values, u))
-    # E_i = L_ik P_k: a table's straightness enters with -, the ram's with +; the symmetric
-    # part of each pair is the squareness, the rest a rotation of the whole frame
-    square = {"XY": -slopes["Y", 0] - slopes["X", 1],
-              "XZ": slopes["Z", 0] - slopes["X", 2],
-              "YZ": slopes["Z", 1] - slopes["Y", 2]}
-    return twin.Geometry(errors=tables, squareness_urad=square,
+    return twin.Geometry(errors=tables, squareness_urad=_squareness_urad(slopes),
                          reading_head_mm=dict(reading_head_mm), travel_mm=dict(travel_mm))
+
+
+def _standing_tilt_um(axis: str, positions: np.ndarray, origin_mm, angle_fits: dict
+                      ) -> np.ndarray:
+    """What the standing tables add to a test [um], shape (n, 3): on the ram's test they stand
+    tilted by eps where they wait, and z lengthens their lever, -eps x (z - z_0) e_z; on the
+    tables' own tests z does not move and they add nothing."""
+    out = np.zeros_like(positions)
+    if axis in twin.TABLE_AXES:
+        return out
+    rise = np.zeros_like(positions)
+    rise[:, 2] = positions[:, 2] - positions[0, 2]
+    for other in twin.TABLE_AXES:
+        tilt = np.array([f(origin_mm[twin.AXES.index(other)]) for f in angle_fits[other]])
+        out -= twin.cross_um(np.broadcast_to(tilt, positions.shape), rise)
+    return out
+
+
+def _squareness_urad(slopes: dict) -> dict:
+    """The three squareness errors [urad] from the straightness lines' slopes [urad].
+
+    A line of slope s in axis k's straightness along i adds E_i = -/+ s P_k (the tables' with
+    a minus sign, the ram's with a plus): the field's linear part L_ik. Of each pair only the
+    symmetric part L_ik + L_ki changes distances (the rest turns the whole frame), and the
+    convention E_x = a_XY y, E_x = a_XZ z, E_y = a_YZ z puts all of it on one side.
+    """
+    return {"XY": -slopes["Y", 0] - slopes["X", 1],
+            "XZ": slopes["Z", 0] - slopes["X", 2],
+            "YZ": slopes["Z", 1] - slopes["Y", 2]}
 
 
 def identify_both(machine: twin.Machine, setup: Setup, tests: dict) -> dict[str, twin.Geometry]:

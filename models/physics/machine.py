@@ -148,7 +148,7 @@ class Machine:
     machine_id: str = "twin"
 
 
-def _cross_um(eps_urad: np.ndarray, lever_mm: np.ndarray) -> np.ndarray:
+def cross_um(eps_urad: np.ndarray, lever_mm: np.ndarray) -> np.ndarray:
     """eps x lever [um] for eps [urad] and lever [mm]: urad x mm = 1e-3 um."""
     return np.cross(eps_urad, lever_mm) * 1e-3
 
@@ -175,9 +175,9 @@ def tool_error_um(geometry: Geometry, position_mm, point_mm) -> np.ndarray:
     for i, axis in enumerate(AXES):
         delta, eps = geometry.motion(axis, p[:, i])
         if axis in TABLE_AXES:
-            error -= delta + _cross_um(eps, h + z_lever - geometry.reading_head_mm[axis])
+            error -= delta + cross_um(eps, h + z_lever - geometry.reading_head_mm[axis])
         else:
-            error += delta + _cross_um(eps, h - geometry.reading_head_mm[axis])
+            error += delta + cross_um(eps, h - geometry.reading_head_mm[axis])
     a = geometry.squareness_urad
     error[:, 0] += 1e-3 * (a["XY"] * p[:, 1] + a["XZ"] * p[:, 2])
     error[:, 1] += 1e-3 * a["YZ"] * p[:, 2]
