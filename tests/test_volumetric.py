@@ -79,6 +79,19 @@ def test_a_line_test_sees_the_play_as_the_reversal_value_and_the_scale_as_a_slop
     assert both - both[0] == pytest.approx(-np.linspace(0, 15, 11), abs=1e-3)
 
 
+def test_a_line_test_is_a_readings_table_iso_reads(paper, tmp_path):
+    import backlash as bl
+
+    m = bare(paper, Y=twin.FeedDrive(backlash_um=4.0))
+    test = twin.line_test(m, [750, -2550, -350], [750, -1050, -350], cycles=5, targets=6,
+                          noise={"dy_um": 0.05}, rng=np.random.default_rng(0))
+    path = tmp_path / "y.csv"
+    twin.as_readings(test, machine_id="twin", axis="Y", test_id="Y1",
+                     start_mm=-2550.0).to_csv(path, index=False)
+    figures = bl.iso(str(path)).figures
+    assert figures["B"].iloc[0] == pytest.approx(4.0, abs=0.15)
+
+
 # ------------------------------------------------------------------------- identification
 def independent_geometry_error(model, targets=11) -> dict:
     out = {}
@@ -220,6 +233,16 @@ def test_the_job_prints_every_diagonal_and_is_deterministic(cli, capsys, tmp_pat
     circles = pd.read_csv(tmp_path / "v" / "circles.csv")
     assert tuple(circles.columns) == twin.CIRCLE_COLUMNS
     assert set(circles["plane"]) == {"XY", "YZ", "ZX"}
+
+
+def test_bad_parameters_in_python_name_the_parameter():
+    import backlash as bl
+
+    with pytest.raises(bl.InputError) as err:
+        bl.volumetric(targets=3)
+    assert err.value.parameter == "targets"
+    with pytest.raises(bl.InputError):
+        bl.volumetric(seed=1.5)
 
 
 @pytest.mark.parametrize("argv, says", [

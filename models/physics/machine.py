@@ -362,6 +362,18 @@ def line_test(machine: Machine, start_mm, end_mm, *, targets: int = 11, cycles: 
     return frame
 
 
+def as_readings(test: pd.DataFrame, *, machine_id: str, axis: str, test_id: str,
+                start_mm: float = 0.0) -> pd.DataFrame:
+    """A ``line_test`` frame as the readings table (SCHEMA section 1, linear cycle): targets at
+    ``start_mm`` + the distance along the line [mm], directions '+' and '-', the deviation
+    along the line [um]; the rest of the product (``iso``, ``targets``) reads it as a laser's."""
+    return pd.DataFrame({
+        "machine_id": machine_id, "axis": axis, "test_id": test_id, "method": "linear",
+        "target": (start_mm + test["distance_mm"]).round(6),
+        "direction": np.where(test["direction"] > 0, "+", "-"), "cycle": test["cycle"],
+        "deviation_um": test["deviation_um"]})
+
+
 def body_diagonals(travel_mm: dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The four ISO 230-6 body diagonals of the working volume, by the signs of their x, y, z
     steps as the seed paper names them: PPP, NPP, PPN, NPN -> (start, end) [mm]."""
