@@ -243,6 +243,8 @@ def chain_error(geometry: Geometry, position_mm, point_mm) -> tuple[np.ndarray, 
 def _spike_um(commanded_mm: np.ndarray, drive: FeedDrive) -> np.ndarray:
     """The friction spike along one axis' commanded path [um]: -s h exp(-d / lambda) after
     each reversal, s the new direction, d the travel since the reversal (none before the first)."""
+    if drive.spike_um == 0:
+        return np.zeros_like(commanded_mm)
     step = np.diff(commanded_mm, prepend=commanded_mm[0])
     moving = np.sign(step)
     # direction of the last move at each sample (held through stops)
@@ -253,8 +255,6 @@ def _spike_um(commanded_mm: np.ndarray, drive: FeedDrive) -> np.ndarray:
     last = np.maximum.accumulate(np.where(reversal, np.arange(len(step)), -1))
     # the turning point is the sample before the first step of the new direction
     since = np.where(last >= 0, travelled - travelled[np.maximum(last - 1, 0)], np.inf)
-    if drive.spike_um == 0:
-        return np.zeros_like(commanded_mm)
     return -sense * drive.spike_um * np.exp(-since / drive.spike_mm)
 
 
