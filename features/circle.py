@@ -209,6 +209,11 @@ def _check_runs(frame: pd.DataFrame, file, rows) -> None:
             raise InputError(f"{where} has {len(run)} readings; expected at least "
                              f"{MIN_READINGS} round the circle", file=file,
                              row=row_of(rows, first), column="angle_deg")
+        radius = run["radius_mm"].iloc[0]
+        if (run["deviation_um"] - radius).abs().median() < 0.01 * radius:
+            raise InputError(f"{where}: deviation_um holds the nominal radius {radius:g} mm or "
+                             "close to it; expected the radial deviation in um (measured minus "
+                             "nominal)", file=file, row=row_of(rows, first), column="deviation_um")
         gap = largest_gap_deg(run["angle_deg"].to_numpy())
         if gap > MAX_GAP_DEG:
             raise InputError(f"{where} leaves a gap of {gap:.0f} deg without readings; "

@@ -85,7 +85,7 @@ def ballbar_run(truth: Truth, direction: str, *, radius_mm: float = 150.0,
     """One run: readings of the radial deviation [um] at angles from a random start."""
     s = 1.0 if direction == "CCW" else -1.0
     omega = feed_mm_min / 60.0 / radius_mm                       # rad/s
-    fine = 0.02                                                  # deg, the simulation step
+    fine = 0.04                                                  # deg, the simulation step
     lead_in = 180.0                                              # deg before the data
     start = float(rng.uniform(0.0, 360.0))
     travel = np.arange(0.0, lead_in + 360.0 + 3 * step_deg, fine)   # deg travelled
