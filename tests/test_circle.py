@@ -5,6 +5,7 @@ command's outputs and its refusals."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -130,7 +131,7 @@ def test_the_command_prints_the_schema_and_writes_the_report(six, tmp_path, caps
 
 
 def test_the_example_file_recovers_its_truth():
-    truth = json.loads(open("experiments/data/circle/truth.json", encoding="utf-8").read())
+    truth = json.loads(Path("experiments/data/circle/truth.json").read_text(encoding="utf-8"))
     (item,) = circle("experiments/data/circle/ballbar_xy.csv").circles
     d = item.diagnosis_json()
     for axis, play in zip("XY", truth["play_um"]):
@@ -171,8 +172,8 @@ def good() -> pd.DataFrame:
      "test 'T-CCW' CCW leaves a gap of 211 deg"),
     (lambda t: pd.concat([t, t[t["direction"] == "CW"].assign(test_id="T-CW2")],
                          ignore_index=True),
-     "row 722, column 'test_id': machine 'M1' plane XY visit '1' (R 100 mm, F 2000 mm/min) has "
-     "CW runs 'T-CW' and 'T-CW2'; expected one run per direction"),
+     ("row 722, column 'test_id': machine 'M1' plane XY visit '1' (R 100 mm, F 2000 mm/min) "
+      "has CW runs 'T-CW' and 'T-CW2'; expected one run per direction")),
     (lambda t: t.assign(feed_mm_min=np.where(t.index == 400, 1000.0, t["feed_mm_min"])),
      "test 'T-CW' CW changes feed_mm_min within the run"),
 ])
