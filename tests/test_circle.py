@@ -17,6 +17,8 @@ from pipeline.cli import main
 from pipeline.workflows.circle import circle
 from tests.independent_circle import fleet
 
+EXAMPLE = Path(__file__).resolve().parents[1] / "experiments" / "data" / "circle"
+
 
 @pytest.fixture(scope="module")
 def six():
@@ -131,8 +133,8 @@ def test_the_command_prints_the_schema_and_writes_the_report(six, tmp_path, caps
 
 
 def test_the_example_file_recovers_its_truth():
-    truth = json.loads(Path("experiments/data/circle/truth.json").read_text(encoding="utf-8"))
-    (item,) = circle("experiments/data/circle/ballbar_xy.csv").circles
+    truth = json.loads((EXAMPLE / "truth.json").read_text(encoding="utf-8"))
+    (item,) = circle(EXAMPLE / "ballbar_xy.csv").circles
     d = item.diagnosis_json()
     for axis, play in zip("XY", truth["play_um"]):
         assert abs(d["backlash_um"][axis] - play) <= max(0.6, 0.08 * play)
