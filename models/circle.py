@@ -160,7 +160,10 @@ def _least_squares(a: np.ndarray, y: np.ndarray) -> np.ndarray:
     to unit norm: a few dozen columns, well apart, and far faster than an SVD."""
     scale = np.linalg.norm(a, axis=0)
     b = a / scale
-    return np.linalg.solve(b.T @ b, b.T @ y) / scale
+    try:
+        return np.linalg.solve(b.T @ b, b.T @ y) / scale
+    except np.linalg.LinAlgError:  # effects the runs cannot tell apart: the least-norm answer
+        return np.linalg.lstsq(b, y, rcond=None)[0] / scale
 
 
 def _fit(runs, y: np.ndarray, radius_mm: float, feed_mm_min: float, rounds: int = 4):

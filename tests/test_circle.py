@@ -90,6 +90,16 @@ def test_scale_servo_and_spikes_of_six_machines(six, six_result):
             assert all(0 < u < 1 for u in d["uncertainty"][key].values())
 
 
+def test_an_arc_of_220_degrees_still_shows_each_axis_reversing(six):
+    table, truths = six
+    a = table["angle_deg"]
+    arc = table[(table["machine_id"] == "M2") & ((a < 200) | (a > 340))]
+    d = circle(arc).circles[0].diagnosis_json()
+    for axis, play in zip("XY", truths[1].play_um):
+        assert abs(d["backlash_um"][axis] - play) <= max(0.6, 0.08 * play)
+    assert abs(d["squareness_um_per_m"] - truths[1].squareness_um_per_m) <= 3.0
+
+
 def test_the_uncertainty_grows_with_the_noise():
     quiet, _ = fleet(n=1, seed=3, noise_um=0.1)
     loud, _ = fleet(n=1, seed=3, noise_um=0.8)
