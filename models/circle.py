@@ -7,25 +7,25 @@ Geometry: on a circle of radius R the tool is nominally at
 radius by its projection :math:`\\Delta r = e_1\\cos\\theta + e_2\\sin\\theta`. The signatures
 per unit of each effect:
 
-=====================  =========================================================  ==========
-effect                 :math:`\\Delta r(\\theta)` per unit                         unit
-=====================  =========================================================  ==========
-play of axis 1         :math:`\\tfrac12\\, s\\,\\mathrm{sgn}(\\sin\\theta)\\cos\\theta`   um
-play of axis 2         :math:`-\\tfrac12\\, s\\,\\mathrm{sgn}(\\cos\\theta)\\sin\\theta`  um
-reversal spike, axis   :math:`\\sum_r e^{-d_r/\\lambda}`, :math:`d_r` the travel since  um
-                       the axis's reversal :math:`\\theta_r` (axis 1 at 0 and 180
-                       deg, axis 2 at 90 and 270 deg)
-out-of-squareness      :math:`\\tfrac{R}{2000}\\sin 2\\theta` (:math:`e_1 = \\alpha\\,y`)  um/m
-scale mismatch         :math:`\\tfrac{R}{2000}\\cos 2\\theta` (first minus second)    ppm
-servo mismatch         :math:`s\\,\\tfrac{F}{120}\\sin 2\\theta` (lag of the first       ms
-                       axis minus the second: :math:`e_i = -v_i\\,\\Delta t_i`)
-=====================  =========================================================  ==========
+- play of axis 1 [um]: :math:`\\tfrac12 s\\,\\mathrm{sgn}(\\sin\\theta)\\cos\\theta`;
+- play of axis 2 [um]: :math:`-\\tfrac12 s\\,\\mathrm{sgn}(\\cos\\theta)\\sin\\theta`;
+- reversal spike of an axis [um]: :math:`\\sum_r \\sum_k c_k e^{-d_r/\\lambda_k}`, :math:`d_r`
+  the travel since the axis's reversal :math:`\\theta_r` (axis 1 at 0 and 180 deg, axis 2 at
+  90 and 270 deg); reported: the peak of the sum;
+- out-of-squareness [um/m]: :math:`\\tfrac{R}{2000}\\sin 2\\theta` (:math:`e_1 = \\alpha y`:
+  the second axis leans towards the first);
+- scale mismatch [ppm]: :math:`\\tfrac{R}{2000}\\cos 2\\theta` (first axis minus second);
+- servo mismatch [ms]: :math:`s\\,\\tfrac{F}{120}\\sin 2\\theta` (lag of the first axis minus
+  the second: :math:`e_i = -v_i \\Delta t_i`);
 
 with R in mm and F in mm/min. Play is lost motion: the axis trails its command by half the
 play in the direction it moves, so its deviation steps by the play where it reverses (the
-circle is tangent to the other axis there). A reversal spike is the axis sticking after it
-reverses, outward and decaying over a few degrees; its decay length :math:`\\lambda` is chosen
-by profile (the smallest residual over ``DECAYS_DEG``). Each run also gets its own mean radius
+circle is tangent to the other axis there); the step is taken up while the motor travels the
+play, :math:`R (1 - \\cos d) = b` (``_take_up``), so the fit is repeated with the plays it
+found. A reversal spike is the axis sticking after it reverses, a short peak decaying over a
+few degrees; its shape is not assumed: it is a sum of exponentials of decay lengths
+``SPIKE_BASIS_DEG`` (0.75 to 12 deg), and its height is the peak of that sum over the first
+``SPIKE_SPAN_DEG`` after the reversal. Each run also gets its own mean radius
 and centre offset (ISO 230-4's least-squares centre: :math:`1, \\cos\\theta, \\sin\\theta`).
 The 2-per-revolution terms of squareness and servo mismatch share :math:`\\sin 2\\theta`; they
 separate because servo mismatch changes sign with the direction, so both runs are needed.
