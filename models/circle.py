@@ -7,8 +7,10 @@ Geometry: on a circle of radius R the tool is nominally at
 radius by its projection :math:`\\Delta r = e_1\\cos\\theta + e_2\\sin\\theta`. The signatures
 per unit of each effect:
 
-- play of axis 1 [um]: :math:`\\tfrac12 s\\,\\mathrm{sgn}(\\sin\\theta)\\cos\\theta`;
-- play of axis 2 [um]: :math:`-\\tfrac12 s\\,\\mathrm{sgn}(\\cos\\theta)\\sin\\theta`;
+- play of axis 1 [um]: :math:`\\pm\\tfrac12 \\cos\\theta`, + after the axis passed its +
+  extreme (0 deg), - after its - extreme (180 deg), in either direction (CCW:
+  :math:`\\tfrac12 s\\,\\mathrm{sgn}(\\sin\\theta)\\cos\\theta`);
+- play of axis 2 [um]: :math:`\\pm\\tfrac12 \\sin\\theta`, + after 90 deg, - after 270 deg;
 - reversal spike of an axis [um]: :math:`\\sum_r \\sum_k c_k e^{-d_r/\\lambda_k}`, :math:`d_r`
   the travel since the axis's reversal :math:`\\theta_r` (axis 1 at 0 and 180 deg, axis 2 at
   90 and 270 deg); reported: the peak of the sum;
@@ -80,8 +82,19 @@ class Diagnosis:
 
 
 def _travel_since(theta_deg: np.ndarray, s: float, reversal_deg: float) -> np.ndarray:
-    """Travel [deg] since the path last passed ``reversal_deg`` (direction ``s``)."""
-    return np.mod(s * (theta_deg - reversal_deg), 360.0)
+    """Travel [deg] since the path last passed ``reversal_deg`` (direction ``s``), in (0, 360]:
+    a reading taken at the reversal itself is the last one before it (the axis has arrived at
+    its extreme, not yet left it)."""
+    d = np.mod(s * (theta_deg - reversal_deg), 360.0)
+    return np.where(d < 1e-9, 360.0, d)
+
+
+def _step(theta_deg: np.ndarray, s: float, reversals) -> np.ndarray:
+    """The error of an axis with a play of 1 [um], along the axis: +1/2 after it passed its +
+    extreme (its first reversal, 0 or 90 deg: it now moves in - and trails on the + side),
+    -1/2 after its - extreme, in either direction of the circle."""
+    first, second = (_travel_since(theta_deg, s, r) for r in reversals)
+    return np.where(first < second, 0.5, -0.5)
 
 
 def _take_up(theta_deg: np.ndarray, s: float, reversals, radius_mm: float,
@@ -121,12 +134,14 @@ def signatures(theta_deg: np.ndarray, direction: str, radius_mm: float, feed_mm_
     s = 1.0 if direction == "CCW" else -1.0
     t = np.radians(theta_deg)
     c, n = np.cos(t), np.sin(t)
-    take_up = [_take_up(theta_deg, s, REVERSALS_DEG[k], radius_mm, play_um[k]) for k in (0, 1)]
+    steps = [_step(theta_deg, s, REVERSALS_DEG[k]) * _take_up(theta_deg, s, REVERSALS_DEG[k],
+                                                                radius_mm, play_um[k])
+             for k in (0, 1)]
     spikes = [sum(spike_basis(_travel_since(theta_deg, s, r)) for r in REVERSALS_DEG[k])
               for k in (0, 1)]
     return np.column_stack([
-        0.5 * s * np.sign(n) * c * take_up[0],
-        -0.5 * s * np.sign(c) * n * take_up[1],
+        steps[0] * c,
+        steps[1] * n,
         radius_mm / 2000.0 * np.sin(2 * t),
         radius_mm / 2000.0 * np.cos(2 * t),
         s * feed_mm_min / 120.0 * np.sin(2 * t),
@@ -192,12 +207,14 @@ def _fit(runs, y: np.ndarray, radius_mm: float, feed_mm_min: float, rounds: int 
     return full, cov, residual
 
 
-def _spike_peak(coef: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
-    """The largest excursion of a fitted spike over ``SPIKE_SPAN_DEG`` after the reversal [um]
-    and its standard uncertainty (the covariance along the basis at that travel)."""
-    if np.isnan(coef).any():
+def _spike_peak(coef: np.ndarray, cov: np.ndarray, travel: np.ndarray) -> tuple[float, float]:
+    """The largest excursion of a fitted spike at the travels [deg] where it was read (within
+    ``SPIKE_SPAN_DEG`` after a reversal: between the reversal and the first reading after it
+    the sum of exponentials is an extrapolation) [um], and its standard uncertainty (the
+    covariance along the basis at that travel)."""
+    travel = travel[travel <= SPIKE_SPAN_DEG]
+    if np.isnan(coef).any() or travel.size == 0:
         return float("nan"), float("nan")
-    travel = np.linspace(0.0, SPIKE_SPAN_DEG, 301)
     basis = spike_basis(travel)
     shape = basis @ coef
     g = basis[int(np.argmax(np.abs(shape)))]
@@ -228,8 +245,11 @@ def diagnose(runs, radius_mm: float, feed_mm_min: float) -> Diagnosis:
     value = {name: float(coef[i]) for i, name in enumerate(LINEAR)}
     u = {name: float(np.sqrt(cov[i, i])) for i, name in enumerate(LINEAR)}
     k = len(SPIKE_BASIS_DEG)
-    for axis, first in (("spike_1", len(LINEAR)), ("spike_2", len(LINEAR) + k)):
+    for axis, first in ((0, len(LINEAR)), (1, len(LINEAR) + k)):
         part = slice(first, first + k)
-        value[axis], u[axis] = _spike_peak(coef[part], cov[part, part])
+        travel = np.concatenate([_travel_since(theta, 1.0 if direction == "CCW" else -1.0, r)
+                                 for direction, theta, _ in runs for r in REVERSALS_DEG[axis]])
+        value[f"spike_{axis + 1}"], u[f"spike_{axis + 1}"] = _spike_peak(
+            coef[part], cov[part, part], travel)
     return Diagnosis({t: value[t] for t in TERMS}, {t: u[t] for t in TERMS},
                      float(np.sqrt(np.mean(residual ** 2))))

@@ -81,13 +81,15 @@ def _stick(motor: np.ndarray, travel_deg: np.ndarray, height: float, width: floa
 
 def ballbar_run(truth: Truth, direction: str, *, radius_mm: float = 150.0,
                 feed_mm_min: float = 1000.0, step_deg: float = 0.6173, noise_um: float = 0.15,
-                drift_um: float = 0.3, rng: np.random.Generator) -> pd.DataFrame:
-    """One run: readings of the radial deviation [um] at angles from a random start."""
+                drift_um: float = 0.3, start_deg: float | None = None,
+                rng: np.random.Generator) -> pd.DataFrame:
+    """One run: readings of the radial deviation [um] at angles from ``start_deg`` (default a
+    random start)."""
     s = 1.0 if direction == "CCW" else -1.0
     omega = feed_mm_min / 60.0 / radius_mm                       # rad/s
     fine = 0.04                                                  # deg, the simulation step
     lead_in = 180.0                                              # deg before the data
-    start = float(rng.uniform(0.0, 360.0))
+    start = float(rng.uniform(0.0, 360.0)) if start_deg is None else start_deg
     travel = np.arange(0.0, lead_in + 360.0 + 3 * step_deg, fine)   # deg travelled
     time = np.radians(travel) / omega
     theta0 = np.radians(start - s * lead_in)

@@ -100,6 +100,17 @@ def test_an_arc_of_220_degrees_still_shows_each_axis_reversing(six):
     assert abs(d["squareness_um_per_m"] - truths[1].squareness_um_per_m) <= 3.0
 
 
+def test_readings_on_the_reversals_themselves_belong_before_them():
+    # ballbar software often reads at whole degrees from 0: a reading at 0, 90, 180 or 270 deg
+    # is taken as the axis arrives at its extreme, before the play is taken up
+    table, truths = fleet(n=2, seed=5, step_deg=1.0, start_deg=0.0)
+    assert np.isin([0.0, 90.0, 180.0, 270.0], table["angle_deg"].round(9)).all()
+    for item, truth in zip(circle(table).circles, truths):
+        d = item.diagnosis_json()
+        for axis, play in zip("XY", truth.play_um):
+            assert abs(d["backlash_um"][axis] - play) <= max(0.6, 0.08 * play)
+
+
 def test_the_uncertainty_grows_with_the_noise():
     quiet, _ = fleet(n=1, seed=3, noise_um=0.1)
     loud, _ = fleet(n=1, seed=3, noise_um=0.8)
