@@ -149,7 +149,8 @@ class CircleResult(Result):
         return clean_nan({"source": self.source, "circles": items, "notes": list(self.notes)})
 
     def table(self) -> str:
-        """One line per circle: G, H and the diagnosis (value ± standard uncertainty)."""
+        """Three lines per circle: G and H; backlash and spike per axis; the plane's effects
+        (each value ± its standard uncertainty)."""
         lines = []
         for item in self.circles:
             c = item.circle
@@ -157,9 +158,18 @@ class CircleResult(Result):
             h = f", H {item.H_um:.2f}" if item.H_um is not None else ""
             lines.append(f"{c.machine_id} {c.plane} visit {c.visit} R {c.radius_mm:g} mm "
                          f"F {c.feed_mm_min:g} mm/min: {g}{h} um")
-            if item.diagnosis is not None:
-                lines.append("  " + "; ".join(f"{label} {v:.2f} ± {u:.2f}"
-                                              for label, v, u in item.diagnosis_lines()))
+            d = item.diagnosis
+            if d is None:
+                continue
+            axes = [f"{name} " + "  ".join(f"{axis} {d.value[t]:.2f} ± {d.u[t]:.2f}"
+                                            for axis, t in zip(c.axes, terms)) + " um"
+                    for name, *terms in (("backlash", "backlash_1", "backlash_2"),
+                                         ("reversal spike", "spike_1", "spike_2"))]
+            lines.append("  " + "; ".join(axes))
+            lines.append("  " + "; ".join(
+                f"{name} {d.value[t]:.2f} ± {d.u[t]:.2f} {unit}" for name, t, unit in (
+                    ("squareness", "squareness", "um/m"), ("scale mismatch", "scale", "ppm"),
+                    ("servo mismatch", "servo", "ms"))))
         return "\n".join(lines)
 
     def write(self, out) -> dict[str, Path]:
