@@ -111,6 +111,29 @@ def test_readings_on_the_reversals_themselves_belong_before_them():
             assert abs(d["backlash_um"][axis] - play) <= max(0.6, 0.08 * play)
 
 
+def test_the_machine_twin_s_circles_are_diagnosed():
+    # the product's machine twin (models.physics.machine, of the volumetric job) reads circles
+    # in this contract with its own feed drives: play, a spike decaying along the axis travel,
+    # a first-order servo lag of 30 ms per axis (0.5 ms apart)
+    twin = pytest.importorskip("models.physics.machine")
+    if not all(hasattr(twin, n) for n in ("paper_machine", "without", "circle_test")):
+        pytest.skip("the machine twin has no circular test")
+    machine = twin.without(twin.paper_machine(), geometry=True)
+    table = pd.concat([twin.circle_test(machine, plane=plane, radius_mm=150.0, direction=d)
+                       for plane in ("XY", "YZ") for d in ("CW", "CCW")])
+    for item in circle(table).circles:
+        d = item.diagnosis_json()
+        first, second = item.circle.axes
+        for axis in (first, second):
+            drive = machine.drives[axis]
+            assert abs(d["backlash_um"][axis] - drive.backlash_um) <= max(
+                0.6, 0.08 * drive.backlash_um), (axis, d)
+            assert d["reversal_spike_um"][axis] == pytest.approx(drive.spike_um, rel=0.25)
+        lag = machine.drives[first].servo_ms - machine.drives[second].servo_ms
+        assert d["servo_mismatch_ms"] == pytest.approx(lag, abs=0.2)
+        assert abs(d["squareness_um_per_m"]) < 1.0
+
+
 def test_the_uncertainty_grows_with_the_noise():
     quiet, _ = fleet(n=1, seed=3, noise_um=0.1)
     loud, _ = fleet(n=1, seed=3, noise_um=0.8)
