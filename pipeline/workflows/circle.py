@@ -4,7 +4,7 @@ and the diagnosis of what made the path depart from the circle.
 >>> import backlash as bl
 >>> result = bl.circle("experiments/data/circle/ballbar_xy.csv")          # doctest: +SKIP
 >>> result.circles[0].diagnosis.value["backlash_1"]                       # doctest: +SKIP
-6.1...
+4.7...
 
 A circle is one machine, plane, visit, radius and feed with a CW and a CCW run
 (``features.circle``). The diagnosis fits both runs at once with the error signatures of
