@@ -12,8 +12,8 @@ approaches in the series (``read_camonitor``'s per-sample frame) and makes them 
   logged last before the test number changes; the target is the set point then. Other test
   numbers (0 between tests, ecmc's limit-switch and resolver tests) are not approaches.
 - **without them** (``from_stops``): a stop is a set point held for at least ``dwell_s``; its
-  direction is the sign of the set point's last change before it, its reading the reference
-  logged last before the set point moves on. Stops are grouped into targets (set points
+  direction is the side it came from (the last set point farther than ``tolerance``), its
+  reading the reference logged last before the set point moves on. Stops are grouped into targets (set points
   within ``tolerance`` of each other); only targets stopped at from both directions are ISO
   targets (an overrun or parking position is reached one way only), and the cycle is the
   count of stops at a target and direction so far.
@@ -174,6 +174,40 @@ def from_test_numbers(samples: pd.DataFrame, path) -> pd.DataFrame:
     return found.drop(columns="code")
 
 
+def find_stops(samples: pd.DataFrame, dwell_s: float = DWELL_S,
+               tolerance: float = TOLERANCE_MM) -> pd.DataFrame:
+    """Every hold of the set point of at least ``dwell_s`` [s], in time order.
+
+    Returns
+    -------
+    DataFrame
+        ``target`` (the set point held), ``direction`` (the side it came from: the sign of
+        the hold minus the last set point before it farther than ``tolerance`` [mm], so an
+        open-loop counter settling back by a step does not count), ``reference`` (logged last
+        before the set point moves on), ``time`` (of that sample), ``started`` (when the hold
+        began), ``row``. A hold that no set point since the previous one is farther from has
+        no direction and is left out.
+    """
+    target = samples["target"].to_numpy()
+    seconds = (samples["time"] - samples["time"].iloc[0]).dt.total_seconds().to_numpy()
+    change = np.flatnonzero(np.r_[False, target[1:] != target[:-1]])
+    until = np.r_[change[1:], len(target)]  # first sample of the next move (or the end)
+    held = np.r_[seconds[change[1:]], seconds[-1]] - seconds[change]
+    stops = change[held >= dwell_s]
+    value = target[stops]
+    side = np.zeros(len(stops))
+    for k, (begin, end) in enumerate(zip(np.r_[0, stops[:-1]], stops)):
+        far = np.flatnonzero(np.abs(target[begin:end] - value[k]) > tolerance)
+        if len(far):
+            side[k] = value[k] - target[begin + far[-1]]
+    rows = samples.iloc[until[held >= dwell_s] - 1]
+    found = pd.DataFrame({
+        "target": value, "direction": np.where(side > 0, "+", "-"),
+        "reference": rows["reference"].to_numpy(), "time": rows["time"].array,
+        "started": samples["time"].iloc[stops].array, ROW: rows["row"].to_numpy()})
+    return found[side != 0].reset_index(drop=True)
+
+
 def from_stops(samples: pd.DataFrame, path, dwell_s: float = DWELL_S,
                tolerance: float = TOLERANCE_MM) -> pd.DataFrame:
     """Approaches found as settled stops of the set point (see the module docstring).
@@ -183,22 +217,7 @@ def from_stops(samples: pd.DataFrame, path, dwell_s: float = DWELL_S,
     DataFrame
         As ``from_test_numbers`` (``position`` is the target's rank).
     """
-    target = samples["target"].to_numpy()
-    seconds = (samples["time"] - samples["time"].iloc[0]).dt.total_seconds().to_numpy()
-    change = np.flatnonzero(np.r_[False, target[1:] != target[:-1]])
-    if len(change) == 0:
-        raise InputError("the set point never changes; expected an ISO 230-2 run's moves",
-                         file=path, parameter="channels")
-    until = np.r_[change[1:], len(target)]  # first sample of the next move (or the end)
-    held = np.r_[seconds[change[1:]], seconds[-1]] - seconds[change]
-    stop = held >= dwell_s
-    last = until[stop] - 1
-    step = target[change] - target[change - 1]
-    rows = samples.iloc[last]
-    found = pd.DataFrame({
-        "target": target[change[stop]], "direction": np.where(step[stop] > 0, "+", "-"),
-        "reference": rows["reference"].to_numpy(), "time": rows["time"].array,
-        "started": samples["time"].iloc[change[stop]].array, ROW: rows["row"].to_numpy()})
+    found = find_stops(samples, dwell_s, tolerance)
     if found.empty:
         raise InputError(f"no stop of the set point lasts {dwell_s:g} s; expected an ISO "
                          "230-2 run with dwells at its targets", file=path)
