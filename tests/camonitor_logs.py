@@ -59,11 +59,12 @@ class _Log:
 def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 1.0,
               offset: float = 0.0, speed: float = 5.0, dwell: float = 2.0,
               overrun: float = 2.0, seed: int = 0, test_numbers: bool = True,
-              alarms: bool = True) -> Path:
+              alarms: bool = True, rate: float = RATE_HZ) -> Path:
     """Write the camonitor log of a linear ISO 230-2 run whose approach readings are
     ``readings[("FWD"|"BWD", i, j)]`` [mm, axis coordinates]; the reference PV logs
     ``(reading - offset) / scale`` (raw units), so a reader must map it back with ``scale`` and
-    ``offset``. ``speed`` [mm/s], ``dwell`` [s] at each target."""
+    ``offset``. ``speed`` [mm/s], ``dwell`` [s] at each target, ``rate`` [Hz] of the encoder
+    and the set point."""
     rng = np.random.default_rng(seed)
     ref_pv, test_pv, set_pv = pvs["REF_PV"], pvs["TEST_PV"], pvs["TGT_SET_PV"]
     order = sorted(targets)
@@ -82,20 +83,20 @@ def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 
 
     def move(to, seconds):
         nonlocal position
-        steps = max(int(abs(to - position) / speed * RATE_HZ), 1)
+        steps = max(int(abs(to - position) / speed * rate), 1)
         for k in range(1, steps + 1):
             x = position + (to - position) * k / steps
-            seconds += 1 / RATE_HZ
+            seconds += 1 / rate
             log.add(set_pv, seconds, f"{x:.6g}")
             ref(seconds + 0.002, x + rng.normal(0, 0.002))
         position = to
         return seconds
 
     def settle(value, seconds):
-        for k in range(int(dwell * RATE_HZ) - 1):
-            seconds += 1 / RATE_HZ
+        for _ in range(int(dwell * rate) - 1):
+            seconds += 1 / rate
             ref(seconds + 0.002, value + rng.normal(0, 2e-4))
-        seconds += 1 / RATE_HZ
+        seconds += 1 / rate
         ref(seconds + 0.002, value, exact=True)  # the last reference before the change
         return seconds + 0.005
 
