@@ -19,22 +19,11 @@ from features.readings.halsampler import read_halsampler
 from pipeline.cli import main
 from tests.camonitor_logs import read_dat, run_readings, write_run
 from tests.conftest import REAL_DATA
+from tests.test_cli_errors import refused
 
 LOGS = REAL_DATA / "camonitor"
 OPEN_LOOP, RESOLVER = "IOC_TEST:Axis1-PosAct", "IOC_TEST:ec0-s4-EL7211-Enc-PosAct"
 needs_logs = pytest.mark.skipif(not LOGS.is_dir(), reason="real camonitor logs not present")
-
-
-def one_error(capsys, argv: list[str]) -> str:
-    try:
-        code = main(argv)
-    except SystemExit as stop:
-        code = stop.code
-    assert code == 2
-    err = [line for line in capsys.readouterr().err.splitlines()
-           if line.strip() and not line.startswith("note:")]
-    assert len(err) == 1, err
-    return err[0]
 
 
 @pytest.fixture(scope="module")
@@ -254,7 +243,7 @@ CHANNELS = "target=MC:X-PosSet,reference=MC:X-Enc,test=MC:TestNumber"
 ])
 def test_bad_logs_are_one_line_and_write_nothing(tmp_path, capsys, text, channels, expected):
     out = tmp_path / "r.csv"
-    line = one_error(capsys, ["convert", str(_log(tmp_path, text)), "--format", "camonitor",
+    line = refused(capsys, ["convert", str(_log(tmp_path, text)), "--format", "camonitor",
                               "--channels", channels, "--out", str(out)])
     assert expected in line, line
     assert not out.exists()
@@ -262,14 +251,14 @@ def test_bad_logs_are_one_line_and_write_nothing(tmp_path, capsys, text, channel
 
 def test_bad_options_are_one_line(tmp_path, capsys, ess_file):
     out = tmp_path / "r.csv"
-    line = one_error(capsys, ["convert", str(_log(tmp_path, GOOD)), "--format", "camonitor",
+    line = refused(capsys, ["convert", str(_log(tmp_path, GOOD)), "--format", "camonitor",
                               "--channels", CHANNELS, "--reference-scale", "0", "--out",
                               str(out)])
     assert "--reference-scale" in line and "SCALE not 0" in line
-    line = one_error(capsys, ["convert", str(ess_file), "--channels", CHANNELS, "--out",
+    line = refused(capsys, ["convert", str(ess_file), "--channels", CHANNELS, "--out",
                               str(out)])
     assert "--channels" in line and "camonitor files only" in line
-    line = one_error(capsys, ["convert", str(_log(tmp_path, GOOD.replace("PosSet", "Cmd"))),
+    line = refused(capsys, ["convert", str(_log(tmp_path, GOOD.replace("PosSet", "Cmd"))),
                               "--out", str(out)])
     assert "cannot tell which PV is which" in line and "--channels" in line
     assert not out.exists()
