@@ -122,6 +122,13 @@ def test_ess_run_converts_to_its_dat_readings(ess_log, tmp_path, capsys):
     assert len(truth) == 50
     assert np.abs(truth["measured"] - truth["measured_dat"]).max() < 1e-9
     assert (readings["method"] == "linear").all()
+    capsys.readouterr()
+    figures = []
+    for source in (out, dat):  # the same ISO 230-2 figures as the .dat file's
+        assert main(["iso", str(source), "--json"]) == 0
+        figures.append(json.loads(capsys.readouterr().out)[0])
+    for name in ("A", "E", "M", "R", "B", "B_mean"):
+        assert figures[0][name] == pytest.approx(figures[1][name], abs=1e-6)
 
 
 def test_fitted_gear_ratio_keeps_reversal_values_within_tolerance(ess_log, tmp_path, capsys):
