@@ -191,6 +191,18 @@ def test_other_jobs_read_the_log_directly(ess_log, capsys):
     assert "fitted gear ratio" in err
 
 
+def test_connection_lines_are_left_out_with_a_note(tmp_path):
+    path = tmp_path / "c.log"
+    path.write_text("MC:X-Enc *** disconnected\n"
+                    "MC:X-Enc 2026-01-05 08:00:00.000000 1.5\n"
+                    "MC:X-Set <undefined> <undefined> UDF INVALID\n"
+                    "MC:X-Enc 2026-01-05 08:00:00.010000 1.6 HIHI MAJOR\n")
+    with pytest.warns(BacklashWarning, match="2 lines"):
+        lines = parse_camonitor(path)
+    assert list(lines["row"]) == [2, 4] and list(lines["value"]) == [1.5, 1.6]
+    assert list(lines["status"]) == ["", "HIHI"] and list(lines["severity"]) == ["", "MAJOR"]
+
+
 def test_pendulum_order_and_letter_axis(tmp_path):
     """Every approach right after a reversal: a pendulum test; PV MC:Y-... names axis Y."""
     start = pd.Timestamp("2026-01-05 08:00:00")

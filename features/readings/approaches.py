@@ -9,7 +9,8 @@ approaches in the series (``read_camonitor``'s per-sample frame) and makes them 
 - **with test numbers** (``from_test_numbers``): ecmc numbers each approach ``d c pp``:
   direction digit d (1 forward = ``+``, 2 backward = ``-``), cycle digit c, two-digit
   position index pp (1101 = forward, cycle 1, position 1). The reading is the reference value
-  logged last before the test number changes; the target is the set point then. Other test
+  logged last before the test number changes (or the log ends); the target is the set point
+  then. Other test
   numbers (0 between tests, ecmc's limit-switch and resolver tests) are not approaches.
 - **without them** (``from_stops``): a stop is a set point held for at least ``dwell_s``; its
   direction is the side it came from (the last set point farther than ``tolerance``), its

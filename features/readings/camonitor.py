@@ -12,7 +12,8 @@ is in alarm. A PV is logged only when its value changes, so a PV's value at any 
 value it was last logged with. The first line of each PV is its value when ``camonitor``
 connected, stamped with the time of its last change, so it may be older than lines above it:
 times run forward within each PV, not across PVs. Lines ``PV *** ...`` (``*** disconnected``,
-``*** Not connected``) are connection events, not values; they are dropped with a note.
+``*** Not connected``) are connection events and ``PV <undefined> ...`` a PV never processed:
+neither holds a value, so they are left out with a note.
 
 Two readers:
 
@@ -96,11 +97,11 @@ def parse_camonitor(path, tz: str = "UTC") -> pd.DataFrame:
                          file=path) from None
     lines["row"] = np.arange(1, len(lines) + 1)
     lines = lines[lines["pv"] != ""]
-    disconnected = lines["date"].str.startswith("***")
-    if disconnected.any():
-        note(f"{path}: {int(disconnected.sum())} connection lines ('PV *** ...') are not values; "
-             "left out")
-        lines = lines[~disconnected]
+    no_value = lines["date"].str.startswith(("***", "<undefined>"))
+    if no_value.any():
+        note(f"{path}: {int(no_value.sum())} lines 'PV *** ...' (connection events) or 'PV "
+             "<undefined> ...' (never processed) hold no value; left out")
+        lines = lines[~no_value]
     if lines.empty:
         raise InputError("no value lines; expected camonitor lines 'PV date time value'",
                          file=path)
