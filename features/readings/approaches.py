@@ -10,14 +10,14 @@ approaches in the series (``read_camonitor``'s per-sample frame) and makes them 
   direction digit d (1 forward = ``+``, 2 backward = ``-``), cycle digit c, two-digit
   position index pp (1101 = forward, cycle 1, position 1). The reading is the reference value
   logged last before the test number changes (or the log ends); the target is the set point
-  then. Other test
-  numbers (0 between tests, ecmc's limit-switch and resolver tests) are not approaches.
+  then. Other test numbers (0 between tests, ecmc's limit-switch and resolver tests) are not
+  approaches.
 - **without them** (``from_stops``): a stop is a set point held for at least ``dwell_s``; its
   direction is the side it came from (the last set point farther than ``tolerance``), its
-  reading the reference logged last before the set point moves on. Stops are grouped into targets (set points
-  within ``tolerance`` of each other); only targets stopped at from both directions are ISO
-  targets (an overrun or parking position is reached one way only), and the cycle is the
-  count of stops at a target and direction so far.
+  reading the reference logged last before the set point moves on. Stops are grouped into
+  targets (set points within ``tolerance`` of each other); only targets stopped at from both
+  directions are ISO targets (an overrun or parking position is reached one way only), and
+  the cycle is the count of stops at a target and direction so far.
 
 The reference is mapped to axis coordinates (``to_readings``): ``measured = scale * reference
 + offset`` [mm] with ``reference_scale = (scale, offset)``; without it the gear ratio and
