@@ -203,8 +203,9 @@ def test_connection_lines_are_left_out_with_a_note(tmp_path):
     assert list(lines["status"]) == ["", "HIHI"] and list(lines["severity"]) == ["", "MAJOR"]
 
 
-def test_pendulum_order_and_letter_axis(tmp_path):
-    """Every approach right after a reversal: a pendulum test; PV MC:Y-... names axis Y."""
+def pendulum_log(path, axis_pv: str = "MC:Y", scale: float = 1.0):
+    """Two targets (10, 20 x ``scale``), two cycles, every approach after a reversal; forward
+    readings 2 x ``scale`` / 1000 short, backward as long: B_i = -4 x ``scale`` / 1000."""
     start = pd.Timestamp("2026-01-05 08:00:00")
 
     def line(pv, seconds, value, alarm=""):
@@ -213,18 +214,45 @@ def test_pendulum_order_and_letter_axis(tmp_path):
 
     lines, t = [], 0.0
     for j in (1, 2):
-        for i, x in ((1, 10.0), (2, 20.0)):
-            for d, reading in ((1, x - 0.002), (2, x + 0.002)):
+        for i, x in ((1, 10.0 * scale), (2, 20.0 * scale)):
+            for d, sign in ((1, -1), (2, 1)):
                 t += 5
                 lines += [line("MC:TestNumber", t, d * 1000 + j * 100 + i),
-                          line("MC:Y-PosSet", t, x - 1 if d == 1 else x + 1),
-                          line("MC:Y-PosSet", t + 1, x),
-                          line("MC:Y-Enc", t + 3, reading, "HIGH MINOR")]
-    path = tmp_path / "p.log"
+                          line(f"{axis_pv}-PosSet", t, x + sign * scale),
+                          line(f"{axis_pv}-PosSet", t + 1, x),
+                          line(f"{axis_pv}-Enc", t + 3, x + sign * 0.002 * scale, "HIGH MINOR")]
     path.write_text("\n".join(lines) + "\n")
-    readings = read_camonitor_readings(path, reference_scale=1)
+    return path
+
+
+def test_pendulum_order_and_letter_axis(tmp_path):
+    """Every approach right after a reversal: a pendulum test; PV MC:Y-... names axis Y."""
+    readings = read_camonitor_readings(pendulum_log(tmp_path / "p.log"), reference_scale=1)
     assert set(readings["method"]) == {"pendulum"} and set(readings["axis"]) == {"Y"}
+    assert set(readings["machine_id"]) == {"MC"}
     assert np.allclose(reversal(readings), -4.0)
+
+
+def test_set_point_units(tmp_path, capsys):
+    rotary = read_camonitor_readings(pendulum_log(tmp_path / "b.log", "MC:B"), reference_scale=1)
+    assert set(rotary["axis"]) == {"B"}  # deg: deviations in arcsec
+    assert np.allclose(reversal(rotary), -0.004 * 3600)
+    um = pendulum_log(tmp_path / "um.log", "IOC:Axis2", scale=1000.0)
+    out = tmp_path / "um.csv"
+    assert main(["convert", str(um), "--unit", "um", "--reference-scale", "1", "--out",
+                 str(out)]) == 0
+    readings = pd.read_csv(out)
+    assert sorted(set(readings["target"])) == [10.0, 20.0]  # mm
+    assert np.allclose(reversal(readings), -4.0)
+    assert set(readings["machine_id"]) == {"IOC:Axis2"} and set(readings["axis"]) == {"X"}
+    capsys.readouterr()
+    line = refused(capsys, ["convert", str(tmp_path / "b.log"), "--unit", "mm", "--out",
+                            str(tmp_path / "x.csv")])
+    assert "b.log, --unit: unit mm but the set-point PV names axis B; expected deg" in line
+    line = refused(capsys, ["convert", str(um), "--unit", "inch", "--out", str(out)])
+    assert "--unit" in line and "invalid choice" in line
+    with pytest.raises(InputError, match="unknown unit 'inch'; expected mm, um or deg"):
+        read_camonitor_readings(um, unit="inch")
 
 
 # ------------------------------------------------------------------ bad inputs

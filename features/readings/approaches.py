@@ -20,7 +20,7 @@ approaches in the series (``read_camonitor``'s per-sample frame) and makes them 
   the cycle is the count of stops at a target and direction so far.
 
 The reference is mapped to axis coordinates (``to_readings``): ``measured = scale * reference
-+ offset`` [mm] with ``reference_scale = (scale, offset)``; without it the gear ratio and
++ offset`` [in the set point's unit] with ``reference_scale = (scale, offset)``; without it the gear ratio and
 offset are fitted to the set points by least squares, as ecmc's own report does, and
 reported in a note. A fitted ratio takes up the reference's scale and zero, and with them the
 axis's linear positioning error and mean deviation: reversal values and repeatability keep
@@ -29,7 +29,8 @@ axis's linear positioning error and mean deviation: reversal values and repeatab
 The axis is named from the set-point PV ``IOC:RECORD-...`` (ecmc's ``IOC_TEST:Axis1-PosSet``):
 a record named X, Y, Z, A, B or C is that axis of machine ``IOC``; any other record
 (``Axis1``, ``M1``) is machine ``IOC:RECORD``, axis X, marked as not stated so that ``--axis``
-names it (``docs/input-formats.md``). Targets are in mm (deg for an axis A, B or C).
+names it (``docs/input-formats.md``). The set point is in mm unless ``unit`` says ``um`` or
+``deg`` (a rotary axis: A, or the axis the PV names); an axis A, B or C is in deg.
 """
 
 from __future__ import annotations
@@ -54,10 +55,12 @@ DWELL_S = 1.0
 TOLERANCE_MM = 0.005
 # Set points of one position index may differ by this much [mm] (float round-off).
 SAME_TARGET_MM = 1e-6
+# Units the set point may be logged in: factor to the readings' mm (deg), rotary or not.
+UNITS = {"mm": (1.0, False), "um": (1e-3, False), "deg": (1.0, True)}
 _RECORD = re.compile(r"^(?P<ioc>[^:]+):(?P<record>[^-:.]+)[-:.]")
 
 
-def read_camonitor_readings(path, channels=None, reference_scale=None,
+def read_camonitor_readings(path, channels=None, reference_scale=None, unit: str | None = None,
                             dwell_s: float = DWELL_S, tz: str = "UTC") -> pd.DataFrame:
     """The ``camonitor`` layout: the approach readings of an ISO 230-2 run in a raw log.
 
@@ -71,8 +74,11 @@ def read_camonitor_readings(path, channels=None, reference_scale=None,
         ``-PosSet`` is ``target`` and the only other PV is ``reference``.
     reference_scale : float or (float, float), optional
         Gear ratio and offset [mm] from reference to axis coordinates (``measured = scale *
-        reference + offset``); a float is the ratio with offset 0. None: fitted (a note says
-        the result).
+        reference + offset``, in ``unit``); a float is the ratio with offset 0. None: fitted
+        (a note says the result).
+    unit : str, optional
+        Unit of the set point and of axis coordinates: ``mm``, ``um`` or ``deg`` (a rotary
+        axis). None: ``deg`` when the set-point PV names an axis A, B or C, else ``mm``.
     dwell_s : float
         Minimum hold of the set point that makes a stop [s] (without test numbers).
     tz : str
@@ -86,12 +92,38 @@ def read_camonitor_readings(path, channels=None, reference_scale=None,
     path = Path(path)
     lines = parse_camonitor(path, tz)
     channels = _channels(channels, lines, path)
+    machine, axis, record = _names(channels["target"])
+    factor, rotary = _unit(unit, axis, path)
     samples = read_camonitor(path, channels, tz, lines=lines)
+    samples["target"] *= factor  # to mm (deg): the tolerances are in mm
     if "test" in channels:
         found = from_test_numbers(samples, path)
     else:
         found = from_stops(samples, path, dwell_s)
-    return to_readings(found, channels["target"], path, reference_scale)
+    readings = to_readings(found, path, _reference_map(found, path, reference_scale, factor))
+    stated = axis is not None
+    readings = readings.assign(machine_id=machine, axis=axis if stated else ("A" if rotary else "X"),
+                               test_id=f"{record}-{found['started'].min():%Y-%m-%dT%H:%M:%S}")
+    if rotary:  # deviations of a rotary axis are in arcsec
+        readings["deviation_um"] *= 3600.0 / 1000.0
+    if not stated:
+        readings.attrs[schema.UNSTATED] = ("axis",)
+    return readings
+
+
+def _unit(unit: str | None, axis: str | None, path: Path) -> tuple[float, bool]:
+    """(factor to mm or deg, rotary) of the set point's unit; a unit that contradicts the axis
+    the PV names is refused."""
+    named_rotary = axis is not None and axis in schema.ROTARY_AXES
+    unit = unit if unit is not None else ("deg" if named_rotary else "mm")
+    if unit not in UNITS:
+        raise InputError(f"unknown unit {unit!r}; expected mm, um or deg", parameter="unit")
+    factor, rotary = UNITS[unit]
+    if axis is not None and rotary != named_rotary:
+        raise InputError(f"unit {unit} but the set-point PV names axis {axis}; expected "
+                         f"{'deg' if named_rotary else 'mm or um'}", file=path,
+                         parameter="unit")
+    return factor, rotary
 
 
 def _channels(channels, lines: pd.DataFrame, path: Path) -> dict[str, str]:
@@ -240,35 +272,28 @@ def from_stops(samples: pd.DataFrame, path, dwell_s: float = DWELL_S,
     return found
 
 
-def to_readings(found: pd.DataFrame, target_pv: str, path, reference_scale=None
+def to_readings(found: pd.DataFrame, path, reference_map: tuple[float, float]
                 ) -> pd.DataFrame:
-    """Approaches -> long readings (not yet validated); see the module docstring."""
-    path = Path(path)
-    scale, offset = _reference_map(found, path, reference_scale)
+    """Approaches -> long readings of a linear axis (not yet validated), the reference mapped
+    by ``reference_map`` = (scale, offset) to mm; names are the caller's."""
+    scale, offset = reference_map
     measured = scale * found["reference"].to_numpy() + offset
-    machine, axis, record = _names(target_pv)
-    # mm -> um, or deg -> arcsec for a rotary axis
-    to_deviation = schema.deviation_scale(axis or "X")
     direction = found["direction"].to_numpy()
     pendulum = len(direction) > 1 and bool(np.all(direction[1:] != direction[:-1]))
-    started = found["started"].min()
-    frame = pd.DataFrame({
-        "machine_id": machine, "axis": axis,
-        "test_id": f"{record}-{started:%Y-%m-%dT%H:%M:%S}",
+    return pd.DataFrame({
+        "machine_id": Path(path).stem, "axis": "X", "test_id": Path(path).stem,
         "method": "pendulum" if pendulum else "linear",
         "target": found["target"].to_numpy(), "direction": direction,
         "cycle": found["cycle"].to_numpy(),
-        "deviation_um": (measured - found["target"].to_numpy()) * to_deviation,
-        "measured": measured, "started_at": started, "measured_at": found["time"].array,
-        ROW: found[ROW].to_numpy()})
-    if axis is None:
-        frame["axis"] = "X"
-        frame.attrs[schema.UNSTATED] = ("axis",)
-    return frame
+        "deviation_um": (measured - found["target"].to_numpy()) * 1000.0,
+        "measured": measured, "started_at": found["started"].min(),
+        "measured_at": found["time"].array, ROW: found[ROW].to_numpy()})
 
 
-def _reference_map(found: pd.DataFrame, path: Path, reference_scale) -> tuple[float, float]:
-    """(scale, offset) from reference to axis coordinates: given, or fitted (with a note)."""
+def _reference_map(found: pd.DataFrame, path: Path, reference_scale, factor: float = 1.0
+                   ) -> tuple[float, float]:
+    """(scale, offset) from reference to axis coordinates in mm (deg): given in the set
+    point's unit (times ``factor``), or fitted (with a note)."""
     if reference_scale is not None:
         try:
             pair = np.atleast_1d(np.asarray(reference_scale, dtype=float))
@@ -277,7 +302,7 @@ def _reference_map(found: pd.DataFrame, path: Path, reference_scale) -> tuple[fl
         if not 1 <= len(pair) <= 2 or not np.isfinite(pair).all() or pair[0] == 0:
             raise InputError(f"{reference_scale!r}: expected a scale or (scale, offset), finite "
                              "numbers with a scale not 0", parameter="reference_scale")
-        return float(pair[0]), float(pair[1]) if len(pair) > 1 else 0.0
+        return float(pair[0]) * factor, (float(pair[1]) if len(pair) > 1 else 0.0) * factor
     ref, target = found["reference"].to_numpy(), found["target"].to_numpy()
     if np.ptp(ref) == 0 or np.ptp(target) == 0:
         raise InputError("the reference or the set point does not move; cannot fit a gear "
@@ -286,7 +311,7 @@ def _reference_map(found: pd.DataFrame, path: Path, reference_scale) -> tuple[fl
     scale, offset = np.polyfit(ref, target, 1)
     residual = target - (scale * ref + offset)
     note(f"{path}: reference mapped with a fitted gear ratio {scale:.6g} and offset "
-         f"{offset:.10g} mm ({len(ref)} readings, residual {np.sqrt(np.mean(residual**2)) * 1e3:.3g}"
+         f"{offset:.10g} ({len(ref)} readings, residual {np.sqrt(np.mean(residual**2)) * 1e3:.3g}"
          " um rms); the fit takes up the linear positioning error: give --reference-scale to "
          "keep it")
     return float(scale), float(offset)

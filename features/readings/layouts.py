@@ -171,7 +171,7 @@ RECORDS: tuple[Layout, ...] = (
         expected="an EPICS camonitor log of an ISO 230-2 run (lines 'PV date time value')",
         suffixes=(".log", ".txt"),
         reader="features.readings.approaches:read_camonitor_readings",
-        signature=_camonitor_signature, options=("channels", "reference_scale")),
+        signature=_camonitor_signature, options=("channels", "reference_scale", "unit")),
 )
 BY_NAME = {record.name: record for record in RECORDS}
 # The ``--format`` choices: detection first, then every layout.

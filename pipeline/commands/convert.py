@@ -19,8 +19,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="PVs of the set point, the reference and ecmc's test number: "
                           "target=PV,reference=PV[,test=PV] (default: from ecmc's PV names)")
     raw.add_argument("--reference-scale", metavar="SCALE[,OFFSET]", type=_scale,
-                     help="axis position [mm] = SCALE * reference + OFFSET (default: fitted "
-                          "to the set points, reported in a note)")
+                     help="axis position = SCALE * reference + OFFSET, in the set point's "
+                          "unit (default: fitted to the set points, reported in a note)")
+    raw.add_argument("--unit", choices=("mm", "um", "deg"),
+                     help="unit of the set point (default: deg when its PV names an axis A, B "
+                          "or C, else mm)")
 
 
 def _scale(text: str) -> tuple[float, float]:
@@ -51,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
                          "is kept)", file=args.out)
     data = readings_arg(args, "file")
     # a frame (a store, or a file with filters) was read with the raw log's options already
-    raw = (args.channels, args.reference_scale) if isinstance(data, str) else (None, None)
+    raw = ((args.channels, args.reference_scale, args.unit) if isinstance(data, str)
+           else (None, None, None))
     result = convert(data, args.out, args.format, *raw)
     print(f"{len(result.readings)} readings in {result.tests} tests -> {args.out}",
           file=sys.stderr)

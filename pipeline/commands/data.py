@@ -54,7 +54,7 @@ def _input(value: str, args):
     from pipeline.workflows.convert import read
 
     # a raw log's options (``backlash convert --channels``) go to its reader
-    raw = {name: getattr(args, name, None) for name in ("channels", "reference_scale")}
+    raw = {name: getattr(args, name, None) for name in ("channels", "reference_scale", "unit")}
     return read(value, args.format, **filters, **raw)
 
 

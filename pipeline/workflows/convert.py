@@ -37,6 +37,7 @@ def _parameters() -> dict:
         "source": [str, os.PathLike],
         "channels": [str, dict, None],
         "reference_scale": [Real, tuple, list, None],
+        "unit": [StrOptions({"mm", "um", "deg"}), None],
     }
 
 
@@ -44,7 +45,7 @@ PARAMETERS = Constraints(_parameters)
 
 
 def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None,
-         channels=None, reference_scale=None):
+         channels=None, reference_scale=None, unit=None):
     """Read a readings file in any accepted layout, or a fleet store, into the validated
     readings frame; optionally only some tests.
 
@@ -63,9 +64,9 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
         Only tests whose ``started_at`` lies on or after ``since`` and on or before ``until``
         (ISO 8601; a date alone includes that whole day; UTC unless the time has an offset).
         Tests without ``started_at`` are left out when either is given (a note says how many).
-    channels, reference_scale : optional
-        A raw log's channel mapping and reference scale (``format="camonitor"``; see
-        ``convert``).
+    channels, reference_scale, unit : optional
+        A raw log's channel mapping, reference scale and set-point unit
+        (``format="camonitor"``; see ``convert``).
 
     Returns
     -------
@@ -83,11 +84,10 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
     """
     from features.readings.selection import selection
 
-    check_params(_parameters(), {"path": path, "format": format, "channels": channels,
-                                 "reference_scale": reference_scale}, "read")
+    raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
+    check_params(_parameters(), {"path": path, "format": format, **raw}, "read")
     chosen = selection(machine=machine, axis=axis, since=since, until=until)
-    return readings_of(path, format, "path", chosen,
-                       {"channels": channels, "reference_scale": reference_scale})
+    return readings_of(path, format, "path", chosen, raw)
 
 
 def validate(frame, source: str = "<memory>"):
@@ -165,8 +165,8 @@ class ConvertResult(Result):
                 "out": None if self.out is None else str(self.out)}
 
 
-def convert(data, out=None, format: str = "auto", channels=None,
-            reference_scale=None) -> ConvertResult:
+def convert(data, out=None, format: str = "auto", channels=None, reference_scale=None,
+            unit=None) -> ConvertResult:
     """Read a readings file in any accepted layout, validate it and write the canonical table.
 
     Parameters
@@ -186,13 +186,16 @@ def convert(data, out=None, format: str = "auto", channels=None,
         A ``camonitor`` log's gear ratio and offset [mm] from the reference PV to axis
         coordinates (``measured = scale * reference + offset``). None: fitted to the set
         points (a note gives them; see ``features.readings.approaches``).
+    unit : str, optional
+        A ``camonitor`` log's set-point unit: ``"mm"``, ``"um"`` or ``"deg"`` (a rotary axis).
+        None: deg when the set-point PV names an axis A, B or C, else mm.
 
     Returns
     -------
     ConvertResult
     """
-    check_params(_parameters(), {"data": data, "format": format, "channels": channels,
-                                 "reference_scale": reference_scale}, "convert")
+    raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
+    check_params(_parameters(), {"data": data, "format": format, **raw}, "convert")
     if out is not None:
         check_params(_parameters(), {"out": out}, "convert")
         # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line
@@ -201,8 +204,7 @@ def convert(data, out=None, format: str = "auto", channels=None,
                 data):
             raise InputError("is the input file; expected a new file name (the original is "
                              "kept)", file=out, parameter="out")
-    readings = readings_of(data, format, options={"channels": channels,
-                                                  "reference_scale": reference_scale})
+    readings = readings_of(data, format, options=raw)
     tests = readings.groupby(list(schema.TEST_KEYS)).ngroups
     result = ConvertResult(readings=readings, tests=tests)
     if out is not None:  # exactly this file (a name without suffix is refused, not a folder)
