@@ -154,20 +154,23 @@ def _segment_costs(t, y, w):
     return cost
 
 
-def optimal_partition(t_month, y_um, sigma_um, *, penalty: float, min_size: int = 2):
+def optimal_partition(t_month, y_um, sigma_um, *, penalty: float, min_size: int = 2,
+                      min_last: int | None = None):
     """Exact optimal partitioning into straight-line segments (Jackson et al. 2005).
 
     Minimises sum over segments of chi²(segment) + penalty x (number of segments) by dynamic
-    programming over all O(n²) segments. Returns the start indices of segments 2..k.
+    programming over all O(n²) segments; every segment holds ``min_size`` points or more, the
+    last one ``min_last`` (default ``min_size``). Returns the start indices of segments 2..k.
     """
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     n = len(y)
+    min_last = min_size if min_last is None else min_last
     cost = _segment_costs(t, y, 1.0 / np.asarray(sigma_um, float) ** 2)
     best = np.full(n + 1, np.inf)
     best[0] = -penalty
     last = np.zeros(n + 1, int)
-    for j in range(min_size, n + 1):  # O(n) loop over series ends, n <= a few hundred visits
-        starts = np.arange(0, j - min_size + 1)
+    for j in range(min_size, n + 1):  # O(n) loop over series ends, n <= a few hundred
+        starts = np.arange(0, j - (min_last if j == n else min_size) + 1)
         total = best[starts] + cost[starts, j] + penalty
         k = int(np.argmin(total))
         best[j], last[j] = total[k], starts[k]
@@ -190,7 +193,8 @@ def _line(t, y):
 
 
 def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
-                  min_jump_sigma: float = 3.0, min_size: int = 2) -> list[dict]:
+                  min_jump_sigma: float = 3.0, min_size: int = 2,
+                  min_last: int = 1) -> list[dict]:
     """Change points of a piecewise linear series, each with the jump it made.
 
     Parameters
@@ -200,6 +204,10 @@ def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
     min_jump_sigma : a kept change jumps by more than this many standard errors: the left
         segment's line extrapolated to the first visit after the change against the right
         segment's line there, se² = sum over both lines of sigma²(1/m + (t_k - t̄)²/Sxx).
+    min_size, min_last : the fewest visits of a segment and of the last one. The last may
+        hold the last visit alone (default): an adjustment or a failure just before the
+        latest visit is a change there, its right "line" that visit's value (se² = sigma²),
+        rather than a trend bent through it.
 
     Returns
     -------
@@ -209,10 +217,48 @@ def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     sigma = np.broadcast_to(np.asarray(sigma_um, float), y.shape)
     n = len(y)
-    if n < 2 * min_size:
+    if n < min_size + min_last:
         return []
     penalty = 6.0 * np.log(n) if penalty is None else penalty
-    cuts = optimal_partition(t, y, sigma, penalty=penalty, min_size=min_size)
+    cuts = optimal_partition(t, y, sigma, penalty=penalty, min_size=min_size,
+                             min_last=min_last)
+    found = _strong(t, y, sigma, cuts, min_jump_sigma)
+    if min_last == 1:
+        found = _last_visit_change(t, y, sigma, found, penalty=penalty,
+                                   min_jump_sigma=min_jump_sigma, min_size=min_size)
+    return found
+
+
+def _last_visit_change(t, y, sigma, found, *, penalty, min_jump_sigma, min_size):
+    """The change points with the last visit's own weighed again.
+
+    A two-visit last segment fits exactly, so the partition cannot tell a change before the
+    last two visits from one before the last visit alone. When its two visits fall by more
+    than ``min_jump_sigma`` sigma of their difference, the change is put before the last
+    visit (wear does not lower the lost motion: the fall is an adjustment there). When the
+    change before them proved weak, a change before the last visit is weighed on its own:
+    kept when it saves more chi² than ``penalty`` and jumps by more than ``min_jump_sigma``.
+    """
+    n = len(y)
+    kept = [c["index"] for c in found]
+    if kept and kept[-1] == n - 2:
+        if y[-2] - y[-1] <= min_jump_sigma * np.hypot(sigma[-2], sigma[-1]):
+            return found
+        moved = _strong(t, y, sigma, kept[:-1] + [n - 1], min_jump_sigma)
+        return moved if moved and moved[-1]["index"] == n - 1 else found
+    start = kept[-1] if kept else 0
+    if n - 1 - start < min_size:
+        return found
+    w = 1.0 / sigma[start:] ** 2
+    saved = _segment_costs(t[start:], y[start:], w)[0, -1] - _segment_costs(
+        t[start:-1], y[start:-1], w[:-1])[0, -1]
+    return _strong(t, y, sigma, kept + [n - 1], min_jump_sigma) if saved > penalty else found
+
+
+def _strong(t, y, sigma, cuts, min_jump_sigma):
+    """The jumps of ``cuts``, the weakest removed one at a time while any is within
+    ``min_jump_sigma`` standard errors."""
+    cuts = list(cuts)
     while True:
         found = _jumps(t, y, sigma, cuts)
         weak = [c for c in found if abs(c["jump_sigma"]) <= min_jump_sigma]
@@ -322,6 +368,12 @@ class DriftSeries:
     # {"visit", "kind" ('change_point', 'last_visit' or 'trend'), "jump_um", "U_um"}
     within_uncertainty: list = field(default_factory=list)
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
+
+    @property
+    def last_visit_change(self) -> dict | None:
+        """The change point at the last visit (a segment of that visit alone), or None."""
+        last = self.change_points[-1] if self.change_points else None
+        return last if last is not None and last["index"] == len(self.visits) - 1 else None
 
     @property
     def origin(self):
@@ -469,7 +521,9 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
                              f"[{tr['low']:.3f}, {tr['high']:.3f}] since visit "
                              f"{v['visit'].iloc[s.segment_start]} (Mann-Kendall p = "
                              f"{tr['p_value']:.2g})"))
-    if s.change_points and s.change_points[-1]["jump_um"] > 0:
+    if s.last_visit_change is not None:
+        alerts.append(_last_visit_alert(s))
+    elif s.change_points and s.change_points[-1]["jump_um"] > 0:
         c = s.change_points[-1]
         alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} um "
                              f"({c['jump_sigma']:.1f} sigma) at visit {v['visit'].iloc[c['index']]}"
@@ -481,14 +535,33 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
     return alerts
 
 
+def _last_visit_alert(s: DriftSeries) -> dict:
+    """``last_visit_drop`` or ``last_visit_jump``: the change point at the last visit, with
+    how far the lost motion moved from the visit before it."""
+    v, c = s.visits, s.last_visit_change
+    step = float(v["backlash_um"].iloc[-1] - v["backlash_um"].iloc[-2])
+    visit, sigma = v["visit"].iloc[-1], abs(c["jump_sigma"])
+    if c["jump_um"] < 0:
+        return _alert("last_visit_drop", f"lost motion fell by {-step:.2f} um at visit {visit} "
+                      f"({sigma:.1f} sigma below the trend before it): an adjustment or repair? "
+                      "The trend restarts there")
+    return _alert("last_visit_jump", f"lost motion rose by {step:.2f} um at visit {visit} "
+                  f"({sigma:.1f} sigma above the trend before it): failure or loosened preload "
+                  "suspected; the next visit confirms it")
+
+
 def _last_visit_jump(s: DriftSeries) -> float | None:
-    """How many sigma the last visit lies above the line through its segment's earlier visits."""
+    """How many standard errors the last visit lies above the line through its segment's
+    earlier visits: se² = sigma² of the last visit + the variance of the line there (a line
+    through two visits extrapolates with much of their scatter)."""
     v = s.visits.iloc[s.segment_start:]
     if len(v) < 3:
         return None
     t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
+    sigma = v["sigma_um"].to_numpy(float)
     level, slope, _ = _line(t[:-1], y[:-1])
-    return float((y[-1] - level - slope * t[-1]) / v["sigma_um"].iloc[-1])
+    se = np.sqrt(sigma[-1] ** 2 + _fit_var(t[:-1], sigma[:-1], t[-1]))
+    return float((y[-1] - level - slope * t[-1]) / se)
 
 
 def _trend_within(s: DriftSeries) -> bool:

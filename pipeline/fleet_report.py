@@ -36,6 +36,8 @@ TITLE = "Fleet backlash"
 KIND_NAMES = {"paper": "pendulum − linear", "iso": "ISO |B_i|", "mixed": "mixed"}
 REASONS = {"above_threshold": "at or above the threshold at the last visit: due now",
            "crossing": "the crossing interval opens (early end) before the interval ends",
+           "fleet_rate": "one visit since the last change point: the day its level plus the "
+                         "fleet's wear rate reaches the threshold, before the interval ends",
            "interval": "the maintenance interval after the last visit"}
 STYLE = """<style>
 svg.spark { vertical-align: middle; }

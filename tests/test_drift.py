@@ -368,5 +368,7 @@ def test_jump_at_the_last_visit_alerts_before_it_is_confirmed(tmp_path, capsys):
     code, out = _run(tmp_path, visit_readings(b, noise_um=0.1), capsys=capsys)
     assert code == 3
     s = out["series"][0]
-    assert s["change_points"] == []  # one visit cannot make a segment
+    # a change point at the last visit, its alert the unconfirmed jump (not level_jump)
+    assert s["change_points"] == ["v06"] and s["change_jumps_um"][0] == pytest.approx(2, abs=0.3)
     assert [a["kind"] for a in s["alerts"]] == ["last_visit_jump"]
+    assert s["slope_um_per_month"] is None  # no trend from the one visit since

@@ -127,7 +127,8 @@ TYPES = {"machine_id": str, "axis": str, "visits": int, "first_visit_date": str,
          "slope_interval": list, "trend_since_visit": str, "change_points": list,
          "change_jumps_um": list, "threshold_um": (float, type(None)),
          "crossing_date": (str, type(None)), "crossing_interval": list, "next_visit_due": str,
-         "next_visit_reason": str, "alerts": list, "alert_messages": list,
+         "next_visit_reason": str, "fleet_wear_rate_per_month": (float, type(None)),
+         "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
          "page": str}
 
@@ -145,7 +146,8 @@ def test_json_keys_and_types(mixed):
         for key in ("first_visit_date", "last_visit_date", "next_visit_due"):
             dt.date.fromisoformat(a[key])
         assert all(isinstance(k, str) for k in a["alerts"])
-        assert a["next_visit_reason"] in ("above_threshold", "crossing", "interval")
+        assert a["next_visit_reason"] in ("above_threshold", "crossing", "fleet_rate",
+                                          "interval")
         assert set(a["history"]) == {"visits", "dates", "backlash_um", "backlash_u_um"}
         assert len(a["history"]["backlash_um"]) == a["visits"]
         assert a["history"]["backlash_um"][-1] == a["backlash_um"]

@@ -18,6 +18,11 @@ Rules (docs/fleet.md):
   crossing interval (the first day the upper prediction band of a future visit reaches the
   threshold; the crossing date itself where the band gives no early end); the last visit's date
   (due now) when the axis is already at or above the threshold. Never before the last visit.
+  An axis with one visit since its last change point (an adjustment just before its latest
+  visit, or a single visit) has no trend: its crossing is estimated from its level and the
+  fleet's wear rate (``fleet_wear_rates``: the upper ``FLEET_RATE_QUANTILE`` of the rates of
+  the axes of its unit with a trend, per operating hour times the axis's own usage, else per
+  month), never "due now" because of the drop.
 - **worst first**: axes at or above the threshold, then other alerting axes, then the rest;
   within each group the earliest next visit due, then the earliest crossing date (none last),
   then the highest backlash now, then machine and axis.
@@ -43,7 +48,10 @@ DEFAULT_INTERVAL_DAYS = 90.0
 FORECAST_CAP_MONTHS = 24.0
 FORECAST_STEPS = 40
 MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
-NEXT_VISIT_REASONS = ("above_threshold", "crossing", "interval")
+NEXT_VISIT_REASONS = ("above_threshold", "crossing", "fleet_rate", "interval")
+# The fleet's wear rate an axis without a trend of its own is planned with: a high quantile of
+# the rates of the fleet's axes, as the axis may wear as fast as most of them.
+FLEET_RATE_QUANTILE = 0.9
 
 
 def _parameters() -> dict:
@@ -80,7 +88,11 @@ class AxisView:
     next_visit_due : datetime.date
         When the axis should next be measured (module docstring).
     next_visit_reason : str
-        Which rule set it: ``above_threshold``, ``crossing`` or ``interval``.
+        Which rule set it: ``above_threshold``, ``crossing``, ``fleet_rate`` or ``interval``.
+    fleet_rate : dict or None
+        For an axis with one visit since its last change point: the wear rate it is planned
+        with, ``per_day`` [um/d, arcsec/d for a rotary axis] and ``basis`` (``operating hours``:
+        the fleet's rate per hour times the axis's hours per day; ``calendar``: per month).
     forecast : dict or None
         The prediction band ahead: ``days`` since the first visit, ``fit``, ``low``, ``high``
         [um]; None with fewer than two visits since the last change point.
@@ -113,6 +125,7 @@ class AxisView:
     page: str = ""
     forecasts: list = field(default_factory=list)
     compensations: list = field(default_factory=list)
+    fleet_rate: dict | None = None
 
     @property
     def machine_id(self) -> str:
@@ -140,6 +153,7 @@ class AxisView:
 
     def to_json(self) -> dict:
         """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
+        from features.visits import DAYS_PER_MONTH
         from pipeline.store.records import summary
 
         s, v = self.series, self.series.visits
@@ -161,6 +175,8 @@ class AxisView:
             "crossing_interval": [s.date_at(s.crossing[1]), s.date_at(s.crossing[2])],
             "next_visit_due": self.next_visit_due.isoformat(),
             "next_visit_reason": self.next_visit_reason,
+            "fleet_wear_rate_per_month": None if self.fleet_rate is None else _round(
+                self.fleet_rate["per_day"] * DAYS_PER_MONTH, 5),
             "alerts": [a["kind"] for a in s.alerts],
             "alert_messages": [a["message"] for a in s.alerts],
             "last_forecast": summary(self.forecasts[-1]) if self.forecasts else None,
@@ -342,25 +358,74 @@ def axis_views(series: list, readings, stats, interval_days: float,
     what ``store_records`` found."""
     from features import iso230
     from features.targets import targets_of
+    from models.wear_clock import usage_rates
 
     parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
                    iso230.axis_figures(readings, stats))
-    views = [_view(s, parts, interval_days, records or {}) for s in series]
+    rates = fleet_wear_rates(series, parts)
+    usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
+    views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage))
+             for s in series]
     views.sort(key=worst_first)
     for view, name in zip(views, page_names(views)):
         view.page = name
     return views
 
 
-def _view(s, parts: _Parts, interval_days: float, records: dict) -> AxisView:
-    due, reason = next_visit(s, interval_days)
+def _view(s, parts: _Parts, interval_days: float, records: dict,
+          fleet_rate: dict | None = None) -> AxisView:
+    due, reason = next_visit(s, interval_days, fleet_rate)
     end = _forecast_end(s, interval_days)
     wear, why = wear_map(s, parts)
     key = (s.machine_id, s.axis)
     forecasts = [dated(f, s, parts) for f in records.get("forecast", {}).get(key, [])]
     return AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
                     last_iso(s, parts), forecasts=forecasts,
-                    compensations=records.get("compensation", {}).get(key, []))
+                    compensations=records.get("compensation", {}).get(key, []),
+                    fleet_rate=fleet_rate)
+
+
+def fleet_wear_rates(series: list, parts: _Parts) -> dict[str, dict]:
+    """The fleet's wear rates by unit (``um``, ``arcsec``): per axis with two visits or more
+    since its last change point, the Theil-Sen slope of its backlash against operating hours
+    (``per_hour``, where every visit has hours) and against time (``per_month``), negative
+    slopes as 0; each the upper ``FLEET_RATE_QUANTILE`` over the fleet's axes (None without
+    any)."""
+    import numpy as np
+
+    from features.readings.schema import deviation_unit
+    from models.drift import trend
+
+    found: dict[str, dict[str, list]] = {}
+    for s in series:
+        seg = s.visits.iloc[s.segment_start:]
+        if len(seg) < 2 or not np.isfinite(s.trend.get("slope", np.nan)):
+            continue
+        mine = found.setdefault(deviation_unit(s.axis), {"per_hour": [], "per_month": []})
+        mine["per_month"].append(max(s.trend["slope"], 0.0))
+        hours = np.array([(parts.hours or {}).get((s.machine_id, s.axis, str(v)), np.nan)
+                          for v in seg["visit"]])
+        if np.isfinite(hours).all() and np.ptp(hours) > 0:
+            mine["per_hour"].append(max(trend(hours, seg["backlash_um"])["slope"], 0.0))
+    return {unit: {k: float(np.quantile(v, FLEET_RATE_QUANTILE)) if v else None
+                   for k, v in rates.items()} for unit, rates in found.items()}
+
+
+def _rate_of(s, rates: dict, usage: dict) -> dict | None:
+    """The wear rate an axis with one visit since its last change point is planned with
+    (``AxisView.fleet_rate``); None for an axis with a trend of its own or no fleet rate."""
+    from features.readings.schema import deviation_unit
+    from features.visits import DAYS_PER_MONTH
+
+    if len(s.visits) - s.segment_start > 1:
+        return None
+    fleet = rates.get(deviation_unit(s.axis), {})
+    per_day = usage.get((s.machine_id, s.axis))
+    if fleet.get("per_hour") is not None and per_day is not None:
+        return {"per_day": fleet["per_hour"] * per_day, "basis": "operating hours"}
+    if fleet.get("per_month") is not None:
+        return {"per_day": fleet["per_month"] / DAYS_PER_MONTH, "basis": "calendar"}
+    return None
 
 
 def dated(record: dict, s, parts: _Parts) -> dict:
@@ -411,16 +476,23 @@ def page_names(views: list[AxisView]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- per-axis rules
-def next_visit(s, interval_days: float) -> tuple[dt.date, str]:
+def next_visit(s, interval_days: float, fleet_rate: dict | None = None) -> tuple[dt.date, str]:
     """When the axis is next due and which rule set it (module docstring): ``above_threshold``
     (the last visit's date: due now), ``crossing`` (the early end of the crossing interval,
-    before the interval ends) or ``interval`` (last visit + ``interval_days``)."""
+    before the interval ends), ``fleet_rate`` (the day the last level plus the fleet's wear
+    rate ``fleet_rate`` reaches the threshold, before the interval ends) or ``interval``
+    (last visit + ``interval_days``)."""
     import pandas as pd
 
     last = s.visits["date"].iloc[-1]
     by_interval = _day(last + pd.Timedelta(days=float(interval_days)))
-    if s.threshold_um is not None and s.visits["backlash_um"].iloc[-1] >= s.threshold_um:
+    level = float(s.visits["backlash_um"].iloc[-1])
+    if s.threshold_um is not None and level >= s.threshold_um:
         return _day(last), "above_threshold"
+    if s.threshold_um is not None and fleet_rate is not None and fleet_rate["per_day"] > 0:
+        when = _day(last + pd.Timedelta(days=(s.threshold_um - level) / fleet_rate["per_day"]))
+        if when < by_interval:
+            return when, "fleet_rate"
     early = s.crossing[1] if s.crossing[1] is not None else s.crossing[0]
     if early is not None:
         when = max(dt.date.fromisoformat(s.date_at(early)), _day(last))
