@@ -370,6 +370,14 @@ class DriftSeries:
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
 
     @property
+    def unit(self) -> str:
+        """The unit of every ``_um`` value of the series: ``um``, or ``arcsec`` for a rotary
+        axis (``features.readings.schema.deviation_unit``)."""
+        from features.readings.schema import deviation_unit
+
+        return deviation_unit(self.axis)
+
+    @property
     def last_visit_change(self) -> dict | None:
         """The change point at the last visit (a segment of that visit alone), or None."""
         last = self.change_points[-1] if self.change_points else None
@@ -387,7 +395,7 @@ class DriftSeries:
     def to_json(self) -> dict:
         v = self.visits
         return {
-            "machine_id": self.machine_id, "axis": self.axis,
+            "machine_id": self.machine_id, "axis": self.axis, "unit": self.unit,
             "visits": v["visit"].astype(str).tolist(),
             "dates": [d.isoformat() for d in v["date"]],
             "backlash_um": v["backlash_um"].round(4).tolist(),
@@ -509,15 +517,15 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
     last_visit = str(v["visit"].iloc[-1])
     if s.threshold_um is not None:
         if last_y >= s.threshold_um:
-            alerts.append(_alert("above_threshold", f"backlash {last_y:.2f} um at visit "
+            alerts.append(_alert("above_threshold", f"backlash {last_y:.2f} {s.unit} at visit "
                                  f"{last_visit} is at or above the threshold "
-                                 f"{s.threshold_um:g} um"))
+                                 f"{s.threshold_um:g} {s.unit}"))
         elif s.crossing[1] is not None and s.crossing[1] - last_t <= warn_months:
-            alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} um "
+            alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} {s.unit} "
                                  f"from {s.date_at(s.crossing[1])} (within {warn_months:g} "
                                  "months of the last visit)"))
     elif tr["p_value"] < alpha and tr["low"] > 0 and not _trend_within(s):
-        alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} um/month "
+        alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} {s.unit}/month "
                              f"[{tr['low']:.3f}, {tr['high']:.3f}] since visit "
                              f"{v['visit'].iloc[s.segment_start]} (Mann-Kendall p = "
                              f"{tr['p_value']:.2g})"))
@@ -525,7 +533,7 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
         alerts.append(_last_visit_alert(s))
     elif s.change_points and s.change_points[-1]["jump_um"] > 0:
         c = s.change_points[-1]
-        alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} um "
+        alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} {s.unit} "
                              f"({c['jump_sigma']:.1f} sigma) at visit {v['visit'].iloc[c['index']]}"
                              ": failure or loosened preload suspected"))
     jump = _last_visit_jump(s)
@@ -542,10 +550,10 @@ def _last_visit_alert(s: DriftSeries) -> dict:
     step = float(v["backlash_um"].iloc[-1] - v["backlash_um"].iloc[-2])
     visit, sigma = v["visit"].iloc[-1], abs(c["jump_sigma"])
     if c["jump_um"] < 0:
-        return _alert("last_visit_drop", f"lost motion fell by {-step:.2f} um at visit {visit} "
+        return _alert("last_visit_drop", f"lost motion fell by {-step:.2f} {s.unit} at visit {visit} "
                       f"({sigma:.1f} sigma below the trend before it): an adjustment or repair? "
                       "The trend restarts there")
-    return _alert("last_visit_jump", f"lost motion rose by {step:.2f} um at visit {visit} "
+    return _alert("last_visit_jump", f"lost motion rose by {step:.2f} {s.unit} at visit {visit} "
                   f"({sigma:.1f} sigma above the trend before it): failure or loosened preload "
                   "suspected; the next visit confirms it")
 
@@ -608,16 +616,33 @@ def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
 
 
 def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
-                   **options) -> list[DriftSeries]:
+                   threshold_um: float | None = None, threshold_arcsec: float | None = None,
+                   limits: dict | None = None, **options) -> list[DriftSeries]:
     """``analyse_series`` of every machine axis in ``visits`` (``visit_backlash`` rows) with
     ``min_visits`` or more, in (machine_id, axis) order, each with its fleet's pooled scatter
-    (``fleet_scatter_um``)."""
+    (``fleet_scatter_um``) and its limit in its own unit (``limit_of``)."""
     from features.readings.schema import deviation_unit
 
     fleet = fleet_scatter_um(visits)
-    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)), **options)
-            for (_, axis), group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)
+    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)),
+                           threshold_um=limit_of(str(machine), str(axis), threshold_um,
+                                                 threshold_arcsec, limits), **options)
+            for (machine, axis), group in visits.groupby(list(SERIES_KEYS), sort=True,
+                                                         observed=True)
             if len(group) >= min_visits]
+
+
+def limit_of(machine: str, axis: str, threshold_um: float | None = None,
+             threshold_arcsec: float | None = None, limits: dict | None = None) -> float | None:
+    """The limit of one machine axis in its own unit: its entry in ``limits`` ({(machine,
+    axis): limit}), else ``threshold_arcsec`` [arcsec] for a rotary axis and ``threshold_um``
+    [um] for a linear one; a limit is never compared with a value in another unit."""
+    from features.readings.schema import is_rotary
+
+    own = (limits or {}).get((machine, axis))
+    if own is not None:
+        return own
+    return threshold_arcsec if is_rotary(axis) else threshold_um
 
 
 # --------------------------------------------------------------------------- model alerts

@@ -121,7 +121,7 @@ def test_the_independent_fleet_backlash_change_points_and_late_joiner():
 
 
 # --------------------------------------------------------------------------- JSON contract
-TYPES = {"machine_id": str, "axis": str, "visits": int, "first_visit_date": str,
+TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visit_date": str,
          "last_visit": str, "last_visit_date": str, "target_kind": str, "backlash_um": float,
          "backlash_u_um": float, "slope_um_per_month": (float, type(None)),
          "slope_interval": list, "trend_since_visit": str, "change_points": list,
@@ -137,7 +137,8 @@ def test_json_keys_and_types(mixed):
     from features.readings.fileio import dumps
 
     data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
-    assert set(data) == {"source", "threshold_um", "interval_days", "n_alerts", "axes"}
+    assert set(data) == {"source", "threshold_um", "threshold_arcsec", "limits",
+                         "interval_days", "n_alerts", "axes"}
     assert data["threshold_um"] == MIXED_UM and data["interval_days"] == 90.0
     for a in data["axes"]:
         assert set(a) == set(TYPES)
@@ -456,7 +457,7 @@ def test_the_printed_table_shows_the_last_forecast_and_compensation(recorded, ca
     view = fleet(store, threshold_um=QUIET_UM)
     print_summary(view, file=sys.stdout)
     lines = capsys.readouterr().out.splitlines()
-    assert "last forecast um" in lines[0] and "compensated" in lines[0]
+    assert "last forecast" in lines[0] and "compensated" in lines[0] and "unit" in lines[0]
     for line, a in zip(lines[1:], view.to_json()["axes"]):
         f = a["last_forecast"]
         assert (f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}, "

@@ -28,6 +28,8 @@ def _parameters() -> dict:
     return {
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
+        "threshold_arcsec": [Interval(Real, 0, None, closed="neither"), None],
+        "limits": [str, os.PathLike, dict, None],
         "model": [str, os.PathLike, HasMethods(["predict"]), None],
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
@@ -92,8 +94,12 @@ class DriftResult(Result):
 
         p = self.parameters
         model = p.get("model")
+        limits = p.get("limits")
         params = {"data": self.source, "data_sha256": data_hash(self.readings),
                   "threshold_um": p.get("threshold_um"),
+                  "threshold_arcsec": p.get("threshold_arcsec"),
+                  "limits": "" if limits is None else str(limits) if isinstance(
+                      limits, (str, os.PathLike)) else "given",
                   "model": "" if model is None else str(model) if isinstance(
                       model, (str, os.PathLike)) else type(model).__name__,
                   "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
@@ -114,7 +120,8 @@ class DriftResult(Result):
                               artifact_path="drift")
 
 
-def drift(data, *, format: str = "auto", threshold_um: float | None = None, model=None,
+def drift(data, *, format: str = "auto", threshold_um: float | None = None,
+          threshold_arcsec: float | None = None, limits=None, model=None,
           warn_months: float = 6.0, alpha: float = 0.05,
           min_jump_sigma: float = 3.0, uncertainty=None) -> DriftResult:
     """Follow backlash across maintenance visits.
@@ -131,7 +138,12 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
-        Backlash limit [um]: forecast the date it is crossed.
+        Backlash limit of the linear axes [um]: forecast the date it is crossed.
+    threshold_arcsec : float, optional
+        Backlash limit of the rotary axes [arcsec].
+    limits : str, path or dict, optional
+        Limits per machine and axis, each in its axis's unit (``pipeline.limits``); an axis
+        without one takes ``threshold_um`` or ``threshold_arcsec``.
     model : str, path or fitted predictor, optional
         Trained model (directory or object): monitor its residuals and inputs.
     warn_months : float, default 6.0
@@ -157,10 +169,14 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         Bad readings or parameters, an unreadable or non-physical budget, a budget for a rotary
         axis.
     """
-    values = {"format": format, "threshold_um": threshold_um, "model": model,
+    values = {"format": format, "threshold_um": threshold_um,
+              "threshold_arcsec": threshold_arcsec, "limits": limits, "model": model,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
               "uncertainty": uncertainty}
     check_params(_parameters(), values, "drift")
+    from pipeline.limits import read_limits
+
+    per_axis = None if limits is None else read_limits(limits)
     from pipeline.workflows.iso import _budget
 
     budget = None if uncertainty is None else _budget(uncertainty)
@@ -181,7 +197,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
              for (m, a), c in counts.items() if c < 2]
     for text in notes:
         note(text)
-    series = drift_model.analyse_visits(visits, threshold_um=threshold_um, alpha=alpha,
+    series = drift_model.analyse_visits(visits, threshold_um=threshold_um,
+                                        threshold_arcsec=threshold_arcsec, limits=per_axis,
+                                        alpha=alpha,
                                         min_jump_sigma=min_jump_sigma,
                                         warn_months=warn_months, coverage_factor=k)
     if predictor is not None:
@@ -189,9 +207,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
     for s in series:
         for w in s.within_uncertainty:
             text = (f"{s.machine_id} axis {s.axis}: {drift_model.WITHIN_KINDS[w['kind']]} of "
-                    f"{w['jump_um']:+.2f} um at visit "
+                    f"{w['jump_um']:+.2f} {s.unit} at visit "
                     f"{w['visit']} is within the measurement uncertainty (U = "
-                    f"{w['U_um']:.2f} um, k = {k:g}): not an alert")
+                    f"{w['U_um']:.2f} {s.unit}, k = {k:g}): not an alert")
             notes.append(text)
             note(text)
     source = source_of(data, readings)

@@ -63,6 +63,8 @@ def _parameters() -> dict:
     return {
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [positive, None],
+        "threshold_arcsec": [positive, None],
+        "limits": [str, os.PathLike, dict, None],
         "interval_days": [positive],
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
@@ -159,7 +161,7 @@ class AxisView:
         s, v = self.series, self.series.visits
         trend = s.trend
         return {
-            "machine_id": s.machine_id, "axis": s.axis, "visits": len(v),
+            "machine_id": s.machine_id, "axis": s.axis, "unit": s.unit, "visits": len(v),
             "first_visit_date": _day(v["date"].iloc[0]).isoformat(),
             "last_visit": str(self.last["visit"]), "last_visit_date": _day(self.last["date"]).isoformat(),
             "target_kind": str(self.last.get("target_kind", "")) or None,
@@ -239,7 +241,11 @@ class FleetResult(Result):
 
     def to_json(self) -> dict:
         p = self.parameters
+        limits = p.get("limits")
         return {"source": self.source, "threshold_um": p.get("threshold_um"),
+                "threshold_arcsec": p.get("threshold_arcsec"),
+                "limits": None if limits is None else str(limits) if isinstance(
+                    limits, (str, os.PathLike)) else "given",
                 "interval_days": p.get("interval_days"), "n_alerts": len(self.alerts),
                 "axes": [v.to_json() for v in self.axes]}
 
@@ -249,8 +255,9 @@ class FleetResult(Result):
 
         p = self.parameters
         params = {"data": self.source, "data_sha256": data_hash(self.readings),
-                  **{k: p.get(k) for k in ("threshold_um", "interval_days", "warn_months",
-                                           "alpha", "min_jump_sigma")},
+                  **{k: p.get(k) for k in ("threshold_um", "threshold_arcsec", "interval_days",
+                                           "warn_months", "alpha", "min_jump_sigma")},
+                  "limits": self.to_json()["limits"] or "",
                   "n_axes": len(self.axes)}
         metrics = {"n_alerts": float(len(self.alerts))}
         for v in self.axes:
@@ -266,6 +273,7 @@ class FleetResult(Result):
 
 # --------------------------------------------------------------------------- the workflow
 def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
+          threshold_arcsec: float | None = None, limits=None,
           interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
           alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None,
           store=None) -> FleetResult:
@@ -279,7 +287,13 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
-        Backlash limit [um]: forecast the date each axis crosses it.
+        Backlash limit of the linear axes [um]: forecast the date each crosses it.
+    threshold_arcsec : float, optional
+        Backlash limit of the rotary axes [arcsec].
+    limits : str, path or dict, optional
+        Limits per machine and axis, each in its axis's unit (``pipeline.limits``: a TOML
+        file ``[M01] X_um = 8.0, C_arcsec = 40.0`` or a dict of that shape); an axis without
+        one takes ``threshold_um`` or ``threshold_arcsec``.
     interval_days : float, default 90
         Maintenance interval [d]: the next visit is due this long after the last one at the
         latest.
@@ -304,13 +318,17 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     Raises
     ------
     InputError
-        A parameter out of range (naming it), ``out`` naming a file, or readings without
-        dates or with one visit per axis only.
+        A parameter out of range (naming it), a bad limits file (one line naming the key),
+        ``out`` naming a file, or readings without dates or with one visit per axis only.
     """
-    values = {"format": format, "threshold_um": threshold_um, "interval_days": interval_days,
-              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
-              "out": out, "store": store}
+    values = {"format": format, "threshold_um": threshold_um,
+              "threshold_arcsec": threshold_arcsec, "limits": limits,
+              "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
+              "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
     check_params(_parameters(), values, "fleet")
+    from pipeline.limits import read_limits
+
+    per_axis = None if limits is None else read_limits(limits)
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
     from features import iso230
@@ -320,7 +338,8 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     readings = readings_of(data, format)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
     visits = visit_backlash(readings, stats)
-    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um, alpha=alpha,
+    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
+                            threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
     notes = [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
              if len(s.visits) < 2]
