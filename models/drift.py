@@ -33,9 +33,16 @@ Alert policy (each alert a dict with ``kind`` and ``message``): ``above_threshol
 ``crossing_soon`` (early end of the crossing interval within ``warn_months`` of the last
 visit), ``increasing_trend`` (no threshold given: Mann-Kendall p < alpha and the Theil-Sen
 interval above zero), ``level_jump`` (the latest change point raised the level: failure
-suspected), ``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`` sigma above the
-prediction of the segment before it; one visit cannot confirm a change point) and, with a
-monitored model (``models.monitoring``), ``retrain``, ``input_out_of_range``, ``input_drift``.
+suspected), ``last_visit_drop`` / ``last_visit_jump`` (a change point at the last visit: the
+last visit alone is the last segment, its value more than ``min_jump_sigma`` standard errors
+below / above the trend before it; an adjustment restarts the trend there, a jump awaits the
+next visit to be confirmed; without such a change point ``last_visit_jump`` also fires when
+the last visit lies that far above the line of its segment's earlier visits),
+``limit_passed_unmeasured`` (``limit_passed_alert``: the crossing date lies before the day the
+view is computed as of) and, with a monitored model (``models.monitoring``), ``retrain``,
+``input_out_of_range``, ``input_drift``. Every value, limit and message is in the axis's unit
+(``DriftSeries.unit``: um, or arcsec for a rotary axis); ``limit_of`` gives each axis a limit
+in its own unit, so no alert compares unlike units.
 
 With a measurement uncertainty budget (ISO/TR 230-9; the series then carries
 ``backlash_U_um``, the expanded uncertainty of each visit's value, and ``backlash_u_visit_um``,
@@ -541,6 +548,22 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
         alerts.append(_alert("last_visit_jump", f"visit {last_visit} lies {jump:.1f} sigma above "
                              "the trend of the visits before it (unconfirmed change)"))
     return alerts
+
+
+def limit_passed_alert(s: DriftSeries, as_of) -> dict | None:
+    """``limit_passed_unmeasured`` when the crossing date of ``s`` lies before the day
+    ``as_of`` (a ``datetime.date``): no visit measured it, but the trend says the axis has
+    probably passed its limit since its last visit; None otherwise."""
+    if s.crossing[0] is None:
+        return None
+    when = s.date_at(s.crossing[0])
+    days = (as_of - pd.Timestamp(when).date()).days
+    if days <= 0:
+        return None
+    return _alert("limit_passed_unmeasured", f"the trend reached the limit {s.threshold_um:g} "
+                  f"{s.unit} on {when}, {days} days before {as_of.isoformat()}, after the last "
+                  f"visit ({s.visits['date'].iloc[-1].date().isoformat()}): probably past its "
+                  "limit, unmeasured")
 
 
 def _last_visit_alert(s: DriftSeries) -> dict:

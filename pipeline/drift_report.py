@@ -25,15 +25,17 @@ from pipeline.report_page import new_figure, save_figure, write_page
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
 
 
-def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
+def write_drift_report(series, out_dir, *, source: str = "", notes=(),
+                       as_of: str | None = None) -> dict:
     """Write PNG, HTML and JSON for analysed series (``models.drift.DriftSeries``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {k: out / name for k, name in FILES.items()}
     plot_series(series, paths["png"])
-    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes))
+    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes,
+                                                 as_of=as_of))
     fileio.write_json(paths["json"], fileio.clean_nan(
-        {"source": source, "series": [s.to_json() for s in series]}))
+        {"source": source, "as_of": as_of, "series": [s.to_json() for s in series]}))
     return paths
 
 
@@ -139,7 +141,7 @@ def _uncertainty_text(series) -> str:
             "measurement uncertainty.</p>")
 
 
-def render_body(series, *, source: str = "", notes=()) -> str:
+def render_body(series, *, source: str = "", notes=(), as_of: str | None = None) -> str:
     """The report body: a summary table, the figure, and per-series visit tables."""
     rows = []
     for s in series:
@@ -185,7 +187,8 @@ def render_body(series, *, source: str = "", notes=()) -> str:
             f"<th>B = max|B_i| [{unit}]</th></tr>{body}</table>")
     note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
     level = f"{100 * (1 - series[0].alpha):g} %" if series else ""
-    return f"""<p>Data: {html.escape(source)}</p>
+    day = f" As of {html.escape(as_of)}." if as_of else ""
+    return f"""<p>Data: {html.escape(source)}.{day}</p>
 <p>Series value: the axis's backlash at the visit, the mean lost motion over its interior
 backlash points by the axis's measuring system (target <em>pendulum − linear</em> with a
 direct system, <em>ISO |B_i|</em> with an indirect one or a single test method); u(backlash) is

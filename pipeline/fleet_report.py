@@ -136,7 +136,8 @@ def index_body(result) -> str:
     rows = "".join(_index_row(i, view) for i, view in enumerate(result.axes, 1))
     notes = "".join(f"<li>{_esc(n)}</li>" for n in result.notes)
     alerting = sum(1 for v in result.axes if v.alerts)
-    return f"""<p class="summary">Data: {_esc(result.source)}. {len(result.axes)} machine axes,
+    return f"""<p class="summary">As of <strong>{_esc(p.get('as_of'))}</strong>. Data:
+{_esc(result.source)}. {len(result.axes)} machine axes,
 {alerting} with an alert. Limits: {_limits_text(p)}; maintenance interval
 {_fmt(p.get('interval_days'), 'g')} days.</p>
 <p>Each axis in its own unit: µm for a linear axis, arcsec for a rotary one. Backlash: the
@@ -157,6 +158,11 @@ hours); last compensation: its day, controller and reversal compensation.</p>
 <th>last forecast</th><th>last compensation</th><th>alerts</th></tr>
 {rows}</table>
 <p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
+
+
+def _overdue(j: dict) -> str:
+    return "" if j["days_overdue"] is None else (
+        f"<br><small class='alerts'>overdue {j['days_overdue']} d</small>")
 
 
 def _limits_text(p: dict) -> str:
@@ -194,7 +200,7 @@ def _index_row(rank: int, view) -> str:
             f"<br><small>{unit}/month</small></td>"
             f"<td>{_esc(', '.join(j['change_points']) or '–')}</td>"
             f"<td class='nowrap'>{crossing}</td><td class='nowrap'>{_esc(j['next_visit_due'])}"
-            f"</td><td class='nowrap'>{_forecast_cell(j['last_forecast'], unit)}</td>"
+            f"{_overdue(j)}</td><td class='nowrap'>{_forecast_cell(j['last_forecast'], unit)}</td>"
             f"<td class='nowrap'>{_compensation_cell(j['last_compensation'])}</td>"
             f"<td class='alerts'>{'<br>'.join(map(_esc, j['alerts']))}</td></tr>\n")
 
@@ -277,7 +283,14 @@ def _summary(view, j: dict) -> str:
 {trend}. Change points: {_esc(changes or 'none')}.<br>
 Threshold crossing{_threshold_text(j, unit)}: {_crossing_text(j)}.<br>
 Next visit due: <strong>{_esc(j['next_visit_due'])}</strong>
-({_esc(REASONS[j['next_visit_reason']])}).</p></div>"""
+({_esc(REASONS[j['next_visit_reason']])}){_overdue_text(view, j)}.</p></div>"""
+
+
+def _overdue_text(view, j: dict) -> str:
+    as_of = "" if view.as_of is None else view.as_of.isoformat()
+    if j["days_overdue"] is None:
+        return f"; as of {_esc(as_of)}" if as_of else ""
+    return f"; <strong>{j['days_overdue']} days overdue</strong> as of {_esc(as_of)}"
 
 
 def _threshold_text(j: dict, unit: str) -> str:

@@ -37,8 +37,13 @@ def cut():
     readings = bl.validate(readings)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
-        view = fleet(readings, threshold_um=THRESHOLD_UM)
+        view = fleet(readings, threshold_um=THRESHOLD_UM, as_of=last_day(readings))
     return readings, truth, view
+
+
+def last_day(readings) -> str:
+    """The day of the last test: the view a team takes home from the visit."""
+    return pd.to_datetime(readings["started_at"], utc=True).max().date().isoformat()
 
 
 def true_level(truth: pd.DataFrame) -> pd.Series:
@@ -88,7 +93,8 @@ def test_one_visit_since_is_planned_with_the_fleets_wear_rate(cut):
     threshold = 2.6  # near enough for the fleet rate to set some adjusted axes' next visit
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
-        view = fleet(readings, threshold_um=threshold, interval_days=120)
+        view = fleet(readings, threshold_um=threshold, interval_days=120,
+                     as_of=last_day(readings))
     hours = truth.groupby(["machine_id", "axis", "visit"])["operating_hours"].first()
     reasons = []
     for v in view.axes:
@@ -153,7 +159,7 @@ def test_the_twin_fleet_preset_seen_at_its_adjustment():
     05, none is crossing_soon nor due on the day of its last visit."""
     sim = bl.simulate(preset="fleet", seed=0, config={"fleet": {
         "machines": 2, "axes": ["X", "Y"], "visits": 5, "adjust_at": [5]}})
-    view = fleet(sim.readings, threshold_um=4.0)
+    view = fleet(sim.readings, threshold_um=4.0, as_of=last_day(sim.readings))
     for a in view.to_json()["axes"]:
         assert a["change_points"] == ["05"] and "last_visit_drop" in a["alerts"], a["axis"]
         assert "crossing_soon" not in a["alerts"]

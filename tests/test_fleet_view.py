@@ -45,15 +45,20 @@ def twin_file(twin, tmp_path_factory) -> Path:
     return twin.write(tmp_path_factory.mktemp("twin"))["readings"]
 
 
+def last_day(sim) -> str:
+    """The day of the fleet's last test: the view computed then has nothing overdue yet."""
+    return pd.to_datetime(sim.readings["started_at"], utc=True).max().date().isoformat()
+
+
 @pytest.fixture(scope="module")
 def mixed(twin):
-    return fleet(twin.readings, threshold_um=MIXED_UM)
+    return fleet(twin.readings, threshold_um=MIXED_UM, as_of=last_day(twin))
 
 
 @pytest.fixture(scope="module")
 def site(twin, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("site") / "fleet"
-    fleet(twin.readings, threshold_um=MIXED_UM, out=out)
+    fleet(twin.readings, threshold_um=MIXED_UM, out=out, as_of=last_day(twin))
     return out
 
 
@@ -128,6 +133,7 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "change_jumps_um": list, "threshold_um": (float, type(None)),
          "crossing_date": (str, type(None)), "crossing_interval": list, "next_visit_due": str,
          "next_visit_reason": str, "fleet_wear_rate_per_month": (float, type(None)),
+         "days_overdue": (int, type(None)),
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
          "page": str}
@@ -137,7 +143,7 @@ def test_json_keys_and_types(mixed):
     from features.readings.fileio import dumps
 
     data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
-    assert set(data) == {"source", "threshold_um", "threshold_arcsec", "limits",
+    assert set(data) == {"source", "as_of", "threshold_um", "threshold_arcsec", "limits",
                          "interval_days", "n_alerts", "axes"}
     assert data["threshold_um"] == MIXED_UM and data["interval_days"] == 90.0
     for a in data["axes"]:
@@ -194,10 +200,10 @@ def test_next_visit_due_rule(twin):
 
 
 def test_no_alert_without_a_near_threshold(twin):
-    quiet = fleet(twin.readings, threshold_um=QUIET_UM)
+    quiet = fleet(twin.readings, threshold_um=QUIET_UM, as_of=last_day(twin))
     assert quiet.alerts == []
     assert all(a["crossing_date"] is not None for a in quiet.to_json()["axes"])  # all growing
-    crossing = fleet(twin.readings, threshold_um=CROSSING_UM)
+    crossing = fleet(twin.readings, threshold_um=CROSSING_UM, as_of=last_day(twin))
     assert {a["kind"] for a in crossing.alerts} == {"crossing_soon"}
 
 
@@ -304,14 +310,15 @@ def _cli(args: list[str], capsys) -> tuple[int, str, str]:
 
 
 @cli
-def test_cli_exits_3_with_an_alert_and_0_without(twin_file, tmp_path, capsys):
+def test_cli_exits_3_with_an_alert_and_0_without(twin, twin_file, tmp_path, capsys):
     code, out, err = _cli([str(twin_file), "--threshold-um", str(CROSSING_UM), "--json",
-                           "--out", str(tmp_path / "site")], capsys)
+                           "--out", str(tmp_path / "site"), "--as-of", last_day(twin)], capsys)
     assert code == 3, err
     data = json.loads(out)
     assert len(data["axes"]) == 4 and all(a["alerts"] for a in data["axes"])
     assert (tmp_path / "site" / "index.html").is_file()
-    code, out, err = _cli([str(twin_file), "--threshold-um", str(QUIET_UM), "--json"], capsys)
+    code, out, err = _cli([str(twin_file), "--threshold-um", str(QUIET_UM), "--json",
+                           "--as-of", last_day(twin)], capsys)
     assert code == 0, err
     assert all(a["alerts"] == [] for a in json.loads(out)["axes"])
 

@@ -94,6 +94,14 @@ def add_limit_arguments(parser) -> None:
                              "C_arcsec = 40.0); other axes take --threshold-um/-arcsec")
 
 
+def add_as_of_argument(parser) -> None:
+    """``--as-of DATE``: the day ``drift`` and ``fleet`` are computed as of (default today)."""
+    parser.add_argument("--as-of", metavar="YYYY-MM-DD",
+                        help="compute the view as of this day (default today, UTC): tests "
+                             "started later are left out; overdue visits and limits passed "
+                             "since the last visit alert")
+
+
 def add_trend_arguments(parser) -> None:
     """The options of the trend analysis per machine axis (``models.drift``), the same for
     ``drift`` and ``fleet``: ``--warn-months``, ``--alpha``, ``--min-jump-sigma``."""

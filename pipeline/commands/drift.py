@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_limit_arguments, add_trend_arguments
+from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.drift import WORKFLOW
 
@@ -18,6 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                        "started_at)")
     parser.add_argument("--out", required=True, help="output folder for the report")
     add_limit_arguments(parser)
+    add_as_of_argument(parser)
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory: monitor its residuals and inputs")
     add_trend_arguments(parser)
@@ -42,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     with BackgroundRun("drift", tracking.log_into) as mlflow_run:
         result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
                        threshold_arcsec=args.threshold_arcsec, limits=args.limits,
+                       as_of=args.as_of,
                        model=args.model, warn_months=args.warn_months, alpha=args.alpha,
                        min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
         mlflow_run.start(result.run_name)  # the input is valid: the run may start

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_limit_arguments, add_trend_arguments
+from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
 
@@ -17,6 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_readings_argument(parser, help="readings with several visits per machine axis (visit, "
                                        "started_at)")
     add_limit_arguments(parser)
+    add_as_of_argument(parser)
     parser.add_argument("--interval-days", type=float, default=DEFAULT_INTERVAL_DAYS,
                         metavar="D", help="maintenance interval [days]: the next visit is due "
                                           "this long after the last one at the latest "
@@ -46,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
 
         result = fleet(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
                        threshold_arcsec=args.threshold_arcsec, limits=args.limits,
+                       as_of=args.as_of,
                        interval_days=args.interval_days, warn_months=args.warn_months,
                        alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out,
                        store=args.data if is_store(args.data) else None)
@@ -75,7 +77,9 @@ def print_summary(result, file) -> None:
               f"{j['backlash_um']:>9.3f} "
               f"{slope if slope is not None else float('nan'):>10.4f}  "
               f"{j['crossing_date'] or '-':<10}  {j['next_visit_due']:<10}"
+              f"{'' if j['days_overdue'] is None else ' overdue ' + str(j['days_overdue']) + ' d'}"
               f"{extra if records else ''}  {', '.join(j['alerts']) or '-'}", file=file)
+    print(f"as of {result.parameters['as_of']}", file=file)
     if "index" in result.files:
         print(f"site: {result.files['index']}", file=file)
 

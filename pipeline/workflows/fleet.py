@@ -65,6 +65,7 @@ def _parameters() -> dict:
         "threshold_um": [positive, None],
         "threshold_arcsec": [positive, None],
         "limits": [str, os.PathLike, dict, None],
+        "as_of": [str, dt.date, None],
         "interval_days": [positive],
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
@@ -91,6 +92,8 @@ class AxisView:
         When the axis should next be measured (module docstring).
     next_visit_reason : str
         Which rule set it: ``above_threshold``, ``crossing``, ``fleet_rate`` or ``interval``.
+    as_of : datetime.date or None
+        The day the view is computed as of (``days_overdue`` counts to it).
     fleet_rate : dict or None
         For an axis with one visit since its last change point: the wear rate it is planned
         with, ``per_day`` [um/d, arcsec/d for a rotary axis] and ``basis`` (``operating hours``:
@@ -128,6 +131,7 @@ class AxisView:
     forecasts: list = field(default_factory=list)
     compensations: list = field(default_factory=list)
     fleet_rate: dict | None = None
+    as_of: dt.date | None = None
 
     @property
     def machine_id(self) -> str:
@@ -145,6 +149,12 @@ class AxisView:
     @property
     def alerts(self) -> list[dict]:
         return self.series.alerts
+
+    @property
+    def days_overdue(self) -> int | None:
+        """Days the next visit is overdue as of the view's day (``overdue``), or None."""
+        late = None if self.as_of is None else (self.as_of - self.next_visit_due).days
+        return late if late is not None and late > 0 else None
 
     @property
     def crossing_days(self) -> tuple:
@@ -177,6 +187,7 @@ class AxisView:
             "crossing_interval": [s.date_at(s.crossing[1]), s.date_at(s.crossing[2])],
             "next_visit_due": self.next_visit_due.isoformat(),
             "next_visit_reason": self.next_visit_reason,
+            "days_overdue": self.days_overdue,
             "fleet_wear_rate_per_month": None if self.fleet_rate is None else _round(
                 self.fleet_rate["per_day"] * DAYS_PER_MONTH, 5),
             "alerts": [a["kind"] for a in s.alerts],
@@ -242,7 +253,8 @@ class FleetResult(Result):
     def to_json(self) -> dict:
         p = self.parameters
         limits = p.get("limits")
-        return {"source": self.source, "threshold_um": p.get("threshold_um"),
+        return {"source": self.source, "as_of": p.get("as_of"),
+                "threshold_um": p.get("threshold_um"),
                 "threshold_arcsec": p.get("threshold_arcsec"),
                 "limits": None if limits is None else str(limits) if isinstance(
                     limits, (str, os.PathLike)) else "given",
@@ -273,7 +285,7 @@ class FleetResult(Result):
 
 # --------------------------------------------------------------------------- the workflow
 def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
-          threshold_arcsec: float | None = None, limits=None,
+          threshold_arcsec: float | None = None, limits=None, as_of=None,
           interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
           alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None,
           store=None) -> FleetResult:
@@ -294,6 +306,10 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         Limits per machine and axis, each in its axis's unit (``pipeline.limits``: a TOML
         file ``[M01] X_um = 8.0, C_arcsec = 40.0`` or a dict of that shape); an axis without
         one takes ``threshold_um`` or ``threshold_arcsec``.
+    as_of : str, date or None, default today (UTC)
+        The day the view is computed as of (``YYYY-MM-DD``): it sees the tests started by
+        then; an axis whose next visit was due before it alerts ``overdue``, one whose crossing
+        date lies before it ``limit_passed_unmeasured``.
     interval_days : float, default 90
         Maintenance interval [d]: the next visit is due this long after the last one at the
         latest.
@@ -322,12 +338,15 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         ``out`` naming a file, or readings without dates or with one visit per axis only.
     """
     values = {"format": format, "threshold_um": threshold_um,
-              "threshold_arcsec": threshold_arcsec, "limits": limits,
+              "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
               "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
               "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
     check_params(_parameters(), values, "fleet")
+    from pipeline.dated_view import as_of_date, dated_view
     from pipeline.limits import read_limits
 
+    day = as_of_date(as_of)
+    values["as_of"] = day.isoformat()
     per_axis = None if limits is None else read_limits(limits)
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
@@ -335,18 +354,18 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from features.visits import visit_backlash
     from models.drift import analyse_visits
 
-    readings = readings_of(data, format)
+    readings, notes = dated_view(readings_of(data, format), day)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
     visits = visit_backlash(readings, stats)
     series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
                             threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
-    notes = [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
-             if len(s.visits) < 2]
+    notes += [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
+              if len(s.visits) < 2]
     for text in notes:
         note(text)
     views = axis_views(series, readings, stats, interval_days,
-                       store_records(data if store is None else store))
+                       store_records(data if store is None else store), as_of=day)
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
 
@@ -371,10 +390,10 @@ def store_records(data) -> dict:
 
 
 def axis_views(series: list, readings, stats, interval_days: float,
-               records: dict | None = None) -> list[AxisView]:
+               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
     the readings' per-target ISO statistics (``features.iso230.per_target``), ``records``
-    what ``store_records`` found."""
+    what ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
     from features import iso230
     from features.targets import targets_of
     from models.wear_clock import usage_rates
@@ -385,6 +404,9 @@ def axis_views(series: list, readings, stats, interval_days: float,
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
     views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage))
              for s in series]
+    for view in views if as_of is not None else ():
+        view.as_of = as_of
+        view.series.alerts += as_of_alerts(view, as_of)
     views.sort(key=worst_first)
     for view, name in zip(views, page_names(views)):
         view.page = name
@@ -470,11 +492,29 @@ def dated(record: dict, s, parts: _Parts) -> dict:
     return {**record, "for_date": _day(when).isoformat(), "for_date_estimated": True}
 
 
+def as_of_alerts(view: AxisView, as_of: dt.date) -> list[dict]:
+    """The alerts of the day ``as_of``: ``limit_passed_unmeasured`` when the crossing date
+    lies before it (the axis has probably passed its limit since its last visit, unmeasured)
+    and ``overdue`` when the next visit was due before it, with the days."""
+    from models.drift import limit_passed_alert
+
+    alerts = [a for a in [limit_passed_alert(view.series, as_of)] if a is not None]
+    late = (as_of - view.next_visit_due).days
+    if late > 0:  # (view.days_overdue)
+        alerts.append({"kind": "overdue", "message": (
+            f"next visit was due on {view.next_visit_due.isoformat()} "
+            f"({view.next_visit_reason.replace('_', ' ')}): {late} days overdue as of "
+            f"{as_of.isoformat()}")})
+    return alerts
+
+
 def worst_first(view: AxisView) -> tuple:
-    """Sort key: above the threshold, other alerts, none; then the earliest next visit due,
-    the earliest crossing (none last), the highest backlash now, machine and axis."""
+    """Sort key: above the threshold, past the limit unmeasured, other alerts, none; then the
+    earliest next visit due, the earliest crossing (none last), the highest backlash now,
+    machine and axis."""
     kinds = {a["kind"] for a in view.alerts}
-    group = 0 if "above_threshold" in kinds else 1 if kinds else 2
+    group = (0 if "above_threshold" in kinds else 1 if "limit_passed_unmeasured" in kinds
+             else 2 if kinds else 3)
     crossing = view.series.crossing[0]
     return (group, view.next_visit_due, crossing is None, crossing or 0.0,
             -float(view.last["backlash_um"]), view.machine_id, view.axis)
