@@ -295,6 +295,9 @@ def _fit_var(t, sigma, at):
 def trend(t_month, y_um, alpha: float = 0.05) -> dict:
     """Theil-Sen slope [um/month] with its 1-alpha interval, and the Mann-Kendall test.
 
+    From two visits the slope is their difference over the time between them and its
+    interval cannot be estimated (``low`` and ``high`` NaN).
+
     Mann-Kendall S = sum_{i<j} sign(y_j - y_i) is Kendall's tau between time and value, so
     its p-value (two-sided) comes from ``scipy.stats.kendalltau``.
     """
@@ -305,8 +308,11 @@ def trend(t_month, y_um, alpha: float = 0.05) -> dict:
                 "p_value": nan}
     res = stats.theilslopes(y, t, alpha=1 - alpha)
     tau, p = stats.kendalltau(t, y) if len(y) >= 3 else (float("nan"), float("nan"))
-    return {"slope": float(res[0]), "intercept": float(res[1]), "low": float(res[2]),
-            "high": float(res[3]), "tau": float(tau), "p_value": float(p)}
+    # two visits give one pairwise slope: its interval would have zero width, it cannot be
+    # estimated (NaN, null in the JSON; the pages say so)
+    low, high = (res[2], res[3]) if len(y) >= 3 else (float("nan"), float("nan"))
+    return {"slope": float(res[0]), "intercept": float(res[1]), "low": float(low),
+            "high": float(high), "tau": float(tau), "p_value": float(p)}
 
 
 def crossing_forecast(t_month, y_um, sigma_um, threshold_um: float, *, slope: float,
@@ -666,6 +672,14 @@ def limit_of(machine: str, axis: str, threshold_um: float | None = None,
     if own is not None:
         return own
     return threshold_arcsec if is_rotary(axis) else threshold_um
+
+
+def two_visit_notes(series: list[DriftSeries]) -> list[str]:
+    """One note per series whose trend comes from two visits: its interval cannot be
+    estimated."""
+    return [f"{s.machine_id} axis {s.axis}: the trend since visit "
+            f"{s.visits['visit'].iloc[s.segment_start]} comes from two visits; its interval "
+            "cannot be estimated" for s in series if len(s.visits) - s.segment_start == 2]
 
 
 # --------------------------------------------------------------------------- model alerts

@@ -114,6 +114,16 @@ def _fmt(value, fmt=".3g") -> str:
     return format(value, fmt) if isinstance(value, (int, float)) else html.escape(str(value))
 
 
+def _interval(j: dict) -> str:
+    """The slope's interval, or why there is none (a trend from two visits)."""
+    low, high = j["slope_interval"]
+    if j["slope_um_per_month"] is None or not np.isfinite(j["slope_um_per_month"]):
+        return ""
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return "(interval cannot be estimated from two visits)"
+    return f"[{_fmt(low)}, {_fmt(high)}]"
+
+
 def _visit_row(r: dict) -> str:
     """One visit of a series as a table row (columns a hand-built series lacks show –)."""
     def num(key, fmt=".3f"):
@@ -150,8 +160,7 @@ def render_body(series, *, source: str = "", notes=(), as_of: str | None = None)
             f"<tr><td>{html.escape(s.machine_id)}</td><td>{html.escape(s.axis)}</td>"
             f"<td>{unit_label(s.unit)}</td>"
             f"<td>{len(j['visits'])}</td><td>{_fmt(j['backlash_um'][-1])}</td>"
-            f"<td>{_fmt(j['slope_um_per_month'])} [{_fmt(j['slope_interval'][0])}, "
-            f"{_fmt(j['slope_interval'][1])}]</td>"
+            f"<td>{_fmt(j['slope_um_per_month'])} {_interval(j)}</td>"
             f"<td>{html.escape(', '.join(j['change_points']) or '–')}</td>"
             f"<td>{_fmt(j['threshold_crossing'])} [{_fmt(j['crossing_interval'][0])}, "
             f"{_fmt(j['crossing_interval'][1])}]</td>"

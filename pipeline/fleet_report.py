@@ -160,6 +160,14 @@ hours); last compensation: its day, controller and reversal compensation.</p>
 <p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
 
 
+def _interval(j: dict) -> str:
+    """The slope's interval, or why there is none (a trend from two visits)."""
+    low, high = j["slope_interval"]
+    if low is None or high is None:
+        return "interval cannot be estimated from two visits"
+    return f"[{_fmt(low)}, {_fmt(high)}]"
+
+
 def _overdue(j: dict) -> str:
     return "" if j["days_overdue"] is None else (
         f"<br><small class='alerts'>overdue {j['days_overdue']} d</small>")
@@ -184,9 +192,8 @@ def _index_row(rank: int, view) -> str:
     spark = fleet_charts.sparkline(_history(view), view.forecast, threshold_um=threshold,
                                    alert=bool(view.alerts), recorded=recorded_point(view, j),
                                    label=f"{view.machine_id} {view.axis} backlash history")
-    low, high = j["slope_interval"]
-    slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>[{_fmt(low)}, "
-             f"{_fmt(high)}]</small>" if j["slope_um_per_month"] is not None else "–")
+    slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>{_interval(j)}</small>"
+             if j["slope_um_per_month"] is not None else "–")
     early, late = j["crossing_interval"]
     crossing = (f"{_esc(j['crossing_date'])}<br><small>[{_esc(early or '–')}, "
                 f"{_esc(late or 'later')}]</small>" if j["crossing_date"] else _crossing_text(j))
@@ -269,11 +276,10 @@ def axis_body(view) -> str:
 def _summary(view, j: dict) -> str:
     kind = KIND_NAMES.get(j["target_kind"], j["target_kind"] or "–")
     unit = _unit(view)
-    low, high = j["slope_interval"]
     changes = ", ".join(f"{c} ({d:+.2f} {unit})" for c, d in zip(j["change_points"],
                                                                   j["change_jumps_um"]))
     trend = (f"Trend since visit {_esc(j['trend_since_visit'])}: "
-             f"{_fmt(j['slope_um_per_month'], '+.3f')} {unit}/month [{_fmt(low)}, {_fmt(high)}]"
+             f"{_fmt(j['slope_um_per_month'], '+.3f')} {unit}/month {_interval(j)}"
              if j["slope_um_per_month"] is not None
              else "No trend (fewer than two visits since the last change point)")
     visits = f"{j['visits']} visit{'s' if j['visits'] > 1 else ''}"

@@ -215,6 +215,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
                                         warn_months=warn_months, coverage_factor=k)
     for s in series:
         s.alerts += [a for a in [drift_model.limit_passed_alert(s, day)] if a is not None]
+    for text in drift_model.two_visit_notes(series):
+        notes.append(text)
+        note(text)
     if predictor is not None:
         drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
     for s in series:

@@ -352,7 +352,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
     from features import iso230
     from features.visits import visit_backlash
-    from models.drift import analyse_visits
+    from models.drift import analyse_visits, two_visit_notes
 
     readings, notes = dated_view(readings_of(data, format), day)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
@@ -362,6 +362,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
     notes += [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
               if len(s.visits) < 2]
+    notes += two_visit_notes(series)
     for text in notes:
         note(text)
     views = axis_views(series, readings, stats, interval_days,
