@@ -2,9 +2,9 @@
 
 Both views place every visit on the calendar. A test without a start date (``started_at``)
 cannot be placed: it is left out, with one note naming the tests, rather than stopping the
-view. A view is computed as of a day (``as_of``, default today, UTC): it sees the tests
-started by the end of that day, as it would have been seen then, and measures what is overdue
-against that day.
+view. A view is computed as of a day (``as_of``, default today, UTC) and measures what is
+overdue against that day; given a day, it sees the tests started by the end of it, as it would
+have been seen then.
 """
 
 from __future__ import annotations
@@ -41,12 +41,13 @@ def as_of_date(value, parameter: str = "as_of") -> dt.date:
                          parameter=parameter) from None
 
 
-def dated_view(readings, as_of: dt.date, source: str = "readings"):
+def dated_view(readings, as_of: dt.date | None, source: str = "readings"):
     """The readings a view computed as of ``as_of`` sees, and its notes.
 
     Tests without ``started_at`` are left out (one note naming them), so are tests started
-    after the end of the day ``as_of`` (UTC; one note counting them). Readings without a
-    ``started_at`` column are returned as they are (the view says what it needs).
+    after the end of the day ``as_of`` (UTC; one note counting them) when a day is given (the
+    default day, today, cuts nothing: only simulated tests lie in the future). Readings
+    without a ``started_at`` column are returned as they are (the view says what it needs).
 
     Raises
     ------
@@ -69,6 +70,8 @@ def dated_view(readings, as_of: dt.date, source: str = "readings"):
             raise InputError("no test has a start date (started_at): the view places every "
                              "visit on the calendar", file=source, column="started_at")
         readings = readings[~undated]
+    if as_of is None:
+        return readings, notes
     started = pd.to_datetime(readings["started_at"], utc=True)
     later = (started >= pd.Timestamp(as_of + dt.timedelta(days=1), tz="UTC")).to_numpy()
     if later.all():

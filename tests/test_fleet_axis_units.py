@@ -156,3 +156,21 @@ def test_cli_threshold_arcsec_and_json_units(mixed, tmp_path, capsys):
     code = main(["fleet", str(data), "--threshold-arcsec", "-3"])
     captured = capsys.readouterr()
     assert code == 2 and "--threshold-arcsec" in captured.err
+
+
+def test_an_undated_test_is_left_out_with_one_note(mixed):
+    """One test without a start date (as an ecmc file ingested without one): the view goes
+    on without it and one note names it."""
+    readings = mixed.copy()
+    undated = readings["test_id"] == readings["test_id"].iloc[-1]  # M5's last C test
+    readings.loc[undated, "started_at"] = pd.NaT
+    with pytest.warns(BacklashWarning) as caught:
+        view = fleet(readings, threshold_um=6.0, threshold_arcsec=60.0, as_of="2026-12-31")
+    texts = [str(w.message) for w in caught if "start date" in str(w.message)]
+    name = readings.loc[undated, "test_id"].iloc[0]
+    expected = (f"1 test(s) without a start date (started_at) left out of the date-based "
+                f"view: {name}")
+    assert texts == [expected]
+    assert texts[0] in view.notes and len(view.axes) == 10
+    c = next(v for v in view.axes if (v.machine_id, v.axis) == ("M5", "C"))
+    assert (c.series.visits["n_tests"] == [2] * (len(c.series.visits) - 1) + [1]).all()

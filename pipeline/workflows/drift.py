@@ -149,8 +149,8 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         Limits per machine and axis, each in its axis's unit (``pipeline.limits``); an axis
         without one takes ``threshold_um`` or ``threshold_arcsec``.
     as_of : str, date or None, default today (UTC)
-        The day the drift is computed as of (``YYYY-MM-DD``): the tests started by then; a
-        crossing date before it alerts ``limit_passed_unmeasured``.
+        The day the drift is computed as of (``YYYY-MM-DD``): given, the tests started by
+        then; a crossing date before it alerts ``limit_passed_unmeasured``.
     model : str, path or fitted predictor, optional
         Trained model (directory or object): monitor its residuals and inputs.
     warn_months : float, default 6.0
@@ -200,7 +200,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         from models.registry import load_model
 
         predictor = load_model(model)
-    readings, notes = dated_view(readings_of(data, format), day)
+    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
     visits = visit_backlash(readings, budget=budget)
     k = None if budget is None else budget.coverage_factor
     counts = visits.groupby(list(SERIES_KEYS)).size()

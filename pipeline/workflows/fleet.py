@@ -307,8 +307,8 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         file ``[M01] X_um = 8.0, C_arcsec = 40.0`` or a dict of that shape); an axis without
         one takes ``threshold_um`` or ``threshold_arcsec``.
     as_of : str, date or None, default today (UTC)
-        The day the view is computed as of (``YYYY-MM-DD``): it sees the tests started by
-        then; an axis whose next visit was due before it alerts ``overdue``, one whose crossing
+        The day the view is computed as of (``YYYY-MM-DD``): given, it sees the tests
+        started by then; an axis whose next visit was due before it alerts ``overdue``, one whose crossing
         date lies before it ``limit_passed_unmeasured``.
     interval_days : float, default 90
         Maintenance interval [d]: the next visit is due this long after the last one at the
@@ -354,7 +354,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from features.visits import visit_backlash
     from models.drift import analyse_visits, two_visit_notes
 
-    readings, notes = dated_view(readings_of(data, format), day)
+    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
     visits = visit_backlash(readings, stats)
     series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
