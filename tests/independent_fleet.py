@@ -24,7 +24,7 @@ random draws.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -86,13 +86,8 @@ MACHINES = (
 
 # The fleet seen at its fifth visit, which follows two machines' adjustment: M2 and M4 adjusted
 # a few weeks before visit 5, M5 joined at visit 3.
-ADJUSTED_LAST = (
-    Machine("M1", 310.0, direct=True),
-    Machine("M2", 420.0, direct=True, adjusted_at=5),
-    Machine("M3", 180.0, direct=False),
-    Machine("M4", 260.0, direct=True, adjusted_at=5),
-    Machine("M5", 350.0, direct=True, first_visit=3),
-)
+ADJUSTED_LAST = tuple(replace(m, adjusted_at=5 if m.adjusted_at else None,
+                              first_visit=min(m.first_visit, 3)) for m in MACHINES)
 
 
 def raised_cosine(x, centre, half_width):
