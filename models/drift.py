@@ -33,9 +33,16 @@ Alert policy (each alert a dict with ``kind`` and ``message``): ``above_threshol
 ``crossing_soon`` (early end of the crossing interval within ``warn_months`` of the last
 visit), ``increasing_trend`` (no threshold given: Mann-Kendall p < alpha and the Theil-Sen
 interval above zero), ``level_jump`` (the latest change point raised the level: failure
-suspected), ``last_visit_jump`` (the last visit lies more than ``min_jump_sigma`` sigma above the
-prediction of the segment before it; one visit cannot confirm a change point) and, with a
-monitored model (``models.monitoring``), ``retrain``, ``input_out_of_range``, ``input_drift``.
+suspected), ``last_visit_drop`` / ``last_visit_jump`` (a change point at the last visit: the
+last visit alone is the last segment, its value more than ``min_jump_sigma`` standard errors
+below / above the trend before it; an adjustment restarts the trend there, a jump awaits the
+next visit to be confirmed; without such a change point ``last_visit_jump`` also fires when
+the last visit lies that far above the line of its segment's earlier visits),
+``limit_passed_unmeasured`` (``limit_passed_alert``: the crossing date lies before the day the
+view is computed as of) and, with a monitored model (``models.monitoring``), ``retrain``,
+``input_out_of_range``, ``input_drift``. Every value, limit and message is in the axis's unit
+(``DriftSeries.unit``: um, or arcsec for a rotary axis); ``limit_of`` gives each axis a limit
+in its own unit, so no alert compares unlike units.
 
 With a measurement uncertainty budget (ISO/TR 230-9; the series then carries
 ``backlash_U_um``, the expanded uncertainty of each visit's value, and ``backlash_u_visit_um``,
@@ -154,20 +161,23 @@ def _segment_costs(t, y, w):
     return cost
 
 
-def optimal_partition(t_month, y_um, sigma_um, *, penalty: float, min_size: int = 2):
+def optimal_partition(t_month, y_um, sigma_um, *, penalty: float, min_size: int = 2,
+                      min_last: int | None = None):
     """Exact optimal partitioning into straight-line segments (Jackson et al. 2005).
 
     Minimises sum over segments of chi²(segment) + penalty x (number of segments) by dynamic
-    programming over all O(n²) segments. Returns the start indices of segments 2..k.
+    programming over all O(n²) segments; every segment holds ``min_size`` points or more, the
+    last one ``min_last`` (default ``min_size``). Returns the start indices of segments 2..k.
     """
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     n = len(y)
+    min_last = min_size if min_last is None else min_last
     cost = _segment_costs(t, y, 1.0 / np.asarray(sigma_um, float) ** 2)
     best = np.full(n + 1, np.inf)
     best[0] = -penalty
     last = np.zeros(n + 1, int)
-    for j in range(min_size, n + 1):  # O(n) loop over series ends, n <= a few hundred visits
-        starts = np.arange(0, j - min_size + 1)
+    for j in range(min_size, n + 1):  # O(n) loop over series ends, n <= a few hundred
+        starts = np.arange(0, j - (min_last if j == n else min_size) + 1)
         total = best[starts] + cost[starts, j] + penalty
         k = int(np.argmin(total))
         best[j], last[j] = total[k], starts[k]
@@ -190,7 +200,8 @@ def _line(t, y):
 
 
 def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
-                  min_jump_sigma: float = 3.0, min_size: int = 2) -> list[dict]:
+                  min_jump_sigma: float = 3.0, min_size: int = 2,
+                  min_last: int = 1) -> list[dict]:
     """Change points of a piecewise linear series, each with the jump it made.
 
     Parameters
@@ -200,6 +211,10 @@ def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
     min_jump_sigma : a kept change jumps by more than this many standard errors: the left
         segment's line extrapolated to the first visit after the change against the right
         segment's line there, se² = sum over both lines of sigma²(1/m + (t_k - t̄)²/Sxx).
+    min_size, min_last : the fewest visits of a segment and of the last one. The last may
+        hold the last visit alone (default): an adjustment or a failure just before the
+        latest visit is a change there, its right "line" that visit's value (se² = sigma²),
+        rather than a trend bent through it.
 
     Returns
     -------
@@ -209,10 +224,48 @@ def change_points(t_month, y_um, sigma_um, *, penalty: float | None = None,
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     sigma = np.broadcast_to(np.asarray(sigma_um, float), y.shape)
     n = len(y)
-    if n < 2 * min_size:
+    if n < min_size + min_last:
         return []
     penalty = 6.0 * np.log(n) if penalty is None else penalty
-    cuts = optimal_partition(t, y, sigma, penalty=penalty, min_size=min_size)
+    cuts = optimal_partition(t, y, sigma, penalty=penalty, min_size=min_size,
+                             min_last=min_last)
+    found = _strong(t, y, sigma, cuts, min_jump_sigma)
+    if min_last == 1:
+        found = _last_visit_change(t, y, sigma, found, penalty=penalty,
+                                   min_jump_sigma=min_jump_sigma, min_size=min_size)
+    return found
+
+
+def _last_visit_change(t, y, sigma, found, *, penalty, min_jump_sigma, min_size):
+    """The change points with the last visit's own weighed again.
+
+    A two-visit last segment fits exactly, so the partition cannot tell a change before the
+    last two visits from one before the last visit alone. When its two visits fall by more
+    than ``min_jump_sigma`` sigma of their difference, the change is put before the last
+    visit (wear does not lower the lost motion: the fall is an adjustment there). When the
+    change before them proved weak, a change before the last visit is weighed on its own:
+    kept when it saves more chi² than ``penalty`` and jumps by more than ``min_jump_sigma``.
+    """
+    n = len(y)
+    kept = [c["index"] for c in found]
+    if kept and kept[-1] == n - 2:
+        if y[-2] - y[-1] <= min_jump_sigma * np.hypot(sigma[-2], sigma[-1]):
+            return found
+        moved = _strong(t, y, sigma, kept[:-1] + [n - 1], min_jump_sigma)
+        return moved if moved and moved[-1]["index"] == n - 1 else found
+    start = kept[-1] if kept else 0
+    if n - 1 - start < min_size:
+        return found
+    w = 1.0 / sigma[start:] ** 2
+    saved = _segment_costs(t[start:], y[start:], w)[0, -1] - _segment_costs(
+        t[start:-1], y[start:-1], w[:-1])[0, -1]
+    return _strong(t, y, sigma, kept + [n - 1], min_jump_sigma) if saved > penalty else found
+
+
+def _strong(t, y, sigma, cuts, min_jump_sigma):
+    """The jumps of ``cuts``, the weakest removed one at a time while any is within
+    ``min_jump_sigma`` standard errors."""
+    cuts = list(cuts)
     while True:
         found = _jumps(t, y, sigma, cuts)
         weak = [c for c in found if abs(c["jump_sigma"]) <= min_jump_sigma]
@@ -242,6 +295,9 @@ def _fit_var(t, sigma, at):
 def trend(t_month, y_um, alpha: float = 0.05) -> dict:
     """Theil-Sen slope [um/month] with its 1-alpha interval, and the Mann-Kendall test.
 
+    From two visits the slope is their difference over the time between them and its
+    interval cannot be estimated (``low`` and ``high`` NaN).
+
     Mann-Kendall S = sum_{i<j} sign(y_j - y_i) is Kendall's tau between time and value, so
     its p-value (two-sided) comes from ``scipy.stats.kendalltau``.
     """
@@ -252,8 +308,11 @@ def trend(t_month, y_um, alpha: float = 0.05) -> dict:
                 "p_value": nan}
     res = stats.theilslopes(y, t, alpha=1 - alpha)
     tau, p = stats.kendalltau(t, y) if len(y) >= 3 else (float("nan"), float("nan"))
-    return {"slope": float(res[0]), "intercept": float(res[1]), "low": float(res[2]),
-            "high": float(res[3]), "tau": float(tau), "p_value": float(p)}
+    # two visits give one pairwise slope: its interval would have zero width, it cannot be
+    # estimated (NaN, null in the JSON; the pages say so)
+    low, high = (res[2], res[3]) if len(y) >= 3 else (float("nan"), float("nan"))
+    return {"slope": float(res[0]), "intercept": float(res[1]), "low": float(low),
+            "high": float(high), "tau": float(tau), "p_value": float(p)}
 
 
 def crossing_forecast(t_month, y_um, sigma_um, threshold_um: float, *, slope: float,
@@ -324,6 +383,20 @@ class DriftSeries:
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
 
     @property
+    def unit(self) -> str:
+        """The unit of every ``_um`` value of the series: ``um``, or ``arcsec`` for a rotary
+        axis (``features.readings.schema.deviation_unit``)."""
+        from features.readings.schema import deviation_unit
+
+        return deviation_unit(self.axis)
+
+    @property
+    def last_visit_change(self) -> dict | None:
+        """The change point at the last visit (a segment of that visit alone), or None."""
+        last = self.change_points[-1] if self.change_points else None
+        return last if last is not None and last["index"] == len(self.visits) - 1 else None
+
+    @property
     def origin(self):
         return self.visits["date"].iloc[0]
 
@@ -335,7 +408,7 @@ class DriftSeries:
     def to_json(self) -> dict:
         v = self.visits
         return {
-            "machine_id": self.machine_id, "axis": self.axis,
+            "machine_id": self.machine_id, "axis": self.axis, "unit": self.unit,
             "visits": v["visit"].astype(str).tolist(),
             "dates": [d.isoformat() for d in v["date"]],
             "backlash_um": v["backlash_um"].round(4).tolist(),
@@ -457,21 +530,23 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
     last_visit = str(v["visit"].iloc[-1])
     if s.threshold_um is not None:
         if last_y >= s.threshold_um:
-            alerts.append(_alert("above_threshold", f"backlash {last_y:.2f} um at visit "
+            alerts.append(_alert("above_threshold", f"backlash {last_y:.2f} {s.unit} at visit "
                                  f"{last_visit} is at or above the threshold "
-                                 f"{s.threshold_um:g} um"))
+                                 f"{s.threshold_um:g} {s.unit}"))
         elif s.crossing[1] is not None and s.crossing[1] - last_t <= warn_months:
-            alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} um "
+            alerts.append(_alert("crossing_soon", f"backlash may reach {s.threshold_um:g} {s.unit} "
                                  f"from {s.date_at(s.crossing[1])} (within {warn_months:g} "
                                  "months of the last visit)"))
     elif tr["p_value"] < alpha and tr["low"] > 0 and not _trend_within(s):
-        alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} um/month "
+        alerts.append(_alert("increasing_trend", f"backlash grows by {tr['slope']:.3f} {s.unit}/month "
                              f"[{tr['low']:.3f}, {tr['high']:.3f}] since visit "
                              f"{v['visit'].iloc[s.segment_start]} (Mann-Kendall p = "
                              f"{tr['p_value']:.2g})"))
-    if s.change_points and s.change_points[-1]["jump_um"] > 0:
+    if s.last_visit_change is not None:
+        alerts.append(_last_visit_alert(s))
+    elif s.change_points and s.change_points[-1]["jump_um"] > 0:
         c = s.change_points[-1]
-        alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} um "
+        alerts.append(_alert("level_jump", f"backlash stepped up by {c['jump_um']:.2f} {s.unit} "
                              f"({c['jump_sigma']:.1f} sigma) at visit {v['visit'].iloc[c['index']]}"
                              ": failure or loosened preload suspected"))
     jump = _last_visit_jump(s)
@@ -481,14 +556,49 @@ def series_alerts(s: DriftSeries, *, alpha: float, min_jump_sigma: float,
     return alerts
 
 
+def limit_passed_alert(s: DriftSeries, as_of) -> dict | None:
+    """``limit_passed_unmeasured`` when the crossing date of ``s`` lies before the day
+    ``as_of`` (a ``datetime.date``): no visit measured it, but the trend says the axis has
+    probably passed its limit since its last visit; None otherwise."""
+    if s.crossing[0] is None:
+        return None
+    when = s.date_at(s.crossing[0])
+    days = (as_of - pd.Timestamp(when).date()).days
+    if days <= 0:
+        return None
+    return _alert("limit_passed_unmeasured", f"the trend reached the limit {s.threshold_um:g} "
+                  f"{s.unit} on {when}, {days} days before {as_of.isoformat()}, after the last "
+                  f"visit ({s.visits['date'].iloc[-1].date().isoformat()}): probably past its "
+                  "limit, unmeasured")
+
+
+def _last_visit_alert(s: DriftSeries) -> dict:
+    """``last_visit_drop`` or ``last_visit_jump``: the change point at the last visit, with
+    how far the lost motion moved from the visit before it."""
+    v, c = s.visits, s.last_visit_change
+    step = float(v["backlash_um"].iloc[-1] - v["backlash_um"].iloc[-2])
+    visit, sigma = v["visit"].iloc[-1], abs(c["jump_sigma"])
+    if c["jump_um"] < 0:
+        return _alert("last_visit_drop", f"lost motion fell by {-step:.2f} {s.unit} at visit {visit} "
+                      f"({sigma:.1f} sigma below the trend before it): an adjustment or repair? "
+                      "The trend restarts there")
+    return _alert("last_visit_jump", f"lost motion rose by {step:.2f} {s.unit} at visit {visit} "
+                  f"({sigma:.1f} sigma above the trend before it): failure or loosened preload "
+                  "suspected; the next visit confirms it")
+
+
 def _last_visit_jump(s: DriftSeries) -> float | None:
-    """How many sigma the last visit lies above the line through its segment's earlier visits."""
+    """How many standard errors the last visit lies above the line through its segment's
+    earlier visits: se² = sigma² of the last visit + the variance of the line there (a line
+    through two visits extrapolates with much of their scatter)."""
     v = s.visits.iloc[s.segment_start:]
     if len(v) < 3:
         return None
     t, y = v["t_month"].to_numpy(), v["backlash_um"].to_numpy(float)
+    sigma = v["sigma_um"].to_numpy(float)
     level, slope, _ = _line(t[:-1], y[:-1])
-    return float((y[-1] - level - slope * t[-1]) / v["sigma_um"].iloc[-1])
+    se = np.sqrt(sigma[-1] ** 2 + _fit_var(t[:-1], sigma[:-1], t[-1]))
+    return float((y[-1] - level - slope * t[-1]) / se)
 
 
 def _trend_within(s: DriftSeries) -> bool:
@@ -535,16 +645,41 @@ def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
 
 
 def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
-                   **options) -> list[DriftSeries]:
+                   threshold_um: float | None = None, threshold_arcsec: float | None = None,
+                   limits: dict | None = None, **options) -> list[DriftSeries]:
     """``analyse_series`` of every machine axis in ``visits`` (``visit_backlash`` rows) with
     ``min_visits`` or more, in (machine_id, axis) order, each with its fleet's pooled scatter
-    (``fleet_scatter_um``)."""
+    (``fleet_scatter_um``) and its limit in its own unit (``limit_of``)."""
     from features.readings.schema import deviation_unit
 
     fleet = fleet_scatter_um(visits)
-    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)), **options)
-            for (_, axis), group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True)
+    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)),
+                           threshold_um=limit_of(str(machine), str(axis), threshold_um,
+                                                 threshold_arcsec, limits), **options)
+            for (machine, axis), group in visits.groupby(list(SERIES_KEYS), sort=True,
+                                                         observed=True)
             if len(group) >= min_visits]
+
+
+def limit_of(machine: str, axis: str, threshold_um: float | None = None,
+             threshold_arcsec: float | None = None, limits: dict | None = None) -> float | None:
+    """The limit of one machine axis in its own unit: its entry in ``limits`` ({(machine,
+    axis): limit}), else ``threshold_arcsec`` [arcsec] for a rotary axis and ``threshold_um``
+    [um] for a linear one; a limit is never compared with a value in another unit."""
+    from features.readings.schema import is_rotary
+
+    own = (limits or {}).get((machine, axis))
+    if own is not None:
+        return own
+    return threshold_arcsec if is_rotary(axis) else threshold_um
+
+
+def two_visit_notes(series: list[DriftSeries]) -> list[str]:
+    """One note per series whose trend comes from two visits: its interval cannot be
+    estimated."""
+    return [f"{s.machine_id} axis {s.axis}: the trend since visit "
+            f"{s.visits['visit'].iloc[s.segment_start]} comes from two visits; its interval "
+            "cannot be estimated" for s in series if len(s.visits) - s.segment_start == 2]
 
 
 # --------------------------------------------------------------------------- model alerts

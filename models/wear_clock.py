@@ -85,7 +85,8 @@ def wear_epochs(meta: pd.DataFrame, hours: pd.Series | None = None,
 def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     """Mechanical adjustments the drift statistics find in the per-visit backlash: downward
     level change points (``models.drift.analyse_series``; an upward step is a failure, not an
-    adjustment).
+    adjustment), the latest visit's drop included: a model trained after an adjustment learns
+    from the visits since it only, however few.
 
     ``visits``: rows of ``features.visits.visit_backlash`` (``machine_id, axis, visit, date,
     backlash_um, backlash_u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
@@ -94,8 +95,8 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     from models import drift
 
     rows = []
-    # two segments of two visits at least
-    for series in drift.analyse_visits(visits, min_visits=4):
+    # two visits before a change at least; the last visit alone may follow one
+    for series in drift.analyse_visits(visits, min_visits=3):
         for change in series.change_points:
             if change["jump_um"] < 0:
                 visit = str(series.visits["visit"].iloc[change["index"]])

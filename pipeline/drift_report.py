@@ -19,20 +19,23 @@ import pandas as pd
 from features.readings import fileio
 from features.visits import DAYS_PER_MONTH
 from models.drift import WITHIN_KINDS, prediction_band
+from pipeline.fleet_charts import unit_label
 from pipeline.report_page import new_figure, save_figure, write_page
 
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
 
 
-def write_drift_report(series, out_dir, *, source: str = "", notes=()) -> dict:
+def write_drift_report(series, out_dir, *, source: str = "", notes=(),
+                       as_of: str | None = None) -> dict:
     """Write PNG, HTML and JSON for analysed series (``models.drift.DriftSeries``)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {k: out / name for k, name in FILES.items()}
     plot_series(series, paths["png"])
-    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes))
+    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes,
+                                                 as_of=as_of))
     fileio.write_json(paths["json"], fileio.clean_nan(
-        {"source": source, "series": [s.to_json() for s in series]}))
+        {"source": source, "as_of": as_of, "series": [s.to_json() for s in series]}))
     return paths
 
 
@@ -79,17 +82,18 @@ def _panel(ax, s) -> None:
                             label=f"{100 * (1 - s.alpha):g} % prediction band")
     for c in s.change_points:
         ax.axvline(dates(v["t_month"].iloc[c["index"]]), ls="--", color="0.4", lw=1)
+    unit = unit_label(s.unit)
     if s.threshold_um is not None:
-        ax.axhline(s.threshold_um, color="C3", lw=1, label=f"threshold {s.threshold_um:g} µm")
+        ax.axhline(s.threshold_um, color="C3", lw=1, label=f"threshold {s.threshold_um:g} {unit}")
         if s.crossing[1] is not None:
             hi = s.crossing[2] if s.crossing[2] is not None else t_end
             ax.axvspan(dates(s.crossing[1]), dates(max(hi, s.crossing[1])), color="C3",
                        alpha=0.15, label="crossing interval")
     slope = tr.get("slope", np.nan)
     ax.set_title(f"{s.machine_id} axis {s.axis}"
-                 + (f", trend {slope:+.3f} µm/month" if np.isfinite(slope) else "")
+                 + (f", trend {slope:+.3f} {unit}/month" if np.isfinite(slope) else "")
                  + (" — ALERT" if s.alerts else ""), fontsize=10)
-    ax.set_ylabel("backlash [µm]")
+    ax.set_ylabel(f"backlash [{unit}]")
     ax.tick_params(axis="x", labelrotation=20, labelsize=8)
 
 
@@ -108,6 +112,16 @@ def _fmt(value, fmt=".3g") -> str:
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "–"
     return format(value, fmt) if isinstance(value, (int, float)) else html.escape(str(value))
+
+
+def _interval(j: dict) -> str:
+    """The slope's interval, or why there is none (a trend from two visits)."""
+    low, high = j["slope_interval"]
+    if j["slope_um_per_month"] is None or not np.isfinite(j["slope_um_per_month"]):
+        return ""
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return "(interval cannot be estimated from two visits)"
+    return f"[{_fmt(low)}, {_fmt(high)}]"
 
 
 def _visit_row(r: dict) -> str:
@@ -137,39 +151,39 @@ def _uncertainty_text(series) -> str:
             "measurement uncertainty.</p>")
 
 
-def render_body(series, *, source: str = "", notes=()) -> str:
+def render_body(series, *, source: str = "", notes=(), as_of: str | None = None) -> str:
     """The report body: a summary table, the figure, and per-series visit tables."""
     rows = []
     for s in series:
         j = s.to_json()
         rows.append(
             f"<tr><td>{html.escape(s.machine_id)}</td><td>{html.escape(s.axis)}</td>"
+            f"<td>{unit_label(s.unit)}</td>"
             f"<td>{len(j['visits'])}</td><td>{_fmt(j['backlash_um'][-1])}</td>"
-            f"<td>{_fmt(j['slope_um_per_month'])} [{_fmt(j['slope_interval'][0])}, "
-            f"{_fmt(j['slope_interval'][1])}]</td>"
+            f"<td>{_fmt(j['slope_um_per_month'])} {_interval(j)}</td>"
             f"<td>{html.escape(', '.join(j['change_points']) or '–')}</td>"
             f"<td>{_fmt(j['threshold_crossing'])} [{_fmt(j['crossing_interval'][0])}, "
             f"{_fmt(j['crossing_interval'][1])}]</td>"
             f"<td>{html.escape('; '.join(a['kind'] for a in s.alerts) or '–')}</td></tr>")
     details = []
     for s in series:
-        v = s.visits
+        v, unit = s.visits, unit_label(s.unit)
         body = "".join(_visit_row(r) for r in v.to_dict("records"))
         items = "".join(f"<li>{html.escape(a['kind'])}: {html.escape(a['message'])}</li>"
                         for a in s.alerts)
         alerts = f"<div class='alert'><ul>{items}</ul></div>" if items else "<p>No alert.</p>"
         within = "".join(
-            f"<li>{html.escape(WITHIN_KINDS[w['kind']])} of {w['jump_um']:+.3f} µm at visit "
+            f"<li>{html.escape(WITHIN_KINDS[w['kind']])} of {w['jump_um']:+.3f} {unit} at visit "
             f"{html.escape(w['visit'])}: within the measurement "
-            f"uncertainty U(Δ) = {w['U_um']:.3f} µm, not an alert</li>"
+            f"uncertainty U(Δ) = {w['U_um']:.3f} {unit}, not an alert</li>"
             for w in s.within_uncertainty)
         if within:
             alerts += f"<ul>{within}</ul>"
-        big_u = "<th>U [µm]</th>" if "backlash_U_um" in v else ""
+        big_u = f"<th>U [{unit}]</th>" if "backlash_U_um" in v else ""
         model = ""
         if s.model:
             m = s.model
-            model = (f"<p>Model residual RMSE per visit [µm]: "
+            model = (f"<p>Model residual RMSE per visit [{unit}]: "
                      f"{html.escape(', '.join(f'{a}: {b:.3g} (band {c:.3g})' for a, b, c in zip(m['visits'], m['rmse_um'], m['band_um'])))}"
                      f"; inputs outside the training range: "
                      f"{html.escape(', '.join(m['out_of_range']) or 'none')}; drifted inputs "
@@ -177,11 +191,13 @@ def render_body(series, *, source: str = "", notes=()) -> str:
         details.append(
             f"<h2>{html.escape(s.machine_id)} axis {html.escape(s.axis)}</h2>{alerts}"
             f"{model}<table><tr><th>visit</th><th>date</th><th>tests</th><th>points</th>"
-            f"<th>target</th><th>backlash [µm]</th><th>u(backlash) [µm]</th>{big_u}<th>σ [µm]</th>"
-            f"<th>mean reversal B_i [µm]</th><th>B = max|B_i| [µm]</th></tr>{body}</table>")
+            f"<th>target</th><th>backlash [{unit}]</th><th>u(backlash) [{unit}]</th>{big_u}"
+            f"<th>σ [{unit}]</th><th>mean reversal B_i [{unit}]</th>"
+            f"<th>B = max|B_i| [{unit}]</th></tr>{body}</table>")
     note_html = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
     level = f"{100 * (1 - series[0].alpha):g} %" if series else ""
-    return f"""<p>Data: {html.escape(source)}</p>
+    day = f" As of {html.escape(as_of)}." if as_of else ""
+    return f"""<p>Data: {html.escape(source)}.{day}</p>
 <p>Series value: the axis's backlash at the visit, the mean lost motion over its interior
 backlash points by the axis's measuring system (target <em>pendulum − linear</em> with a
 direct system, <em>ISO |B_i|</em> with an indirect one or a single test method); u(backlash) is
@@ -192,8 +208,9 @@ optimal partitioning into straight-line segments; crossing: Theil-Sen line, inte
 OLS prediction band of a future visit.</p>
 {_uncertainty_text(series)}
 {f'<ul>{note_html}</ul>' if note_html else ''}
-<table><tr><th>machine</th><th>axis</th><th>visits</th><th>last backlash [µm]</th>
-<th>slope [µm/month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
+<p>Each axis in its own unit: µm for a linear axis, arcsec for a rotary one.</p>
+<table><tr><th>machine</th><th>axis</th><th>unit</th><th>visits</th><th>last backlash</th>
+<th>slope [per month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
 {''.join(rows)}</table>
 <p><img src="{FILES['png']}" alt="backlash series"></p>
 {''.join(details)}

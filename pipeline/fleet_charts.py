@@ -28,6 +28,11 @@ FONT = "font-family='system-ui, sans-serif'"
 CHAR_PX = 6.6  # mean width of a character of the 11 px labels [px], for the legend layout
 
 
+def unit_label(unit: str) -> str:
+    """How a page writes a unit: µm for ``um``, the rest as it is (``arcsec``)."""
+    return "µm" if unit == "um" else unit
+
+
 def _num(value: float) -> str:
     return f"{value:.1f}"
 
@@ -272,11 +277,12 @@ def sparkline(history: dict, forecast: dict | None, *, threshold_um=None,
 def history_chart(history: dict, forecast: dict | None, trend: dict | None, origin: dt.date,
                   *, threshold_um=None, crossing: tuple = (None, None, None),
                   due_days: float | None = None, label: str = "",
-                  recorded: dict | None = None) -> str:
+                  recorded: dict | None = None, unit: str = "um") -> str:
     """The axis's backlash per visit with ±2 sigma bars, the Theil-Sen trend since the last
     change point, change points (dashed), the forecast band, the threshold and the crossing
     interval (shaded) and the day the next visit is due (``due_days``, green). Days are
-    counted from ``origin`` (the first visit's date).
+    counted from ``origin`` (the first visit's date); values and threshold are in ``unit``
+    (``um``, ``arcsec`` for a rotary axis).
 
     ``trend``: ``days`` and ``fit`` of the trend line, or None; ``crossing``: (date, early,
     late) in days, each None when unknown; ``recorded``: the last recorded forecast (``day``,
@@ -307,7 +313,7 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
         items.append(("dash", GREY, "change point"))
     if threshold_um is not None:
         plot.hline(threshold_um)
-        items.append(("line", RED, f"threshold {threshold_um:g} µm"))
+        items.append(("line", RED, f"threshold {threshold_um:g} {unit_label(unit)}"))
     if due_days is not None:
         plot.vline(due_days, GREEN, "6 3")
         items.append(("dash", GREEN, "next visit due"))
@@ -317,7 +323,8 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
         _draw_recorded(plot, recorded, 4.5, 3.0)
         items.append(("dot", PURPLE, "last recorded forecast (95 %)"))
     ticks = date_ticks(origin, origin + dt.timedelta(days=float(x_hi)))
-    plot.axes([((d - origin).days, d.strftime("%Y-%m")) for d in ticks], "backlash [µm]")
+    plot.axes([((d - origin).days, d.strftime("%Y-%m")) for d in ticks],
+              f"backlash [{unit_label(unit)}]")
     plot.legend(items)
     return plot.svg(label or "backlash history and forecast")
 
@@ -343,9 +350,10 @@ def iso_chart(targets: dict, unit: str, position_unit: str, label: str = "") -> 
     return plot.svg(label or "ISO 230-2 chart")
 
 
-def wear_chart(rate_map: dict, label: str = "") -> str:
-    """The wear-rate map w(x) [um per 1000 h] along the axis with its interval
-    (``rate_map``: ``position_mm``, ``rate``, ``low``, ``high`` arrays)."""
+def wear_chart(rate_map: dict, label: str = "", unit: str = "um",
+               position_unit: str = "mm") -> str:
+    """The wear-rate map w(x) [``unit`` per 1000 h] along the axis [``position_unit``] with its
+    interval (``rate_map``: ``position_mm``, ``rate``, ``low``, ``high`` arrays)."""
     x = np.asarray(rate_map["position_mm"], float)
     y_lo, y_hi = _span(rate_map["low"], rate_map["high"], rate_map["rate"], [0.0])
     plot = Plot(760, 240, (float(x.min()), float(x.max())), (y_lo, y_hi))
@@ -353,7 +361,7 @@ def wear_chart(rate_map: dict, label: str = "") -> str:
     plot.line(x, rate_map["rate"], GREEN, 2.0)
     plot.hline(0.0, GREY)
     plot.axes([(v, tick_text(v)) for v in nice_ticks(float(x.min()), float(x.max()), 7)],
-              "wear rate [µm/1000 h]", "position [mm]")
+              f"wear rate [{unit_label(unit)}/1000 h]", f"position [{position_unit}]")
     plot.legend([("line", GREEN, "wear rate w(x)"), ("band", GREEN, "95 % interval")])
     return plot.svg(label or "wear-rate map")
 

@@ -36,6 +36,8 @@ TITLE = "Fleet backlash"
 KIND_NAMES = {"paper": "pendulum − linear", "iso": "ISO |B_i|", "mixed": "mixed"}
 REASONS = {"above_threshold": "at or above the threshold at the last visit: due now",
            "crossing": "the crossing interval opens (early end) before the interval ends",
+           "fleet_rate": "one visit since the last change point: the day its level plus the "
+                         "fleet's wear rate reaches the threshold, before the interval ends",
            "interval": "the maintenance interval after the last visit"}
 STYLE = """<style>
 svg.spark { vertical-align: middle; }
@@ -60,8 +62,7 @@ def write_site(result, out) -> dict[str, Path]:
     texts = {INDEX: page(TITLE, STYLE + index_body(result)),
              JSON: json.dumps(clean_nan(result.to_json()), indent=2) + "\n"}
     for view in result.axes:
-        texts[view.page] = page(f"{view.machine_id} axis {view.axis}", STYLE + axis_body(
-            view, result.parameters.get("threshold_um")))
+        texts[view.page] = page(f"{view.machine_id} axis {view.axis}", STYLE + axis_body(view))
     tmp = temp_folder(out)
     try:
         for name, text in texts.items():
@@ -93,6 +94,11 @@ def _move(tmp: Path, out: Path, names: list[str]) -> None:
 # --------------------------------------------------------------------------- helpers
 def _esc(value) -> str:
     return html.escape(str(value))
+
+
+def _unit(view) -> str:
+    """The axis's unit as the pages write it: µm, or arcsec for a rotary axis."""
+    return fleet_charts.unit_label(view.series.unit)
 
 
 def _fmt(value, fmt: str = ".3f") -> str:
@@ -127,14 +133,15 @@ def _crossing_text(j: dict) -> str:
 def index_body(result) -> str:
     """The fleet table, worst first, with a sparkline per axis and notes."""
     p = result.parameters
-    threshold = p.get("threshold_um")
-    rows = "".join(_index_row(i, view, threshold) for i, view in enumerate(result.axes, 1))
+    rows = "".join(_index_row(i, view) for i, view in enumerate(result.axes, 1))
     notes = "".join(f"<li>{_esc(n)}</li>" for n in result.notes)
     alerting = sum(1 for v in result.axes if v.alerts)
-    return f"""<p class="summary">Data: {_esc(result.source)}. {len(result.axes)} machine axes,
-{alerting} with an alert. Threshold: {_fmt(threshold, 'g') + ' µm' if threshold else 'none'};
-maintenance interval {_fmt(p.get('interval_days'), 'g')} days.</p>
-<p>Backlash: the axis's lost motion at its last visit by its measuring system (pendulum − linear
+    return f"""<p class="summary">As of <strong>{_esc(p.get('as_of'))}</strong>. Data:
+{_esc(result.source)}. {len(result.axes)} machine axes,
+{alerting} with an alert. Limits: {_limits_text(p)}; maintenance interval
+{_fmt(p.get('interval_days'), 'g')} days.</p>
+<p>Each axis in its own unit: µm for a linear axis, arcsec for a rotary one. Backlash: the
+axis's lost motion at its last visit by its measuring system (pendulum − linear
 with a direct system, ISO |B_i| with an indirect one) ± its standard uncertainty. Sorted worst
 first: axes at or above the threshold, then other alerting axes, then the rest; within each, the
 earliest next visit due, the earliest crossing, the highest backlash. Next visit due: the
@@ -146,21 +153,47 @@ recorded forecast [95 % interval] and the day it is for (~ estimated from the ax
 hours); last compensation: its day, controller and reversal compensation.</p>
 {f'<ul>{notes}</ul>' if notes else ''}
 <table class="fleet"><tr><th>#</th><th>machine axis</th><th>visits</th><th>last visit</th>
-<th>backlash [µm]</th><th>history and forecast</th><th>slope [µm/month]</th>
+<th>backlash</th><th>history and forecast</th><th>slope [per month]</th>
 <th>change points</th><th>crossing [interval]</th><th>next visit due</th>
-<th>last forecast [µm]</th><th>last compensation</th><th>alerts</th></tr>
+<th>last forecast</th><th>last compensation</th><th>alerts</th></tr>
 {rows}</table>
 <p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
 
 
-def _index_row(rank: int, view, threshold) -> str:
+def _interval(j: dict) -> str:
+    """The slope's interval, or why there is none (a trend from two visits)."""
+    low, high = j["slope_interval"]
+    if low is None or high is None:
+        return "interval cannot be estimated from two visits"
+    return f"[{_fmt(low)}, {_fmt(high)}]"
+
+
+def _overdue(j: dict) -> str:
+    return "" if j["days_overdue"] is None else (
+        f"<br><small class='alerts'>overdue {j['days_overdue']} d</small>")
+
+
+def _limits_text(p: dict) -> str:
+    """The limits the view compares with, each with its unit."""
+    parts = [f"{_fmt(p[k], 'g')} {u} ({kind} axes)" for k, u, kind in (
+        ("threshold_um", "µm", "linear"), ("threshold_arcsec", "arcsec", "rotary"))
+        if p.get(k) is not None]
+    if p.get("limits") is not None:
+        given = p["limits"]
+        parts.append("per machine axis from " + (_esc(os.fspath(given)) if isinstance(
+            given, (str, os.PathLike)) else "the limits given"))
+    return "; ".join(parts) or "none"
+
+
+def _index_row(rank: int, view) -> str:
     j = view.to_json()
+    unit = _unit(view)
+    threshold = view.series.threshold_um
     spark = fleet_charts.sparkline(_history(view), view.forecast, threshold_um=threshold,
                                    alert=bool(view.alerts), recorded=recorded_point(view, j),
                                    label=f"{view.machine_id} {view.axis} backlash history")
-    low, high = j["slope_interval"]
-    slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>[{_fmt(low)}, "
-             f"{_fmt(high)}]</small>" if j["slope_um_per_month"] is not None else "–")
+    slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>{_interval(j)}</small>"
+             if j["slope_um_per_month"] is not None else "–")
     early, late = j["crossing_interval"]
     crossing = (f"{_esc(j['crossing_date'])}<br><small>[{_esc(early or '–')}, "
                 f"{_esc(late or 'later')}]</small>" if j["crossing_date"] else _crossing_text(j))
@@ -169,11 +202,12 @@ def _index_row(rank: int, view, threshold) -> str:
             f"{_esc(view.axis)}</a></td><td class='num'>{j['visits']}</td>"
             f"<td class='nowrap'>{_esc(j['last_visit_date'])}<br><small>visit "
             f"{_esc(j['last_visit'])}</small></td>"
-            f"<td class='num'>{_fmt(j['backlash_um'])}<br><small>± {_fmt(j['backlash_u_um'])}"
-            f"</small></td><td>{spark}</td><td class='num'>{slope}</td>"
+            f"<td class='num'>{_fmt(j['backlash_um'])} {unit}<br><small>± "
+            f"{_fmt(j['backlash_u_um'])}</small></td><td>{spark}</td><td class='num'>{slope}"
+            f"<br><small>{unit}/month</small></td>"
             f"<td>{_esc(', '.join(j['change_points']) or '–')}</td>"
             f"<td class='nowrap'>{crossing}</td><td class='nowrap'>{_esc(j['next_visit_due'])}"
-            f"</td><td class='nowrap'>{_forecast_cell(j['last_forecast'])}</td>"
+            f"{_overdue(j)}</td><td class='nowrap'>{_forecast_cell(j['last_forecast'], unit)}</td>"
             f"<td class='nowrap'>{_compensation_cell(j['last_compensation'])}</td>"
             f"<td class='alerts'>{'<br>'.join(map(_esc, j['alerts']))}</td></tr>\n")
 
@@ -196,11 +230,11 @@ def _band_text(last: dict) -> str:
     return f"{_fmt(last['backlash_um'], '.2f')}{band}"
 
 
-def _forecast_cell(last) -> str:
+def _forecast_cell(last, unit: str) -> str:
     if last is None:
         return "–"
     when = last["for_date"] and f"{'~' if last['for_date_estimated'] else ''}{last['for_date']}"
-    return f"{_band_text(last)}<br><small>for {_esc(when or _for_text(last))}</small>"
+    return f"{_band_text(last)} {unit}<br><small>for {_esc(when or _for_text(last))}</small>"
 
 
 def _compensation_cell(last) -> str:
@@ -225,12 +259,13 @@ def recorded_point(view, j: dict) -> dict | None:
 
 
 # --------------------------------------------------------------------------- axis pages
-def axis_body(view, threshold) -> str:
-    """An axis's page: summary, alerts, history chart, visits, wear map, ISO chart."""
+def axis_body(view) -> str:
+    """An axis's page: summary, alerts, history chart, visits, wear map, ISO chart; every
+    value in the axis's unit."""
     j = view.to_json()
     return "\n".join([
         f'<nav><a href="{INDEX}">← fleet</a></nav>', _summary(view, j), _alerts(view),
-        "<h2>History and forecast</h2>", _history_chart(view, j, threshold),
+        "<h2>History and forecast</h2>", _history_chart(view, j),
         "<h2>Visits</h2>", _visit_table(view),
         "<h2>Wear-rate map since the last change point</h2>", _wear(view),
         "<h2>Last visit: ISO 230-2 chart</h2>", _iso(view),
@@ -240,21 +275,32 @@ def axis_body(view, threshold) -> str:
 
 def _summary(view, j: dict) -> str:
     kind = KIND_NAMES.get(j["target_kind"], j["target_kind"] or "–")
-    low, high = j["slope_interval"]
-    changes = ", ".join(f"{c} ({d:+.2f} µm)" for c, d in zip(j["change_points"],
-                                                              j["change_jumps_um"]))
+    unit = _unit(view)
+    changes = ", ".join(f"{c} ({d:+.2f} {unit})" for c, d in zip(j["change_points"],
+                                                                  j["change_jumps_um"]))
     trend = (f"Trend since visit {_esc(j['trend_since_visit'])}: "
-             f"{_fmt(j['slope_um_per_month'], '+.3f')} µm/month [{_fmt(low)}, {_fmt(high)}]"
+             f"{_fmt(j['slope_um_per_month'], '+.3f')} {unit}/month {_interval(j)}"
              if j["slope_um_per_month"] is not None
              else "No trend (fewer than two visits since the last change point)")
     visits = f"{j['visits']} visit{'s' if j['visits'] > 1 else ''}"
     return f"""<div class="summary"><p>Backlash at visit {_esc(j['last_visit'])}
 ({_esc(j['last_visit_date'])}): <strong>{_fmt(j['backlash_um'])} ± {_fmt(j['backlash_u_um'])}
-µm</strong> ({_esc(kind)}), {visits} since {_esc(j['first_visit_date'])}.<br>
+{unit}</strong> ({_esc(kind)}), {visits} since {_esc(j['first_visit_date'])}.<br>
 {trend}. Change points: {_esc(changes or 'none')}.<br>
-Threshold crossing: {_crossing_text(j)}.<br>
+Threshold crossing{_threshold_text(j, unit)}: {_crossing_text(j)}.<br>
 Next visit due: <strong>{_esc(j['next_visit_due'])}</strong>
-({_esc(REASONS[j['next_visit_reason']])}).</p></div>"""
+({_esc(REASONS[j['next_visit_reason']])}){_overdue_text(view, j)}.</p></div>"""
+
+
+def _overdue_text(view, j: dict) -> str:
+    as_of = "" if view.as_of is None else view.as_of.isoformat()
+    if j["days_overdue"] is None:
+        return f"; as of {_esc(as_of)}" if as_of else ""
+    return f"; <strong>{j['days_overdue']} days overdue</strong> as of {_esc(as_of)}"
+
+
+def _threshold_text(j: dict, unit: str) -> str:
+    return "" if j["threshold_um"] is None else f" ({_fmt(j['threshold_um'], 'g')} {unit})"
 
 
 def _alerts(view) -> str:
@@ -264,11 +310,11 @@ def _alerts(view) -> str:
     return f"<div class='alert'><ul>{items}</ul></div>"
 
 
-def _history_chart(view, j: dict, threshold) -> str:
+def _history_chart(view, j: dict) -> str:
     origin = view.series.visits["date"].iloc[0].date()
     return fleet_charts.history_chart(
-        _history(view), view.forecast, view.trend_line, origin,
-        threshold_um=threshold, crossing=view.crossing_days,
+        _history(view), view.forecast, view.trend_line, origin, unit=view.series.unit,
+        threshold_um=view.series.threshold_um, crossing=view.crossing_days,
         due_days=float((view.next_visit_due - origin).days), recorded=recorded_point(view, j),
         label=f"{view.machine_id} {view.axis}: backlash per visit and forecast")
 
@@ -282,18 +328,23 @@ def _visit_table(view) -> str:
                  _fmt(r.get("reversal_max_um")))
         rows.append(f"<tr><td>{_esc(r['visit'])}</td><td>{r['date'].date().isoformat()}</td>"
                     + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
+    u = _unit(view)
     return ("<table><tr><th>visit</th><th>date</th><th>tests</th><th>points</th><th>target</th>"
-            "<th>backlash [µm]</th><th>u [µm]</th><th>σ [µm]</th>"
-            "<th>mean reversal B_i [µm]</th><th>B = max|B_i| [µm]</th></tr>"
+            f"<th>backlash [{u}]</th><th>u [{u}]</th><th>σ [{u}]</th>"
+            f"<th>mean reversal B_i [{u}]</th><th>B = max|B_i| [{u}]</th></tr>"
             + "".join(rows) + "</table>")
 
 
 def _wear(view) -> str:
     if view.wear is None:
         return f"<p>No wear-rate map: {_esc(view.wear_note)}.</p>"
+    from features.readings.schema import position_unit
+
     w = view.wear
-    chart = fleet_charts.wear_chart(w, label=f"{view.machine_id} {view.axis}: wear-rate map")
-    return (f"{chart}<p>Wear rate w(x) [µm per 1000 operating hours] with its 95 % interval, "
+    chart = fleet_charts.wear_chart(w, label=f"{view.machine_id} {view.axis}: wear-rate map",
+                                    unit=view.series.unit, position_unit=position_unit(view.axis))
+    return (f"{chart}<p>Wear rate w(x) [{_unit(view)} per 1000 operating hours] with its 95 % "
+            "interval, "
             f"from {w['n_points']} interior backlash points of visits "
             f"{_esc(', '.join(w['visits']))} (models.wear_map.WearMap, "
             f"{_esc(w['n_control'])} control points).</p>")
@@ -316,14 +367,19 @@ def _forecasts(view) -> str:
         f"<td class='num'>{_band_text(s)}</td><td class='num'>{s['points']}</td>"
         f"<td>{_esc(s['model'])}</td><td>{_esc(s['model_dir'] or '–')}</td></tr>"
         for s in map(summary, reversed(view.forecasts)))
-    table = ("<table><tr><th>recorded (UTC)</th><th>for</th><th>backlash [µm] [95 %]</th>"
+    table = ("<table><tr><th>recorded (UTC)</th><th>for</th>"
+             f"<th>backlash [{_unit(view)}] [95 %]</th>"
              "<th>points</th><th>model</th><th>model directory</th></tr>" + rows + "</table>")
     last = view.forecasts[-1]
     if last.get("wear_rate") is None:
         return table + "<p>The last forecast's model has no wear-rate map.</p>"
+    from features.readings.schema import position_unit
+
     chart = fleet_charts.wear_chart(last["wear_rate"], label=f"{view.machine_id} {view.axis}: "
-                                    "wear-rate map of the last forecast's model")
-    return (f"{table}<h3>Wear-rate map of the last forecast's model</h3>{chart}<p>w(x) [µm per "
+                                    "wear-rate map of the last forecast's model",
+                                    unit=view.series.unit, position_unit=position_unit(view.axis))
+    return (f"{table}<h3>Wear-rate map of the last forecast's model</h3>{chart}<p>w(x) "
+            f"[{_unit(view)} per "
             f"1000 operating hours] with its 95 % interval, as {_esc(last['model'])} learned it "
             "for this axis.</p>")
 

@@ -24,7 +24,7 @@ random draws.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -84,6 +84,12 @@ MACHINES = (
 )
 
 
+# The fleet seen at its fifth visit, which follows two machines' adjustment: M2 and M4 adjusted
+# a few weeks before visit 5, M5 joined at visit 3.
+ADJUSTED_LAST = tuple(replace(m, adjusted_at=5 if m.adjusted_at else None,
+                              first_visit=min(m.first_visit, 3)) for m in MACHINES)
+
+
 def raised_cosine(x, centre, half_width):
     """1 at ``centre``, falling as cos^2 to 0 at ``half_width`` away, 0 beyond."""
     u = np.clip(np.abs(np.asarray(x, float) - centre) / half_width, 0.0, 1.0)
@@ -119,9 +125,10 @@ class Axis:
         return self.level(x, adjusted) + rate * hours_since / 1000.0
 
 
-def make_axes(rng: np.random.Generator, kind: Kind = LINEAR) -> list[Axis]:
+def make_axes(rng: np.random.Generator, kind: Kind = LINEAR,
+              machines: tuple[Machine, ...] = MACHINES) -> list[Axis]:
     axes = []
-    for machine in MACHINES:
+    for machine in machines:
         for name in kind.names:
             travel = float(rng.choice(list(kind.travels)))
             t = np.linspace(0.0, travel, N_TARGETS)
@@ -149,13 +156,15 @@ def _cycle(method: str, n: int):
                 yield (i, -1, c, True)
 
 
-def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: float = 1.0):
+def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: float = 1.0,
+          machines: tuple[Machine, ...] = MACHINES):
     """Readings, truth and axes of the fleet (module docstring); ``rotary``: its rotary axes;
     ``rate_after``: the wear rate after an adjustment relative to before (a new nut that
-    wears at another pace; 1: the adjustment resets the clearance only)."""
+    wears at another pace; 1: the adjustment resets the clearance only); ``machines``: other
+    machines than ``MACHINES`` (``ADJUSTED_LAST``: adjustments just before the last visit)."""
     kind = ROTARY if rotary else LINEAR
     rng = np.random.default_rng(kind.seed + seed)
-    axes = make_axes(rng, kind)
+    axes = make_axes(rng, kind, machines)
     rows, truth = [], []
     for ax in axes:
         m = ax.machine

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from features import visits
-from features.readings.errors import InputError
+from features.readings.errors import BacklashWarning, InputError
 from models import drift, monitoring
 from pipeline.commands import drift as drift_cmd
 
@@ -252,11 +252,30 @@ def test_missing_dates_is_an_input_error(tmp_path):
         _run(tmp_path, frame)
 
 
-def test_empty_date_is_an_input_error(tmp_path):
+def test_an_undated_test_is_left_out_with_a_note_naming_it(tmp_path, capsys):
     frame = visit_readings([2.0, 2.1, 2.2])
     frame.loc[frame["visit"] == "v02", "started_at"] = ""
-    with pytest.raises(InputError, match="'v02'"):
+    with pytest.warns(BacklashWarning, match=r"1 test\(s\) without a start date .*: t2$"):
+        code, out = _run(tmp_path, frame, "--as-of", "2024-12-31", capsys=capsys)
+    assert code == 0 and out["series"][0]["visits"] == ["v01", "v03"]
+    assert out["as_of"] == "2024-12-31"
+    frame["started_at"] = ""  # no test dated at all: nothing to place on the calendar
+    with pytest.raises(InputError, match="no test has a start date"):
         _run(tmp_path, frame)
+
+
+@pytest.mark.parametrize("value", ["2026-13-01", "31.03.2026", "yesterday", "2026-3-1"])
+def test_a_bad_as_of_date_is_one_line_exit_2(tmp_path, capsys, value):
+    from pipeline import cli
+
+    path = tmp_path / "r.csv"
+    visit_readings([2.0, 2.5, 3.0]).to_csv(path, index=False)
+    for command in ("drift", "fleet"):
+        out = tmp_path / "o"
+        assert cli.main([command, str(path), "--out", str(out), "--as-of", value]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--as-of" in err[0] and "YYYY-MM-DD" in err[0], err
+        assert not out.exists()
 
 
 def test_same_visit_on_two_dates_is_an_input_error(tmp_path):
@@ -368,5 +387,7 @@ def test_jump_at_the_last_visit_alerts_before_it_is_confirmed(tmp_path, capsys):
     code, out = _run(tmp_path, visit_readings(b, noise_um=0.1), capsys=capsys)
     assert code == 3
     s = out["series"][0]
-    assert s["change_points"] == []  # one visit cannot make a segment
+    # a change point at the last visit, its alert the unconfirmed jump (not level_jump)
+    assert s["change_points"] == ["v06"] and s["change_jumps_um"][0] == pytest.approx(2, abs=0.3)
     assert [a["kind"] for a in s["alerts"]] == ["last_visit_jump"]
+    assert s["slope_um_per_month"] is None  # no trend from the one visit since

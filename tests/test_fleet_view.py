@@ -45,15 +45,20 @@ def twin_file(twin, tmp_path_factory) -> Path:
     return twin.write(tmp_path_factory.mktemp("twin"))["readings"]
 
 
+def last_day(sim) -> str:
+    """The day of the fleet's last test: the view computed then has nothing overdue yet."""
+    return pd.to_datetime(sim.readings["started_at"], utc=True).max().date().isoformat()
+
+
 @pytest.fixture(scope="module")
 def mixed(twin):
-    return fleet(twin.readings, threshold_um=MIXED_UM)
+    return fleet(twin.readings, threshold_um=MIXED_UM, as_of=last_day(twin))
 
 
 @pytest.fixture(scope="module")
 def site(twin, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("site") / "fleet"
-    fleet(twin.readings, threshold_um=MIXED_UM, out=out)
+    fleet(twin.readings, threshold_um=MIXED_UM, out=out, as_of=last_day(twin))
     return out
 
 
@@ -121,13 +126,15 @@ def test_the_independent_fleet_backlash_change_points_and_late_joiner():
 
 
 # --------------------------------------------------------------------------- JSON contract
-TYPES = {"machine_id": str, "axis": str, "visits": int, "first_visit_date": str,
+TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visit_date": str,
          "last_visit": str, "last_visit_date": str, "target_kind": str, "backlash_um": float,
          "backlash_u_um": float, "slope_um_per_month": (float, type(None)),
          "slope_interval": list, "trend_since_visit": str, "change_points": list,
          "change_jumps_um": list, "threshold_um": (float, type(None)),
          "crossing_date": (str, type(None)), "crossing_interval": list, "next_visit_due": str,
-         "next_visit_reason": str, "alerts": list, "alert_messages": list,
+         "next_visit_reason": str, "fleet_wear_rate_per_month": (float, type(None)),
+         "days_overdue": (int, type(None)),
+         "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
          "page": str}
 
@@ -136,7 +143,8 @@ def test_json_keys_and_types(mixed):
     from features.readings.fileio import dumps
 
     data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
-    assert set(data) == {"source", "threshold_um", "interval_days", "n_alerts", "axes"}
+    assert set(data) == {"source", "as_of", "threshold_um", "threshold_arcsec", "limits",
+                         "interval_days", "n_alerts", "axes"}
     assert data["threshold_um"] == MIXED_UM and data["interval_days"] == 90.0
     for a in data["axes"]:
         assert set(a) == set(TYPES)
@@ -145,7 +153,8 @@ def test_json_keys_and_types(mixed):
         for key in ("first_visit_date", "last_visit_date", "next_visit_due"):
             dt.date.fromisoformat(a[key])
         assert all(isinstance(k, str) for k in a["alerts"])
-        assert a["next_visit_reason"] in ("above_threshold", "crossing", "interval")
+        assert a["next_visit_reason"] in ("above_threshold", "crossing", "fleet_rate",
+                                          "interval")
         assert set(a["history"]) == {"visits", "dates", "backlash_um", "backlash_u_um"}
         assert len(a["history"]["backlash_um"]) == a["visits"]
         assert a["history"]["backlash_um"][-1] == a["backlash_um"]
@@ -191,10 +200,10 @@ def test_next_visit_due_rule(twin):
 
 
 def test_no_alert_without_a_near_threshold(twin):
-    quiet = fleet(twin.readings, threshold_um=QUIET_UM)
+    quiet = fleet(twin.readings, threshold_um=QUIET_UM, as_of=last_day(twin))
     assert quiet.alerts == []
     assert all(a["crossing_date"] is not None for a in quiet.to_json()["axes"])  # all growing
-    crossing = fleet(twin.readings, threshold_um=CROSSING_UM)
+    crossing = fleet(twin.readings, threshold_um=CROSSING_UM, as_of=last_day(twin))
     assert {a["kind"] for a in crossing.alerts} == {"crossing_soon"}
 
 
@@ -301,14 +310,15 @@ def _cli(args: list[str], capsys) -> tuple[int, str, str]:
 
 
 @cli
-def test_cli_exits_3_with_an_alert_and_0_without(twin_file, tmp_path, capsys):
+def test_cli_exits_3_with_an_alert_and_0_without(twin, twin_file, tmp_path, capsys):
     code, out, err = _cli([str(twin_file), "--threshold-um", str(CROSSING_UM), "--json",
-                           "--out", str(tmp_path / "site")], capsys)
+                           "--out", str(tmp_path / "site"), "--as-of", last_day(twin)], capsys)
     assert code == 3, err
     data = json.loads(out)
     assert len(data["axes"]) == 4 and all(a["alerts"] for a in data["axes"])
     assert (tmp_path / "site" / "index.html").is_file()
-    code, out, err = _cli([str(twin_file), "--threshold-um", str(QUIET_UM), "--json"], capsys)
+    code, out, err = _cli([str(twin_file), "--threshold-um", str(QUIET_UM), "--json",
+                           "--as-of", last_day(twin)], capsys)
     assert code == 0, err
     assert all(a["alerts"] == [] for a in json.loads(out)["axes"])
 
@@ -454,7 +464,7 @@ def test_the_printed_table_shows_the_last_forecast_and_compensation(recorded, ca
     view = fleet(store, threshold_um=QUIET_UM)
     print_summary(view, file=sys.stdout)
     lines = capsys.readouterr().out.splitlines()
-    assert "last forecast um" in lines[0] and "compensated" in lines[0]
+    assert "last forecast" in lines[0] and "compensated" in lines[0] and "unit" in lines[0]
     for line, a in zip(lines[1:], view.to_json()["axes"]):
         f = a["last_forecast"]
         assert (f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}, "

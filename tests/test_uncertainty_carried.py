@@ -93,7 +93,7 @@ def test_printed_table_shows_U(tmp_path, capsys):
                      "--uncertainty", BUDGET]) == 0
     err = capsys.readouterr().err
     header, row = err.splitlines()[:2]
-    assert "U um" in header and "  4.12 " in row  # U(B) with u_r of about 0.03 um
+    assert " U " in header and "unit" in header and "  4.12 " in row  # U(B), u_r ~0.03 um
     assert "within the measurement uncertainty: the step of +0.5" in err
 
 
@@ -111,11 +111,12 @@ def test_twin_fleet_changes_are_still_found_with_the_budget():
         assert j["change_points"] == events  # the adjustment and the failure exceed U(Δ)
         assert all(u < abs(d) for u, d in zip(j["change_U_um"], j["change_jumps_um"]))
         assert min(j["backlash_U_um"]) >= U_B - 0.01
-        # the twin has no event at its last visit: without the budget M03's last visit
-        # (+0.54 um off its trend, 3.4 sigma of the repeatability) raised last_visit_jump
-        assert "last_visit_jump" not in [a["kind"] for a in j["alerts"]]
-    m03 = result.series[2].within_uncertainty
-    assert [(w["visit"], w["kind"]) for w in m03] == [("20", "last_visit")]
+        # the twin has no event at its last visit: M03's last visit lies +0.54 um off its
+        # trend, 3.4 sigma of the repeatability but within 3 standard errors once the trend
+        # line's own error at the last visit counts (models.drift._last_visit_jump); either
+        # way it is within U(Δ) and no alert
+        assert not {"last_visit_jump", "last_visit_drop"} & {a["kind"] for a in j["alerts"]}
+        assert j["change_points"][-1] != "20"
 
 
 # --------------------------------------------------------------------------- training

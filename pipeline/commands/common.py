@@ -81,6 +81,27 @@ def remove_created(folders: list[Path]) -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def add_limit_arguments(parser) -> None:
+    """The limits ``drift`` and ``fleet`` compare each axis with, in its own unit:
+    ``--threshold-um`` (linear axes), ``--threshold-arcsec`` (rotary axes), ``--limits``."""
+    parser.add_argument("--threshold-um", type=float, metavar="X",
+                        help="backlash limit of the linear axes [um]: forecast the date each "
+                             "crosses it")
+    parser.add_argument("--threshold-arcsec", type=float, metavar="X",
+                        help="backlash limit of the rotary axes (A, B, C) [arcsec]")
+    parser.add_argument("--limits", metavar="LIMITS.toml",
+                        help="limits per machine and axis, each in its unit ([M01] X_um = 8.0, "
+                             "C_arcsec = 40.0); other axes take --threshold-um/-arcsec")
+
+
+def add_as_of_argument(parser) -> None:
+    """``--as-of DATE``: the day ``drift`` and ``fleet`` are computed as of (default today)."""
+    parser.add_argument("--as-of", metavar="YYYY-MM-DD",
+                        help="compute the view as of this day (default today, UTC): tests "
+                             "started later are left out; overdue visits and limits passed "
+                             "since the last visit alert")
+
+
 def add_trend_arguments(parser) -> None:
     """The options of the trend analysis per machine axis (``models.drift``), the same for
     ``drift`` and ``fleet``: ``--warn-months``, ``--alpha``, ``--min-jump-sigma``."""

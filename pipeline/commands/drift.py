@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_trend_arguments
+from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.drift import WORKFLOW
 
@@ -17,8 +17,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_readings_argument(parser, help="readings file with several visits (visit, "
                                        "started_at)")
     parser.add_argument("--out", required=True, help="output folder for the report")
-    parser.add_argument("--threshold-um", type=float, metavar="X",
-                        help="backlash limit [um]: forecast the date it is crossed")
+    add_limit_arguments(parser)
+    add_as_of_argument(parser)
     parser.add_argument("--model", metavar="DIR",
                         help="trained model directory: monitor its residuals and inputs")
     add_trend_arguments(parser)
@@ -42,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
     tracking.check_uri()
     with BackgroundRun("drift", tracking.log_into) as mlflow_run:
         result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
+                       threshold_arcsec=args.threshold_arcsec, limits=args.limits,
+                       as_of=args.as_of,
                        model=args.model, warn_months=args.warn_months, alpha=args.alpha,
                        min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
         mlflow_run.start(result.run_name)  # the input is valid: the run may start
@@ -60,22 +62,23 @@ def print_summary(series, html_path, file) -> None:
     from models.drift import WITHIN_KINDS
 
     budget = any(s.coverage_factor is not None for s in series)
-    print(f"{'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} "
-          + (f"{'U um':>6} " if budget else "")
-          + f"{'target':>6} {'slope um/mo':>12} {'changes':>7}  crossing", file=file)
+    print(f"{'machine':<12} {'axis':<4} {'unit':<6} {'visits':>6} {'backlash':>9} "
+          + (f"{'U':>6} " if budget else "")
+          + f"{'target':>6} {'slope /mo':>12} {'changes':>7}  crossing", file=file)
     for s in series:
         j = s.to_json()
         slope = j["slope_um_per_month"]
         kind = (j.get("target_kind") or ["-"])[-1]
         u = f"{j['backlash_U_um'][-1]:>6.2f} " if budget else ""
-        print(f"{s.machine_id:<12} {s.axis:<4} {len(j['visits']):>6} "
-              f"{j['backlash_um'][-1]:>11.3f} {u}{kind:>6} "
+        print(f"{s.machine_id:<12} {s.axis:<4} {s.unit:<6} {len(j['visits']):>6} "
+              f"{j['backlash_um'][-1]:>9.3f} {u}{kind:>6} "
               f"{slope if slope is not None else float('nan'):>12.4f} "
               f"{len(j['change_points']):>7}  {j['threshold_crossing'] or '-'}", file=file)
         for a in s.alerts:
             print(f"  ALERT {a['kind']}: {a['message']}", file=file)
         for w in s.within_uncertainty:
             print(f"  within the measurement uncertainty: {WITHIN_KINDS[w['kind']]} of "
-                  f"{w['jump_um']:+.2f} um at visit {w['visit']} (U = {w['U_um']:.2f} um)",
+                  f"{w['jump_um']:+.2f} {s.unit} at visit {w['visit']} (U = {w['U_um']:.2f} "
+                  f"{s.unit})",
                   file=file)
     print(f"report: {html_path}", file=file)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_trend_arguments
+from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
 from pipeline.commands.data import add_readings_argument
 from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
 
@@ -16,8 +16,8 @@ ALERT_EXIT = 3
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_readings_argument(parser, help="readings with several visits per machine axis (visit, "
                                        "started_at)")
-    parser.add_argument("--threshold-um", type=float, metavar="X",
-                        help="backlash limit [um]: forecast the date each axis crosses it")
+    add_limit_arguments(parser)
+    add_as_of_argument(parser)
     parser.add_argument("--interval-days", type=float, default=DEFAULT_INTERVAL_DAYS,
                         metavar="D", help="maintenance interval [days]: the next visit is due "
                                           "this long after the last one at the latest "
@@ -46,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
         from pipeline.workflows.fleet import fleet
 
         result = fleet(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
+                       threshold_arcsec=args.threshold_arcsec, limits=args.limits,
+                       as_of=args.as_of,
                        interval_days=args.interval_days, warn_months=args.warn_months,
                        alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out,
                        store=args.data if is_store(args.data) else None)
@@ -64,18 +66,20 @@ def print_summary(result, file) -> None:
     and the day it is for) and compensation (day, reversal compensation) where a store holds
     them."""
     records = any(v.forecasts or v.compensations for v in result.axes)
-    extra = f"  {'last forecast um':<28}  {'compensated':<18}" if records else ""
-    print(f"{'#':>3} {'machine':<12} {'axis':<4} {'visits':>6} {'backlash um':>11} "
-          f"{'slope um/mo':>11}  {'crossing':<10}  {'next due':<10}{extra}  alerts", file=file)
+    extra = f"  {'last forecast':<28}  {'compensated':<18}" if records else ""
+    print(f"{'#':>3} {'machine':<12} {'axis':<4} {'unit':<6} {'visits':>6} {'backlash':>9} "
+          f"{'slope /mo':>10}  {'crossing':<10}  {'next due':<10}{extra}  alerts", file=file)
     for rank, view in enumerate(result.axes, 1):
         j = view.to_json()
         slope = j["slope_um_per_month"]
         extra = f"  {_forecast(j['last_forecast']):<28}  {_compensation(j['last_compensation']):<18}"
-        print(f"{rank:>3} {view.machine_id:<12} {view.axis:<4} {j['visits']:>6} "
-              f"{j['backlash_um']:>11.3f} "
-              f"{slope if slope is not None else float('nan'):>11.4f}  "
+        print(f"{rank:>3} {view.machine_id:<12} {view.axis:<4} {j['unit']:<6} {j['visits']:>6} "
+              f"{j['backlash_um']:>9.3f} "
+              f"{slope if slope is not None else float('nan'):>10.4f}  "
               f"{j['crossing_date'] or '-':<10}  {j['next_visit_due']:<10}"
+              f"{'' if j['days_overdue'] is None else ' overdue ' + str(j['days_overdue']) + ' d'}"
               f"{extra if records else ''}  {', '.join(j['alerts']) or '-'}", file=file)
+    print(f"as of {result.parameters['as_of']}", file=file)
     if "index" in result.files:
         print(f"site: {result.files['index']}", file=file)
 

@@ -38,6 +38,10 @@ class AxisProfile:
     notes: list = field(default_factory=list)
     at_hours: float | None = None  # operating hours [h] a wear map's forecast is for
     cycles: int | None = None      # runs per direction of one test (fewest at any target)
+    # the axis's lost motion at that visit by its measuring system (docs/backlash.md) [um]:
+    # what fleet and drift report; measured profiles only (a predictor's scalar is its lost
+    # motion already)
+    lost_motion_um: float | None = None
 
     @property
     def scale(self) -> float:
@@ -55,7 +59,9 @@ class AxisProfile:
 
     @property
     def backlash(self) -> float:
-        """Scalar backlash [um] >= 0: the mean lost motion over the targets."""
+        """The reversal compensation [um] >= 0, the scalar a controller adds at each
+        reversal: -mean B_i of the tests compensated (linear tests, the ISO 230-2 cycle). With
+        a direct measuring system it is not the axis's lost motion (``lost_motion_um``)."""
         return max(0.0, -float(np.mean(self.reversal)))
 
     def reversal_variation(self, alpha: float = REVERSAL_ALPHA) -> dict:
@@ -101,6 +107,7 @@ class AxisProfile:
 def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
     """One profile per machine and axis from validated readings (see module docstring)."""
     from features import iso230
+    from features.visits import axis_backlash
 
     flagged = iso230.outliers(readings)
     profiles = []
@@ -114,12 +121,14 @@ def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
         if part["visit"].nunique() > 1:
             notes.append(f"latest visit {visit} used (of {part['visit'].nunique()})")
         part = part[part["visit"] == visit]
+        lost = axis_backlash(part)["backlash_um"]
         methods = set(part["method"])
         if "linear" in methods and len(methods) > 1:
             part = part[part["method"] == "linear"]
             notes.append("linear tests used (the ISO 230-2 cycle); pendulum tests left out")
         per = iso230.per_target(part)
         profiles.append(_pool(per, str(machine), str(axis), notes))
+        profiles[-1].lost_motion_um = float(lost.iloc[0]) if len(lost) else None
     return profiles
 
 

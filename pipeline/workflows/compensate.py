@@ -152,8 +152,8 @@ class CompensationResult(Result):
         lines = []
         for p, r in zip(self.profiles, self.reversal):
             u = unit(p.axis)
-            lines.append(f"{p.machine_id} {p.axis} ({p.source}): backlash {p.backlash:.3f} {u}, "
-                         f"{len(p.target)} targets")
+            lines.append(f"{p.machine_id} {p.axis} ({p.source}): reversal compensation "
+                         f"{p.backlash:.3f} {u}; {_lost_motion(p, u)}, {len(p.target)} targets")
             if r["direction_dependent"]:
                 lines.append(f"  reversal varies along the axis (p {r['p']:.2g}): the scalar "
                              f"leaves up to {r['scalar_leaves_um']:.3f} {u}")
@@ -552,9 +552,20 @@ def _verify(data, profiles, names, written, folder: Path, progress, sign=None,
     return verification
 
 
+def _lost_motion(p, unit: str) -> str:
+    """The axis's lost motion beside the scalar (one definition: docs/backlash.md)."""
+    if p.source == "predicted":
+        return f"the predicted lost motion {p.backlash:.3f} {unit}"
+    if p.lost_motion_um is None:
+        return "lost motion unknown"
+    return f"the axis's lost motion {p.lost_motion_um:.3f} {unit} (docs/backlash.md)"
+
+
 def _profile_json(p) -> dict:
     return {"machine_id": p.machine_id, "axis": p.axis, "source": p.source,
-            "reversal_compensation_um": p.backlash, "targets_mm": p.target.tolist(),
+            "reversal_compensation_um": p.backlash,
+            "lost_motion_um": p.backlash if p.source == "predicted" else p.lost_motion_um,
+            "targets_mm": p.target.tolist(),
             "mean_up_um": p.mean_up.tolist(), "mean_down_um": p.mean_down.tolist(),
             "reversal_um": p.reversal.tolist(), "at_hours": p.at_hours, "notes": p.notes}
 

@@ -8,6 +8,7 @@ threshold, and (with a trained model) its residual and input drift.
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 from dataclasses import dataclass, field
 from numbers import Real
@@ -28,6 +29,9 @@ def _parameters() -> dict:
     return {
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
+        "threshold_arcsec": [Interval(Real, 0, None, closed="neither"), None],
+        "limits": [str, os.PathLike, dict, None],
+        "as_of": [str, dt.date, None],
         "model": [str, os.PathLike, HasMethods(["predict"]), None],
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
@@ -73,13 +77,15 @@ class DriftResult(Result):
         """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.drift_report``)."""
         from pipeline.drift_report import write_drift_report
 
-        self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes)
+        self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes,
+                                        as_of=self.parameters.get("as_of"))
         return self.files
 
     def to_json(self) -> dict:
         from features.readings.fileio import clean_nan
 
-        return clean_nan({"series": [s.to_json() for s in self.series]})
+        return clean_nan({"as_of": self.parameters.get("as_of"),
+                          "series": [s.to_json() for s in self.series]})
 
     @property
     def run_name(self) -> str:
@@ -92,8 +98,12 @@ class DriftResult(Result):
 
         p = self.parameters
         model = p.get("model")
+        limits = p.get("limits")
         params = {"data": self.source, "data_sha256": data_hash(self.readings),
                   "threshold_um": p.get("threshold_um"),
+                  "threshold_arcsec": p.get("threshold_arcsec"),
+                  "limits": "" if limits is None else str(limits) if isinstance(
+                      limits, (str, os.PathLike)) else "given",
                   "model": "" if model is None else str(model) if isinstance(
                       model, (str, os.PathLike)) else type(model).__name__,
                   "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
@@ -114,7 +124,8 @@ class DriftResult(Result):
                               artifact_path="drift")
 
 
-def drift(data, *, format: str = "auto", threshold_um: float | None = None, model=None,
+def drift(data, *, format: str = "auto", threshold_um: float | None = None,
+          threshold_arcsec: float | None = None, limits=None, as_of=None, model=None,
           warn_months: float = 6.0, alpha: float = 0.05,
           min_jump_sigma: float = 3.0, uncertainty=None) -> DriftResult:
     """Follow backlash across maintenance visits.
@@ -131,7 +142,15 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
-        Backlash limit [um]: forecast the date it is crossed.
+        Backlash limit of the linear axes [um]: forecast the date it is crossed.
+    threshold_arcsec : float, optional
+        Backlash limit of the rotary axes [arcsec].
+    limits : str, path or dict, optional
+        Limits per machine and axis, each in its axis's unit (``pipeline.limits``); an axis
+        without one takes ``threshold_um`` or ``threshold_arcsec``.
+    as_of : str, date or None, default today (UTC)
+        The day the drift is computed as of (``YYYY-MM-DD``): given, the tests started by
+        then; a crossing date before it alerts ``limit_passed_unmeasured``.
     model : str, path or fitted predictor, optional
         Trained model (directory or object): monitor its residuals and inputs.
     warn_months : float, default 6.0
@@ -157,10 +176,18 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         Bad readings or parameters, an unreadable or non-physical budget, a budget for a rotary
         axis.
     """
-    values = {"format": format, "threshold_um": threshold_um, "model": model,
+    values = {"format": format, "threshold_um": threshold_um,
+              "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
+              "model": model,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
               "uncertainty": uncertainty}
     check_params(_parameters(), values, "drift")
+    from pipeline.dated_view import as_of_date, dated_view
+    from pipeline.limits import read_limits
+
+    day = as_of_date(as_of)
+    values["as_of"] = day.isoformat()
+    per_axis = None if limits is None else read_limits(limits)
     from pipeline.workflows.iso import _budget
 
     budget = None if uncertainty is None else _budget(uncertainty)
@@ -173,25 +200,32 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None, mode
         from models.registry import load_model
 
         predictor = load_model(model)
-    readings = readings_of(data, format)
+    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
     visits = visit_backlash(readings, budget=budget)
     k = None if budget is None else budget.coverage_factor
     counts = visits.groupby(list(SERIES_KEYS)).size()
-    notes = [f"{m} axis {a}: a single visit, no drift analysis"
-             for (m, a), c in counts.items() if c < 2]
+    notes += [f"{m} axis {a}: a single visit, no drift analysis"
+              for (m, a), c in counts.items() if c < 2]
     for text in notes:
         note(text)
-    series = drift_model.analyse_visits(visits, threshold_um=threshold_um, alpha=alpha,
+    series = drift_model.analyse_visits(visits, threshold_um=threshold_um,
+                                        threshold_arcsec=threshold_arcsec, limits=per_axis,
+                                        alpha=alpha,
                                         min_jump_sigma=min_jump_sigma,
                                         warn_months=warn_months, coverage_factor=k)
+    for s in series:
+        s.alerts += [a for a in [drift_model.limit_passed_alert(s, day)] if a is not None]
+    for text in drift_model.two_visit_notes(series):
+        notes.append(text)
+        note(text)
     if predictor is not None:
         drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
     for s in series:
         for w in s.within_uncertainty:
             text = (f"{s.machine_id} axis {s.axis}: {drift_model.WITHIN_KINDS[w['kind']]} of "
-                    f"{w['jump_um']:+.2f} um at visit "
+                    f"{w['jump_um']:+.2f} {s.unit} at visit "
                     f"{w['visit']} is within the measurement uncertainty (U = "
-                    f"{w['U_um']:.2f} um, k = {k:g}): not an alert")
+                    f"{w['U_um']:.2f} {s.unit}, k = {k:g}): not an alert")
             notes.append(text)
             note(text)
     source = source_of(data, readings)

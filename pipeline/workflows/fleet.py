@@ -18,6 +18,11 @@ Rules (docs/fleet.md):
   crossing interval (the first day the upper prediction band of a future visit reaches the
   threshold; the crossing date itself where the band gives no early end); the last visit's date
   (due now) when the axis is already at or above the threshold. Never before the last visit.
+  An axis with one visit since its last change point (an adjustment just before its latest
+  visit, or a single visit) has no trend: its crossing is estimated from its level and the
+  fleet's wear rate (``fleet_wear_rates``: the upper ``FLEET_RATE_QUANTILE`` of the rates of
+  the axes of its unit with a trend, per operating hour times the axis's own usage, else per
+  month), never "due now" because of the drop.
 - **worst first**: axes at or above the threshold, then other alerting axes, then the rest;
   within each group the earliest next visit due, then the earliest crossing date (none last),
   then the highest backlash now, then machine and axis.
@@ -43,7 +48,10 @@ DEFAULT_INTERVAL_DAYS = 90.0
 FORECAST_CAP_MONTHS = 24.0
 FORECAST_STEPS = 40
 MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
-NEXT_VISIT_REASONS = ("above_threshold", "crossing", "interval")
+NEXT_VISIT_REASONS = ("above_threshold", "crossing", "fleet_rate", "interval")
+# The fleet's wear rate an axis without a trend of its own is planned with: a high quantile of
+# the rates of the fleet's axes, as the axis may wear as fast as most of them.
+FLEET_RATE_QUANTILE = 0.9
 
 
 def _parameters() -> dict:
@@ -55,6 +63,9 @@ def _parameters() -> dict:
     return {
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [positive, None],
+        "threshold_arcsec": [positive, None],
+        "limits": [str, os.PathLike, dict, None],
+        "as_of": [str, dt.date, None],
         "interval_days": [positive],
         "warn_months": [Interval(Real, 0, None, closed="left")],
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
@@ -80,7 +91,13 @@ class AxisView:
     next_visit_due : datetime.date
         When the axis should next be measured (module docstring).
     next_visit_reason : str
-        Which rule set it: ``above_threshold``, ``crossing`` or ``interval``.
+        Which rule set it: ``above_threshold``, ``crossing``, ``fleet_rate`` or ``interval``.
+    as_of : datetime.date or None
+        The day the view is computed as of (``days_overdue`` counts to it).
+    fleet_rate : dict or None
+        For an axis with one visit since its last change point: the wear rate it is planned
+        with, ``per_day`` [um/d, arcsec/d for a rotary axis] and ``basis`` (``operating hours``:
+        the fleet's rate per hour times the axis's hours per day; ``calendar``: per month).
     forecast : dict or None
         The prediction band ahead: ``days`` since the first visit, ``fit``, ``low``, ``high``
         [um]; None with fewer than two visits since the last change point.
@@ -113,6 +130,8 @@ class AxisView:
     page: str = ""
     forecasts: list = field(default_factory=list)
     compensations: list = field(default_factory=list)
+    fleet_rate: dict | None = None
+    as_of: dt.date | None = None
 
     @property
     def machine_id(self) -> str:
@@ -132,6 +151,12 @@ class AxisView:
         return self.series.alerts
 
     @property
+    def days_overdue(self) -> int | None:
+        """Days the next visit is overdue as of the view's day (``overdue``), or None."""
+        late = None if self.as_of is None else (self.as_of - self.next_visit_due).days
+        return late if late is not None and late > 0 else None
+
+    @property
     def crossing_days(self) -> tuple:
         """Crossing (date, early, late) in days since the first visit, None where unknown."""
         from features.visits import DAYS_PER_MONTH
@@ -140,12 +165,13 @@ class AxisView:
 
     def to_json(self) -> dict:
         """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
+        from features.visits import DAYS_PER_MONTH
         from pipeline.store.records import summary
 
         s, v = self.series, self.series.visits
         trend = s.trend
         return {
-            "machine_id": s.machine_id, "axis": s.axis, "visits": len(v),
+            "machine_id": s.machine_id, "axis": s.axis, "unit": s.unit, "visits": len(v),
             "first_visit_date": _day(v["date"].iloc[0]).isoformat(),
             "last_visit": str(self.last["visit"]), "last_visit_date": _day(self.last["date"]).isoformat(),
             "target_kind": str(self.last.get("target_kind", "")) or None,
@@ -161,6 +187,9 @@ class AxisView:
             "crossing_interval": [s.date_at(s.crossing[1]), s.date_at(s.crossing[2])],
             "next_visit_due": self.next_visit_due.isoformat(),
             "next_visit_reason": self.next_visit_reason,
+            "days_overdue": self.days_overdue,
+            "fleet_wear_rate_per_month": None if self.fleet_rate is None else _round(
+                self.fleet_rate["per_day"] * DAYS_PER_MONTH, 5),
             "alerts": [a["kind"] for a in s.alerts],
             "alert_messages": [a["message"] for a in s.alerts],
             "last_forecast": summary(self.forecasts[-1]) if self.forecasts else None,
@@ -223,7 +252,12 @@ class FleetResult(Result):
 
     def to_json(self) -> dict:
         p = self.parameters
-        return {"source": self.source, "threshold_um": p.get("threshold_um"),
+        limits = p.get("limits")
+        return {"source": self.source, "as_of": p.get("as_of"),
+                "threshold_um": p.get("threshold_um"),
+                "threshold_arcsec": p.get("threshold_arcsec"),
+                "limits": None if limits is None else str(limits) if isinstance(
+                    limits, (str, os.PathLike)) else "given",
                 "interval_days": p.get("interval_days"), "n_alerts": len(self.alerts),
                 "axes": [v.to_json() for v in self.axes]}
 
@@ -233,8 +267,9 @@ class FleetResult(Result):
 
         p = self.parameters
         params = {"data": self.source, "data_sha256": data_hash(self.readings),
-                  **{k: p.get(k) for k in ("threshold_um", "interval_days", "warn_months",
-                                           "alpha", "min_jump_sigma")},
+                  **{k: p.get(k) for k in ("threshold_um", "threshold_arcsec", "interval_days",
+                                           "warn_months", "alpha", "min_jump_sigma")},
+                  "limits": self.to_json()["limits"] or "",
                   "n_axes": len(self.axes)}
         metrics = {"n_alerts": float(len(self.alerts))}
         for v in self.axes:
@@ -250,6 +285,7 @@ class FleetResult(Result):
 
 # --------------------------------------------------------------------------- the workflow
 def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
+          threshold_arcsec: float | None = None, limits=None, as_of=None,
           interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
           alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None,
           store=None) -> FleetResult:
@@ -263,7 +299,17 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
-        Backlash limit [um]: forecast the date each axis crosses it.
+        Backlash limit of the linear axes [um]: forecast the date each crosses it.
+    threshold_arcsec : float, optional
+        Backlash limit of the rotary axes [arcsec].
+    limits : str, path or dict, optional
+        Limits per machine and axis, each in its axis's unit (``pipeline.limits``: a TOML
+        file ``[M01] X_um = 8.0, C_arcsec = 40.0`` or a dict of that shape); an axis without
+        one takes ``threshold_um`` or ``threshold_arcsec``.
+    as_of : str, date or None, default today (UTC)
+        The day the view is computed as of (``YYYY-MM-DD``): given, it sees the tests
+        started by then; an axis whose next visit was due before it alerts ``overdue``, one whose crossing
+        date lies before it ``limit_passed_unmeasured``.
     interval_days : float, default 90
         Maintenance interval [d]: the next visit is due this long after the last one at the
         latest.
@@ -288,30 +334,39 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     Raises
     ------
     InputError
-        A parameter out of range (naming it), ``out`` naming a file, or readings without
-        dates or with one visit per axis only.
+        A parameter out of range (naming it), a bad limits file (one line naming the key),
+        ``out`` naming a file, or readings without dates or with one visit per axis only.
     """
-    values = {"format": format, "threshold_um": threshold_um, "interval_days": interval_days,
-              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
-              "out": out, "store": store}
+    values = {"format": format, "threshold_um": threshold_um,
+              "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
+              "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
+              "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
     check_params(_parameters(), values, "fleet")
+    from pipeline.dated_view import as_of_date, dated_view
+    from pipeline.limits import read_limits
+
+    day = as_of_date(as_of)
+    values["as_of"] = day.isoformat()
+    per_axis = None if limits is None else read_limits(limits)
     if out is not None and Path(out).exists() and not Path(out).is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
     from features import iso230
     from features.visits import visit_backlash
-    from models.drift import analyse_visits
+    from models.drift import analyse_visits, two_visit_notes
 
-    readings = readings_of(data, format)
+    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
     stats = iso230.per_target(readings)  # once, for the series and the pages alike
     visits = visit_backlash(readings, stats)
-    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um, alpha=alpha,
+    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
+                            threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
-    notes = [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
-             if len(s.visits) < 2]
+    notes += [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
+              if len(s.visits) < 2]
+    notes += two_visit_notes(series)
     for text in notes:
         note(text)
     views = axis_views(series, readings, stats, interval_days,
-                       store_records(data if store is None else store))
+                       store_records(data if store is None else store), as_of=day)
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
 
@@ -336,31 +391,83 @@ def store_records(data) -> dict:
 
 
 def axis_views(series: list, readings, stats, interval_days: float,
-               records: dict | None = None) -> list[AxisView]:
+               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
     the readings' per-target ISO statistics (``features.iso230.per_target``), ``records``
-    what ``store_records`` found."""
+    what ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
     from features import iso230
     from features.targets import targets_of
+    from models.wear_clock import usage_rates
 
     parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
                    iso230.axis_figures(readings, stats))
-    views = [_view(s, parts, interval_days, records or {}) for s in series]
+    rates = fleet_wear_rates(series, parts)
+    usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
+    views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage))
+             for s in series]
+    for view in views if as_of is not None else ():
+        view.as_of = as_of
+        view.series.alerts += as_of_alerts(view, as_of)
     views.sort(key=worst_first)
     for view, name in zip(views, page_names(views)):
         view.page = name
     return views
 
 
-def _view(s, parts: _Parts, interval_days: float, records: dict) -> AxisView:
-    due, reason = next_visit(s, interval_days)
+def _view(s, parts: _Parts, interval_days: float, records: dict,
+          fleet_rate: dict | None = None) -> AxisView:
+    due, reason = next_visit(s, interval_days, fleet_rate)
     end = _forecast_end(s, interval_days)
     wear, why = wear_map(s, parts)
     key = (s.machine_id, s.axis)
     forecasts = [dated(f, s, parts) for f in records.get("forecast", {}).get(key, [])]
     return AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
                     last_iso(s, parts), forecasts=forecasts,
-                    compensations=records.get("compensation", {}).get(key, []))
+                    compensations=records.get("compensation", {}).get(key, []),
+                    fleet_rate=fleet_rate)
+
+
+def fleet_wear_rates(series: list, parts: _Parts) -> dict[str, dict]:
+    """The fleet's wear rates by unit (``um``, ``arcsec``): per axis with two visits or more
+    since its last change point, the Theil-Sen slope of its backlash against operating hours
+    (``per_hour``, where every visit has hours) and against time (``per_month``), negative
+    slopes as 0; each the upper ``FLEET_RATE_QUANTILE`` over the fleet's axes (None without
+    any)."""
+    import numpy as np
+
+    from features.readings.schema import deviation_unit
+    from models.drift import trend
+
+    found: dict[str, dict[str, list]] = {}
+    for s in series:
+        seg = s.visits.iloc[s.segment_start:]
+        if len(seg) < 2 or not np.isfinite(s.trend.get("slope", np.nan)):
+            continue
+        mine = found.setdefault(deviation_unit(s.axis), {"per_hour": [], "per_month": []})
+        mine["per_month"].append(max(s.trend["slope"], 0.0))
+        hours = np.array([(parts.hours or {}).get((s.machine_id, s.axis, str(v)), np.nan)
+                          for v in seg["visit"]])
+        if np.isfinite(hours).all() and np.ptp(hours) > 0:
+            mine["per_hour"].append(max(trend(hours, seg["backlash_um"])["slope"], 0.0))
+    return {unit: {k: float(np.quantile(v, FLEET_RATE_QUANTILE)) if v else None
+                   for k, v in rates.items()} for unit, rates in found.items()}
+
+
+def _rate_of(s, rates: dict, usage: dict) -> dict | None:
+    """The wear rate an axis with one visit since its last change point is planned with
+    (``AxisView.fleet_rate``); None for an axis with a trend of its own or no fleet rate."""
+    from features.readings.schema import deviation_unit
+    from features.visits import DAYS_PER_MONTH
+
+    if len(s.visits) - s.segment_start > 1:
+        return None
+    fleet = rates.get(deviation_unit(s.axis), {})
+    per_day = usage.get((s.machine_id, s.axis))
+    if fleet.get("per_hour") is not None and per_day is not None:
+        return {"per_day": fleet["per_hour"] * per_day, "basis": "operating hours"}
+    if fleet.get("per_month") is not None:
+        return {"per_day": fleet["per_month"] / DAYS_PER_MONTH, "basis": "calendar"}
+    return None
 
 
 def dated(record: dict, s, parts: _Parts) -> dict:
@@ -386,11 +493,29 @@ def dated(record: dict, s, parts: _Parts) -> dict:
     return {**record, "for_date": _day(when).isoformat(), "for_date_estimated": True}
 
 
+def as_of_alerts(view: AxisView, as_of: dt.date) -> list[dict]:
+    """The alerts of the day ``as_of``: ``limit_passed_unmeasured`` when the crossing date
+    lies before it (the axis has probably passed its limit since its last visit, unmeasured)
+    and ``overdue`` when the next visit was due before it, with the days."""
+    from models.drift import limit_passed_alert
+
+    alerts = [a for a in [limit_passed_alert(view.series, as_of)] if a is not None]
+    late = (as_of - view.next_visit_due).days
+    if late > 0:  # (view.days_overdue)
+        alerts.append({"kind": "overdue", "message": (
+            f"next visit was due on {view.next_visit_due.isoformat()} "
+            f"({view.next_visit_reason.replace('_', ' ')}): {late} days overdue as of "
+            f"{as_of.isoformat()}")})
+    return alerts
+
+
 def worst_first(view: AxisView) -> tuple:
-    """Sort key: above the threshold, other alerts, none; then the earliest next visit due,
-    the earliest crossing (none last), the highest backlash now, machine and axis."""
+    """Sort key: above the threshold, past the limit unmeasured, other alerts, none; then the
+    earliest next visit due, the earliest crossing (none last), the highest backlash now,
+    machine and axis."""
     kinds = {a["kind"] for a in view.alerts}
-    group = 0 if "above_threshold" in kinds else 1 if kinds else 2
+    group = (0 if "above_threshold" in kinds else 1 if "limit_passed_unmeasured" in kinds
+             else 2 if kinds else 3)
     crossing = view.series.crossing[0]
     return (group, view.next_visit_due, crossing is None, crossing or 0.0,
             -float(view.last["backlash_um"]), view.machine_id, view.axis)
@@ -411,16 +536,23 @@ def page_names(views: list[AxisView]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- per-axis rules
-def next_visit(s, interval_days: float) -> tuple[dt.date, str]:
+def next_visit(s, interval_days: float, fleet_rate: dict | None = None) -> tuple[dt.date, str]:
     """When the axis is next due and which rule set it (module docstring): ``above_threshold``
     (the last visit's date: due now), ``crossing`` (the early end of the crossing interval,
-    before the interval ends) or ``interval`` (last visit + ``interval_days``)."""
+    before the interval ends), ``fleet_rate`` (the day the last level plus the fleet's wear
+    rate ``fleet_rate`` reaches the threshold, before the interval ends) or ``interval``
+    (last visit + ``interval_days``)."""
     import pandas as pd
 
     last = s.visits["date"].iloc[-1]
     by_interval = _day(last + pd.Timedelta(days=float(interval_days)))
-    if s.threshold_um is not None and s.visits["backlash_um"].iloc[-1] >= s.threshold_um:
+    level = float(s.visits["backlash_um"].iloc[-1])
+    if s.threshold_um is not None and level >= s.threshold_um:
         return _day(last), "above_threshold"
+    if s.threshold_um is not None and fleet_rate is not None and fleet_rate["per_day"] > 0:
+        when = _day(last + pd.Timedelta(days=(s.threshold_um - level) / fleet_rate["per_day"]))
+        if when < by_interval:
+            return when, "fleet_rate"
     early = s.crossing[1] if s.crossing[1] is not None else s.crossing[0]
     if early is not None:
         when = max(dt.date.fromisoformat(s.date_at(early)), _day(last))

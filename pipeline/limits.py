@@ -1,0 +1,78 @@
+"""Backlash limits per machine and axis, each in its axis's unit (``--limits LIMITS.toml``).
+
+One table per machine, one key per axis named with the unit of its limit: ``um`` for a linear
+axis, ``arcsec`` for a rotary one (A, B, C), so a limit is never read in the wrong unit::
+
+    # LIMITS.toml
+    [M01]
+    X_um = 8.0
+    C_arcsec = 40.0
+
+    [M02]
+    Y_um = 6.5
+
+An axis without an entry takes ``--threshold-um`` (linear) or ``--threshold-arcsec``
+(rotary). ``fleet`` and ``drift`` read it (``models.drift.limit_of``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from features.readings.errors import InputError
+from features.readings.schema import deviation_unit
+
+UNITS = ("um", "arcsec")
+
+
+def read_limits(source, parameter: str = "limits") -> dict[tuple[str, str], float]:
+    """The limits of a TOML file or of a dict of the same shape, by (machine, axis).
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the key: a key that is not a machine's table or not
+        ``<axis>_um`` / ``<axis>_arcsec``, a unit that is not the axis's, a limit that is not
+        a positive finite number.
+    """
+    from features.readings.fileio import read_toml
+
+    if isinstance(source, (str, os.PathLike)):
+        file = str(source)
+        try:
+            table = read_toml(source, "limits file")
+        except InputError as err:  # unreadable or not TOML: name the option too
+            raise InputError(err.message, file=file, parameter=parameter) from None
+    else:
+        table, file = source, None
+    limits = {}
+    for machine, axes in table.items():
+        if not isinstance(axes, dict):
+            raise InputError(f"key {machine!r}: expected a table [{machine}] of limits per "
+                             "axis, e.g. X_um = 8.0", file=file, parameter=parameter)
+        for key, value in axes.items():
+            limits[(str(machine), _axis(machine, key, file, parameter))] = _limit(
+                machine, key, value, file, parameter)
+    return limits
+
+
+def _axis(machine: str, key: str, file, parameter: str) -> str:
+    """The axis of a key ``<axis>_<unit>``, its unit checked against the axis's."""
+    axis, _, unit = str(key).rpartition("_")
+    if not axis or unit not in UNITS:
+        raise InputError(f"unknown key {machine}.{key}: expected <axis>_um (linear axis) or "
+                         "<axis>_arcsec (rotary axis)", file=file, parameter=parameter)
+    if unit != deviation_unit(axis):
+        raise InputError(f"{machine}.{key}: axis {axis} is measured in {deviation_unit(axis)}, "
+                         f"not {unit}; write {axis}_{deviation_unit(axis)}", file=file,
+                         parameter=parameter)
+    return axis
+
+
+def _limit(machine: str, key: str, value, file, parameter: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value > 0):
+        raise InputError(f"{machine}.{key} = {value!r}: expected a positive finite number",
+                         file=file, parameter=parameter)
+    return float(value)
