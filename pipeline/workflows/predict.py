@@ -23,8 +23,6 @@ from pipeline.workflows.constraints import StrOptions
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")
-# a plan this many times the training span of operating hours beyond its end gets a note
-EXTRAPOLATION_WARNING = 1.5
 PARAMETERS = {
     "model": [str, os.PathLike, TrainedModel],
     "data": [str, os.PathLike, pd.DataFrame, None],
@@ -43,7 +41,9 @@ class PredictionResult(Result):
     predictions : DataFrame
         The point's keys (or the plan's columns) and ``backlash_um``; a predictor with an
         interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
-        predictions are clipped at 0 (backlash is a magnitude). With a rotary axis among the
+        predictions are clipped at 0 (backlash is a magnitude). ``extrapolated`` names the
+        point's inputs outside the ranges the model was trained on (``feed_mm_min;target``),
+        empty when none (``models.serving.trained_ranges``). With a rotary axis among the
         points a ``unit`` column says each row's unit (``arcsec`` for a rotary axis).
     model : str
         Registry name of the predictor.
@@ -115,8 +115,12 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     Returns
     -------
     PredictionResult
-        A plan far beyond the training span of operating hours gets a note (the forecast
-        extrapolates the wear rate that far).
+        Every input with points outside the range the model was trained on gets a note
+        naming the input, the points and the trained range (a ``BacklashWarning``, also in
+        ``notes``), and the points say which in ``extrapolated``. A forecasting model (the wear
+        map) extrapolates in operating hours by design: its hours get a note (with the
+        extrapolation factor) only beyond ``models.serving.FORECAST_HORIZON`` training spans
+        past the last trained hour.
 
     Raises
     ------
@@ -125,10 +129,10 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         written, or points without ``machine_id`` and ``axis`` to record them by (nothing is
         recorded).
     """
-    from features.readings.plan import is_plan, read_plan
+    from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
-    from models.serving import prediction_frame
+    from models.serving import extrapolation_lines, forecasts, prediction_frame
 
     check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
                  "predict")
@@ -144,7 +148,8 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         plan = data
     if plan is not None:
         source = str(plan) if isinstance(plan, (str, os.PathLike)) else "plan"
-        table = read_plan(plan) if isinstance(plan, (str, os.PathLike)) else plan
+        table = (read_plan(plan) if isinstance(plan, (str, os.PathLike))
+                 else plan_points(plan, source))
         inputs = plan_inputs(table, trained, source)
         keys = list(table.columns)
     else:
@@ -162,7 +167,11 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
              "wear maps (a wider interval)")
     predicted = prediction_frame(trained, inputs, source)
     out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
-    result = PredictionResult(predictions=out, model=trained.name)
+    lines = extrapolation_lines(trained, inputs, skip=("operating_hours",) if forecasts(
+        trained) else ())  # a forecast's hours: check_forecast's note with the factor
+    for line in lines:
+        note(line)
+    result = PredictionResult(predictions=out, model=trained.name, notes=lines)
     if store is not None:
         points = out.copy()
         if "operating_hours" not in points and "operating_hours" in inputs:
@@ -246,8 +255,10 @@ def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
 
 
 def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None:
-    """A model trained on one spread of operating hours cannot forecast others; a plan far
-    beyond the training hours gets a note with the extrapolation factor."""
+    """A model trained on one spread of operating hours cannot forecast others; a forecasting
+    model's plan beyond its forecast horizon (``models.serving.FORECAST_HORIZON`` training
+    spans past the last trained hour) gets a note with the extrapolation factor."""
+    from models.serving import FORECAST_HORIZON, forecasts
     if plan and getattr(model.estimator, "can_forecast_", True) is False:
         hours = model.input_ranges_.get("operating_hours")
         raise InputError(f"model {model.name!r} was trained on a single visit (no spread in "
@@ -265,7 +276,7 @@ def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None
                              "several visits", file=source, column="operating_hours")
         return
     factor = (float(hours.max()) - high) / (high - low)
-    if factor > EXTRAPOLATION_WARNING:
+    if forecasts(model) and factor > FORECAST_HORIZON:
         note(f"operating_hours up to {hours.max():g} h is {factor:.1f}x the training span "
              f"({low:g}-{high:g} h) beyond its end; the forecast extrapolates the wear rate "
              "that far")

@@ -1,0 +1,96 @@
+"""Quiet by default: no MLflow, Optuna or alembic log line reaches the terminal from a command
+or a ``bl.*`` call in a fresh folder (a fresh MLflow database) unless the user asks
+(``--verbose``); where the stores go follows one rule (``--tracking-dir`` or
+``BACKLASH_TRACKING_DIR``), said once. Each run is a subprocess with its own fresh folder."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+READINGS = ROOT / "experiments" / "data" / "twin" / "readings.csv"
+# what the libraries print when they are not silenced
+LIBRARY_LINES = ("INFO", "mlflow", "alembic", "optuna", "Optuna", "Created version",
+                 "Successfully registered", "A new study", "Trial 0")
+
+
+def fresh_env(**extra) -> dict:
+    """This environment without any tracking location (the conftest's per-test store), so
+    the command creates a fresh MLflow database where the rule says."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MLFLOW_TRACKING_URI", "BACKLASH_ARTIFACTS", "BACKLASH_TRACKING_DIR",
+                        "BACKLASH_VERBOSE", "MLFLOW_LOGGING_LEVEL")}
+    return {**env, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", **extra}
+
+
+def backlash(args: list[str], cwd: Path, **env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], cwd=cwd,
+                          env=fresh_env(**env), capture_output=True, text=True, timeout=300)
+
+
+def library_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines()
+            if any(word in line for word in LIBRARY_LINES)
+            and "tracking into a new MLflow store" not in line]  # the product's own note
+
+
+def test_train_in_a_fresh_folder_prints_no_library_line(tmp_path):
+    done = backlash(["train", str(READINGS), "--model", "ridge", "--out", "model"], tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert library_lines(done.stderr) == [] and library_lines(done.stdout) == []
+    assert (tmp_path / "mlflow.db").is_file() and (tmp_path / "mlartifacts").is_dir()
+    # where the store went is said once: when it was created, not on the next run
+    said = [line for line in done.stderr.splitlines() if line.startswith("note: tracking")]
+    assert len(said) == 1 and str(tmp_path / "mlflow.db") in said[0]
+    assert "--tracking-dir" in said[0] and "BACKLASH_TRACKING_DIR" in said[0]
+    again = backlash(["train", str(READINGS), "--model", "ridge", "--out", "model2"], tmp_path)
+    assert again.returncode == 0 and "note: tracking" not in again.stderr
+    assert library_lines(again.stderr) == []
+
+
+def test_verbose_lets_the_library_lines_through(tmp_path):
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    done = backlash(["train", str(READINGS), "--model", "ridge", "--out", "model",
+                     "--verbose", "--tracking-dir", str(folder)], tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "Creating initial MLflow database tables" in done.stderr
+    assert "Created version '1' of model 'backlash-predictor'" in done.stderr
+    # --tracking-dir put the database and the artifacts there, none in the working folder
+    assert (folder / "mlflow.db").is_file() and (folder / "mlartifacts").is_dir()
+    assert not (tmp_path / "mlflow.db").exists()
+
+
+def test_a_tracking_dir_that_does_not_exist_is_one_line(tmp_path):
+    done = backlash(["train", str(READINGS), "--model", "ridge", "--out", "model",
+                     "--tracking-dir", "missing"], tmp_path)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.splitlines() == [
+        f"backlash train: error: tracking folder {tmp_path / 'missing'} "
+        "(BACKLASH_TRACKING_DIR, --tracking-dir) must be an existing folder"]
+    assert not (tmp_path / "model").exists()
+
+
+@pytest.mark.parametrize("verbose", [False])
+def test_bl_tune_is_quiet_and_keeps_its_studies_in_the_tracking_folder(tmp_path, verbose):
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    code = ("import backlash as bl; r = bl.tune(%r, trials=2, folds=2, track=True); "
+            "print(r.best_trial)" % str(READINGS))
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=300,
+                          env=fresh_env(BACKLASH_TRACKING_DIR=str(folder),
+                                        **({"BACKLASH_VERBOSE": "1"} if verbose else {})))
+    assert done.returncode == 0, done.stderr
+    lines = library_lines(done.stderr) + library_lines(done.stdout)
+    if verbose:
+        assert any("A new study created in RDB" in line for line in lines), done.stderr
+    else:
+        assert lines == [], lines
+    assert {p.name for p in folder.iterdir()} >= {"mlflow.db", "optuna.db"}
+    assert not (tmp_path / "optuna.db").exists() and not (tmp_path / "mlflow.db").exists()
