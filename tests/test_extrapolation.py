@@ -81,8 +81,8 @@ def test_a_feed_just_outside_flags_only_those_points(model):
     flagged = np.flatnonzero(result.predictions["extrapolated"] == "feed_mm_min")
     assert flagged.tolist() == [2, 5] and (result.predictions["extrapolated"]
                                            .drop(index=[2, 5]) == "").all()
-    assert notes == ["feed_mm_min 199 to 1200.5 at 2 of 18 points is outside the trained "
-                     "range 200 to 1200: the prediction extrapolates there"]
+    assert notes == [("feed_mm_min 199 to 1200.5 at 2 of 18 points is outside the trained "
+                      "range 200 to 1200: the prediction extrapolates there")]
 
 
 def test_the_wear_maps_hours_are_flagged_beyond_its_forecast_horizon_only(model):

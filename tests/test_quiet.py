@@ -30,7 +30,8 @@ def fresh_env(**extra) -> dict:
 
 def backlash(args: list[str], cwd: Path, **env) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], cwd=cwd,
-                          env=fresh_env(**env), capture_output=True, text=True, timeout=300)
+                          env=fresh_env(**env), capture_output=True, text=True, timeout=300,
+                          check=False)
 
 
 def library_lines(text: str) -> list[str]:
@@ -70,9 +71,9 @@ def test_a_tracking_dir_that_does_not_exist_is_one_line(tmp_path):
     done = backlash(["train", str(READINGS), "--model", "ridge", "--out", "model",
                      "--tracking-dir", "missing"], tmp_path)
     assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr.splitlines() == [
+    assert done.stderr.splitlines() == [(
         f"backlash train: error: tracking folder {tmp_path / 'missing'} "
-        "(BACKLASH_TRACKING_DIR, --tracking-dir) must be an existing folder"]
+        "(BACKLASH_TRACKING_DIR, --tracking-dir) must be an existing folder")]
     assert not (tmp_path / "model").exists()
 
 
@@ -80,10 +81,10 @@ def test_a_tracking_dir_that_does_not_exist_is_one_line(tmp_path):
 def test_bl_tune_is_quiet_and_keeps_its_studies_in_the_tracking_folder(tmp_path, verbose):
     folder = tmp_path / "runs"
     folder.mkdir()
-    code = ("import backlash as bl; r = bl.tune(%r, trials=2, folds=2, track=True); "
-            "print(r.best_trial)" % str(READINGS))
+    code = (f"import backlash as bl; r = bl.tune({str(READINGS)!r}, trials=2, folds=2, "
+            "track=True); print(r.best_trial)")
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=300,
+                          text=True, timeout=300, check=False,
                           env=fresh_env(BACKLASH_TRACKING_DIR=str(folder),
                                         **({"BACKLASH_VERBOSE": "1"} if verbose else {})))
     assert done.returncode == 0, done.stderr

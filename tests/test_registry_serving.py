@@ -301,10 +301,10 @@ def test_mlflow_models_serve_forecasts_a_plan_over_http(wear_map, fleet, tmp_pat
     assert set(answer["extrapolated"]) == {"", "target"}
     assert (far["extrapolated"] == "target").all()
     # invalid inputs: 400, a body of one line that says what is wrong, no stack trace
-    for (status, body), words in ((negative, "request, row 1, column 'operating_hours': -480 "
-                                             "is not operating hours >= 0"),
-                                  (rotary, "M01 A, M02 A: backlash in arcsec, but the model "
-                                           "knows only axes in um")):
+    for (status, body), words in ((negative, ("request, row 1, column 'operating_hours': -480 "
+                                              "is not operating hours >= 0")),
+                                  (rotary, ("M01 A, M02 A: backlash in arcsec, but the model "
+                                            "knows only axes in um"))):
         assert status == 400 and "\n" not in body and "Traceback" not in body
         message = json.loads(body)["message"]
         assert words in message, message
