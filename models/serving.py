@@ -116,13 +116,14 @@ def extrapolated(model: TrainedModel, inputs: pd.DataFrame) -> pd.Series:
 
 def extrapolation_lines(model: TrainedModel, inputs: pd.DataFrame,
                         skip: tuple[str, ...] = ()) -> list[str]:
-    """One line per input with points outside its trained range: the input, how many points,
-    the values there and the trained range, e.g. ``feed_mm_min 20000 at 40 of 40 points is
-    outside the trained range 200-1200: the prediction extrapolates``."""
+    """One line per input (alphabetical) with points outside its trained range: the input,
+    how many points, the values there and the trained range, e.g. ``feed_mm_min 20000 at 40
+    of 40 points is outside the trained range 200 to 1200: the prediction extrapolates
+    there``."""
     flags = outside(model, inputs)
     ranges = trained_ranges(model)
     lines = []
-    for name in flags.columns:
+    for name in sorted(flags.columns):
         rows = flags[name].to_numpy(bool)
         if name in skip or not rows.any():
             continue
