@@ -77,3 +77,35 @@ def _line() -> int:
     import sys
 
     return sys._getframe(1).f_lineno
+
+
+def test_a_library_between_two_product_frames_is_not_the_caller(tmp_path, monkeypatch):
+    """A note issued in a callback that pandas calls for a product function names the line
+    that called the product, not pandas' line."""
+    import importlib.util
+
+    from features.readings import errors
+
+    package = tmp_path / "product"
+    package.mkdir()
+    (package / "job.py").write_text(
+        "import pandas as pd\n"
+        "from features.readings.errors import note\n\n\n"
+        "def noted(value):\n"
+        "    note('from inside a pandas callback')\n"
+        "    return value\n\n\n"
+        "def run():\n"
+        "    return pd.Series([1.0]).apply(noted)\n", encoding="utf-8")
+    spec = importlib.util.spec_from_file_location("product_job", package / "job.py")
+    job = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(job)
+    monkeypatch.setattr(errors, "PACKAGES", (*errors.PACKAGES, str(package.resolve())))
+    errors._inside.cache_clear()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            line = _line() + 1
+            job.run()
+    finally:
+        errors._inside.cache_clear()
+    assert [(w.filename, w.lineno) for w in caught] == [(__file__, line)]

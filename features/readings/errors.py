@@ -8,6 +8,7 @@ an error line); long work reports progress to a callback (the CLI draws a progre
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
@@ -67,16 +68,20 @@ def note(message: str) -> None:
 
 def caller_level() -> int:
     """The ``stacklevel`` for ``warnings.warn`` called by the function that calls this one:
-    the first frame up the stack whose file lies outside ``PACKAGES`` (the product's code), or
-    the outermost frame when every one lies inside (the CLI)."""
+    walking up the stack, the first frame outside ``PACKAGES`` (the product's code) above the
+    outermost frame inside them, so that a library between two of the product's frames
+    (pandas calling back into a workflow) is not taken for the caller; the outermost frame
+    when there is none above (the CLI)."""
     frame = sys._getframe(2)  # the caller of the function that wants the level
-    level = 2  # warnings.warn(stacklevel=2) in that function names this frame
-    while frame.f_back is not None and _inside(frame.f_code.co_filename):
-        frame = frame.f_back
-        level += 1
-    return level
+    level, outermost = 2, 1  # warnings.warn(stacklevel=2) in that function names this frame
+    while frame is not None:
+        if _inside(frame.f_code.co_filename):
+            outermost = level
+        frame, level = frame.f_back, level + 1
+    return min(outermost + 1, level - 1)
 
 
+@functools.lru_cache(maxsize=1024)
 def _inside(filename: str) -> bool:
     path = os.path.realpath(filename)
     return any(path.startswith(root + os.sep) for root in PACKAGES)
