@@ -55,6 +55,7 @@ MAX_KEY = 250  # MLflow's limit on metric and parameter names
 MAX_VALUE = 6000  # MLflow's limit on parameter values
 _BAD_KEY_CHARS = re.compile(r"[^\w.\- /]")
 _ready: set[str] = set()
+_silenced = False  # MLflow's messages are off in this process (``_silence_mlflow``)
 _LOCK_KEY = 0x6261636B6C617368  # "backlash": the advisory lock guarding schema creation
 
 
@@ -175,15 +176,36 @@ def import_store():
     os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
     import mlflow
-    from mlflow.utils import logging_utils
 
-    if not verbose():  # the stream every MLflow message and log line goes through
-        logging_utils.disable_logging()
+    if not verbose():
+        _silence_mlflow()
 
     if _scheme(tracking_uri()) in DATABASE_SCHEMES:
         import mlflow.store.model_registry.sqlalchemy_store
         import mlflow.store.tracking.sqlalchemy_store
     return mlflow
+
+
+def _silence_mlflow() -> None:
+    """MLflow's messages and log lines (and alembic's, which go the same way) off for the rest
+    of the process, the way MLflow silences them itself: a count of silencing contexts, held
+    open here, so that MLflow's own nested ones (entered and left by some of its lazy imports)
+    never switch them back on. ``disable_logging`` alone is undone by the first of those."""
+    global _silenced
+    if _silenced:
+        return
+    from mlflow.utils import logging_utils
+
+    try:
+        from mlflow.utils.autologging_utils.logging_and_warnings import (
+            MlflowEventsAndWarningsBehaviorGlobally as Behaviour,
+        )
+    except ImportError:  # a version without it: off until MLflow turns them on again
+        logging_utils.disable_logging()
+    else:
+        Behaviour(disable_event_logs=True, disable_warnings=False,
+                  reroute_warnings=False).__enter__()
+    _silenced = True
 
 
 def prepare_model_logging() -> None:
