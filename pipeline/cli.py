@@ -9,6 +9,10 @@ removed again. A Python parameter named in an error is shown as the option it ma
 command's ``FLAGS``, else ``--name-with-dashes``). Any other exception is a bug and keeps its
 traceback. Notes the library issues (``BacklashWarning``) are printed as ``note: ...`` after a
 successful command, never before an error line.
+
+Every command also takes ``--verbose`` (let MLflow, Optuna and alembic print their log lines,
+off by default) and ``--tracking-dir DIR`` (where MLflow and Optuna keep their stores:
+``pipeline.tracking``).
 """
 
 from __future__ import annotations

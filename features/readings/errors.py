@@ -59,10 +59,9 @@ class BacklashWarning(UserWarning):
 
 
 def note(message: str) -> None:
-    """Issue ``message`` as a ``BacklashWarning`` at the caller's line: the first frame
-    outside the product's packages (``caller_level``), so Python names the user's line, not
-    the library's (shown once per place by Python's default filter; the CLI shows every
-    one)."""
+    """Issue ``message`` as a ``BacklashWarning`` at the line that called the product
+    (``caller_level``), so Python names the user's line, not the library's (shown once per
+    place by Python's default filter; the CLI shows every one)."""
     warnings.warn(message, BacklashWarning, stacklevel=caller_level())
 
 
