@@ -92,7 +92,10 @@ def test_the_wear_maps_hours_are_flagged_beyond_its_forecast_horizon_only(model)
     assert (near.predictions["extrapolated"] == "").all()
     far, notes = predicted(model, plan.assign(operating_hours=6800.0))
     assert (far.predictions["extrapolated"] == "operating_hours").all()
-    assert len(notes) == 1 and "x the training span" in notes[0]
+    # (6800 - 2700) / 2700 = 1.5x the span beyond its end
+    assert notes == far.notes == [("operating_hours up to 6800 h is 1.5x the training span "
+                                   "(0-2700 h) beyond its end; the forecast extrapolates the "
+                                   "wear rate that far")]
 
 
 def test_the_cli_prints_the_note_and_writes_the_column(model, tmp_path, capsys):

@@ -132,7 +132,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
-    from models.serving import extrapolation_lines, forecasts, prediction_frame
+    from models.serving import prediction_frame
 
     check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
                  "predict")
@@ -167,8 +167,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
              "wear maps (a wider interval)")
     predicted = prediction_frame(trained, inputs, source)
     out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
-    lines = extrapolation_lines(trained, inputs, skip=("operating_hours",) if forecasts(
-        trained) else ())  # a forecast's hours: check_forecast's note with the factor
+    lines = extrapolation_notes(trained, inputs)
     for line in lines:
         note(line)
     result = PredictionResult(predictions=out, model=trained.name, notes=lines)
@@ -255,10 +254,7 @@ def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
 
 
 def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None:
-    """A model trained on one spread of operating hours cannot forecast others; a forecasting
-    model's plan beyond its forecast horizon (``models.serving.FORECAST_HORIZON`` training
-    spans past the last trained hour) gets a note with the extrapolation factor."""
-    from models.serving import FORECAST_HORIZON, forecasts
+    """A model trained on one spread of operating hours cannot forecast others."""
     if plan and getattr(model.estimator, "can_forecast_", True) is False:
         hours = model.input_ranges_.get("operating_hours")
         raise InputError(f"model {model.name!r} was trained on a single visit (no spread in "
@@ -269,17 +265,32 @@ def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None
         return
     low, high = model.input_ranges_["operating_hours"]
     hours = inputs["operating_hours"].astype(float)
-    if getattr(model.estimator, "can_forecast_", True) is False or high <= low:
-        if plan or (hours != low).any():
-            raise InputError(f"model {model.name!r} was trained on a single visit (operating "
-                             f"hours {low:g} h only): it cannot forecast other hours; train on "
-                             "several visits", file=source, column="operating_hours")
-        return
-    factor = (float(hours.max()) - high) / (high - low)
-    if forecasts(model) and factor > FORECAST_HORIZON:
-        note(f"operating_hours up to {hours.max():g} h is {factor:.1f}x the training span "
-             f"({low:g}-{high:g} h) beyond its end; the forecast extrapolates the wear rate "
-             "that far")
+    single = getattr(model.estimator, "can_forecast_", True) is False or high <= low
+    if single and (plan or (hours != low).any()):
+        raise InputError(f"model {model.name!r} was trained on a single visit (operating "
+                         f"hours {low:g} h only): it cannot forecast other hours; train on "
+                         "several visits", file=source, column="operating_hours")
+
+
+def extrapolation_notes(model, inputs: pd.DataFrame) -> list[str]:
+    """One note per input with points outside the trained range
+    (``models.serving.extrapolation_lines``); a forecasting model's operating hours only
+    beyond its forecast horizon (``models.serving.FORECAST_HORIZON`` training spans past the
+    last trained hour), with the extrapolation factor."""
+    from models.serving import FORECAST_HORIZON, extrapolation_lines, forecasts
+
+    if not forecasts(model):
+        return extrapolation_lines(model, inputs)
+    lines = extrapolation_lines(model, inputs, skip=("operating_hours",))
+    if "operating_hours" in inputs and "operating_hours" in model.input_ranges_:
+        low, high = model.input_ranges_["operating_hours"]
+        last = float(inputs["operating_hours"].astype(float).max())
+        factor = (last - high) / (high - low) if high > low else 0.0
+        if factor > FORECAST_HORIZON:
+            lines.append(f"operating_hours up to {last:g} h is {factor:.1f}x the training "
+                         f"span ({low:g}-{high:g} h) beyond its end; the forecast "
+                         "extrapolates the wear rate that far")
+    return lines
 
 
 WORKFLOW = Workflow(
