@@ -7,7 +7,9 @@ conditions it fitted (``estimator.conditions_``), which a plan may omit. ``input
 exactly those, as plain data (the MLflow signature is built from it); ``prediction_frame``
 fills what a plan leaves out the way ``backlash predict`` does (an input the estimator does not
 use takes its training mean, a missing condition is NaN and widens the interval) and returns
-``backlash_um`` with, for predictors that give one, the 95 % interval, clipped at 0.
+``backlash_um`` with, for predictors that give one, the 95 % interval, clipped at 0, and
+``extrapolated``: the inputs of each point outside the ranges the model was trained on
+(``trained_ranges``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,10 @@ from models.registry import AXIS_KEYS, TrainedModel, knows_axes
 
 PREDICTION = "backlash_um"
 INTERVAL = ("backlash_low_um", "backlash_high_um")
+EXTRAPOLATED = "extrapolated"
+# A forecasting predictor extrapolates in operating hours by design: up to this many training
+# spans beyond the last trained hour is its forecast horizon, not an extrapolation to flag.
+FORECAST_HORIZON = 1.5
 
 
 def used_inputs(estimator, features: list[str]) -> list[str]:
@@ -60,8 +66,74 @@ def input_columns(estimator, features: list[str]) -> list[dict]:
 
 
 def output_columns(estimator) -> list[str]:
-    """``backlash_um``, plus the interval's bounds for predictors with ``predict_interval``."""
-    return [PREDICTION, *(INTERVAL if hasattr(estimator, "predict_interval") else ())]
+    """``backlash_um``, plus the interval's bounds for predictors with ``predict_interval``
+    (numbers), then ``extrapolated`` (text)."""
+    return [PREDICTION, *(INTERVAL if hasattr(estimator, "predict_interval") else ()),
+            EXTRAPOLATED]
+
+
+def forecasts(model: TrainedModel) -> bool:
+    """Whether ``model`` forecasts in operating hours (its registry record says so and it was
+    trained on a spread of hours)."""
+    from models.registry import PREDICTORS
+
+    record = PREDICTORS.get(model.name)
+    return bool(record and record.forecasts
+                and getattr(model.estimator, "can_forecast_", True) is not False)
+
+
+def trained_ranges(model: TrainedModel) -> dict[str, tuple[float, float]]:
+    """The range [low, high] of every input ``model`` was trained on (``input_ranges_``), in
+    the inputs' units; for a forecasting model the operating hours reach ``FORECAST_HORIZON``
+    training spans beyond the last trained hour (its forecast horizon)."""
+    ranges = dict(model.input_ranges_)
+    hours = ranges.get("operating_hours")
+    if hours is not None and forecasts(model):
+        low, high = hours
+        ranges["operating_hours"] = (low, high + FORECAST_HORIZON * (high - low))
+    return ranges
+
+
+def outside(model: TrainedModel, inputs: pd.DataFrame) -> pd.DataFrame:
+    """Per point of ``inputs`` and per input with a trained range, whether the value lies
+    outside it (a missing value is not outside: it takes the training mean or widens the
+    interval)."""
+    ranges = trained_ranges(model)
+    names = [n for n in inputs.columns if n in ranges]
+    return pd.DataFrame({n: ~inputs[n].astype(float).between(*ranges[n]) & inputs[n].notna()
+                         for n in names}, index=inputs.index, columns=names, dtype=bool)
+
+
+def extrapolated(model: TrainedModel, inputs: pd.DataFrame) -> pd.Series:
+    """Per point, the inputs outside the trained ranges joined by ``;`` (e.g.
+    ``feed_mm_min;target``), empty when none."""
+    flags = outside(model, inputs)
+    flags = flags[sorted(flags.columns)]
+    names = np.asarray(flags.columns, dtype=object)
+    return pd.Series([";".join(names[row]) for row in flags.to_numpy(bool)],
+                     index=inputs.index, dtype=object)
+
+
+def extrapolation_lines(model: TrainedModel, inputs: pd.DataFrame,
+                        skip: tuple[str, ...] = ()) -> list[str]:
+    """One line per input (alphabetical) with points outside its trained range: the input,
+    how many points, the values there and the trained range, e.g. ``feed_mm_min 20000 at 40
+    of 40 points is outside the trained range 200 to 1200: the prediction extrapolates
+    there``."""
+    flags = outside(model, inputs)
+    ranges = trained_ranges(model)
+    lines = []
+    for name in sorted(flags.columns):
+        rows = flags[name].to_numpy(bool)
+        if name in skip or not rows.any():
+            continue
+        values = inputs[name].astype(float)[rows]
+        low, high = values.min(), values.max()
+        shown = f"{low:g}" if low == high else f"{low:g} to {high:g}"
+        lines.append(f"{name} {shown} at {rows.sum()} of {len(rows)} points is outside the "
+                     f"trained range {ranges[name][0]:g} to {ranges[name][1]:g}: the "
+                     "prediction extrapolates there")
+    return lines
 
 
 def filled_inputs(model: TrainedModel, frame: pd.DataFrame,
@@ -101,13 +173,17 @@ def prediction_frame(model: TrainedModel, frame: pd.DataFrame,
     -------
     DataFrame
         ``backlash_um`` and, for a predictor with ``predict_interval``, ``backlash_low_um`` and
-        ``backlash_high_um`` (95 %); every value clipped at 0 (backlash is a magnitude), one
-        row per row of ``frame`` in its order (index 0..n-1).
+        ``backlash_high_um`` (95 %); every value clipped at 0 (backlash is a magnitude); then
+        ``extrapolated`` (``extrapolated``: the inputs outside the trained ranges, empty when
+        none). One row per row of ``frame`` in its order (index 0..n-1).
     """
-    X = served_inputs(model, frame, source)
+    filled = filled_inputs(model, frame, source)
+    X = model.inputs(filled, source)
     estimator = model.estimator
     if hasattr(estimator, "predict_interval"):
-        values = dict(zip(output_columns(estimator), estimator.predict_interval(X), strict=True))
+        values = dict(zip((PREDICTION, *INTERVAL), estimator.predict_interval(X), strict=True))
     else:
         values = {PREDICTION: estimator.predict(X)}
-    return pd.DataFrame({k: np.maximum(np.asarray(v, float), 0.0) for k, v in values.items()})
+    out = pd.DataFrame({k: np.maximum(np.asarray(v, float), 0.0) for k, v in values.items()})
+    out[EXTRAPOLATED] = extrapolated(model, filled.reset_index(drop=True)).to_numpy()
+    return out

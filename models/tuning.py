@@ -22,7 +22,6 @@ import warnings
 
 import numpy as np
 
-DEFAULT_STORAGE = "sqlite:///optuna.db"
 HEARTBEAT_S = 10
 SCHEMA_ATTEMPTS = 5  # tries to open a storage that other workers are creating at the same time
 ACTIVATIONS = ("tanh", "relu", "sigmoid")
@@ -84,6 +83,7 @@ def open_storage(url: str, heartbeat_s: int = HEARTBEAT_S):
     killed) and is marked FAIL by the next worker that opens the study."""
     import optuna
 
+    quiet_optuna(optuna)
     if heartbeat_s < 1:
         raise ValueError(f"heartbeat_s must be at least 1 second, got {heartbeat_s}")
     connect = {"timeout": 60} if url.startswith("sqlite") else {}  # workers wait for the lock
@@ -102,6 +102,16 @@ def open_storage(url: str, heartbeat_s: int = HEARTBEAT_S):
             if attempt == SCHEMA_ATTEMPTS - 1 or not _lost_schema_race(error):
                 raise
             time.sleep(0.2 * (attempt + 1))
+
+
+def quiet_optuna(optuna) -> None:
+    """Optuna's log lines (``A new study created in RDB``, one per finished trial) off, errors
+    aside, unless the user asked for them (``features.readings.errors.verbose``): the search
+    reports through its result and its progress callback."""
+    from features.readings.errors import verbose
+
+    if not verbose():
+        optuna.logging.set_verbosity(optuna.logging.ERROR)
 
 
 def _lost_schema_race(error: Exception) -> bool:
@@ -195,7 +205,7 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
 
     if threads:
         torch.set_num_threads(threads)
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    quiet_optuna(optuna)
     study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s, tag)
     stopped(stop)
     study.optimize(objective(X, y, folds, seed, stop), n_trials=trials,

@@ -9,20 +9,26 @@ removed again. A Python parameter named in an error is shown as the option it ma
 command's ``FLAGS``, else ``--name-with-dashes``). Any other exception is a bug and keeps its
 traceback. Notes the library issues (``BacklashWarning``) are printed as ``note: ...`` after a
 successful command, never before an error line.
+
+Every command also takes ``--verbose`` (let MLflow, Optuna and alembic print their log lines,
+off by default) and ``--tracking-dir DIR`` (where MLflow and Optuna keep their stores:
+``pipeline.tracking``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import importlib
 import os
 import sys
 import warnings
 
-from features.readings.errors import BacklashWarning, InputError
+from features.readings.errors import VERBOSE, BacklashWarning, InputError
 from pipeline.commands import NAMES as COMMANDS  # the one command registry
 from pipeline.commands.common import check_outputs, remove_created
+from pipeline.tracking import TRACKING_DIR
 
 
 class Parser(argparse.ArgumentParser):
@@ -46,10 +52,41 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"pipeline.commands.{name.replace('-', '_')}")
         cmd = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(cmd)
+        add_common_arguments(cmd)
         checked_types(cmd)
         cmd.set_defaults(_run=module.run)
         parser.commands[name] = cmd
     return parser
+
+
+def add_common_arguments(cmd: argparse.ArgumentParser) -> None:
+    """The options of every command: the libraries' log lines and where tracking goes."""
+    cmd.add_argument("--verbose", action="store_true",
+                     help="show the log lines of MLflow, Optuna and alembic (off by default)")
+    cmd.add_argument("--tracking-dir", metavar="DIR",
+                     help="folder of the MLflow database (mlflow.db), its artifacts "
+                          "(mlartifacts/) and the Optuna studies (optuna.db); default "
+                          "$BACKLASH_TRACKING_DIR, else the working directory")
+
+
+@contextlib.contextmanager
+def common_settings(args: argparse.Namespace):
+    """``--verbose`` and ``--tracking-dir`` as the environment variables the library reads
+    (``BACKLASH_VERBOSE``, ``BACKLASH_TRACKING_DIR``), for this command only; a process it
+    forks inherits them."""
+    settings = {VERBOSE: "1" if args.verbose else None, TRACKING_DIR: args.tracking_dir}
+    before = {name: os.environ.get(name) for name in settings}
+    try:
+        for name, value in settings.items():
+            if value is not None:
+                os.environ[name] = value
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", BacklashWarning)
             created = check_outputs(args.command, args)
-            code = args._run(args)
+            with common_settings(args):
+                code = args._run(args)
     except (InputError, ValueError) as err:
         remove_created(created)
         line = err.line(_flag_namer(args.command)) if isinstance(err, InputError) else str(err)

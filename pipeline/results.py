@@ -41,6 +41,41 @@ class Result:
     notes: list[str] = field(default_factory=list, kw_only=True)
     files: dict[str, Path] = field(default_factory=dict, kw_only=True)
 
+    def __init_subclass__(cls, **kwargs):
+        # every subclass keeps the short repr: @dataclass adds its own __repr__ only to a class
+        # that does not define one
+        super().__init_subclass__(**kwargs)
+        if "__repr__" not in cls.__dict__:
+            cls.__repr__ = Result.__repr__
+
+    def __repr__(self) -> str:
+        """``Name(data='file.dat', key=value, ..., notes=N)``: the data's name, then every
+        field in brief (frames as their shape ``rows x columns``, collections as their length,
+        numbers to 4 digits), cut at ``REPR_CHARS`` characters."""
+        items = {"data": repr(data_name(self))} if data_name(self) else {}
+        items.update(self.repr_items())
+        items["notes"] = str(len(self.notes))
+        if self.files:
+            items["files"] = str(len(self.files))
+        text = ", ".join(f"{k}={v}" for k, v in items.items())
+        if len(text) > REPR_CHARS:
+            text = text[:REPR_CHARS - 3].rsplit(", ", 1)[0] + ", ..."
+        return f"{type(self).__name__}({text})"
+
+    def repr_items(self) -> dict[str, str]:
+        """The key figures ``repr`` shows, by name, as text: every field shown by the
+        dataclass's repr in brief (``brief``), except the data's name, notes and files. A
+        result may override it to put its own figures first."""
+        from dataclasses import fields
+
+        skip = {"notes", "files", "source", "sources"}
+        out = {}
+        for f in fields(self):
+            text = brief(getattr(self, f.name)) if f.repr and f.name not in skip else None
+            if text is not None:
+                out[f.name] = text
+        return out
+
     def write(self, out: str | Path) -> dict[str, Path]:
         """Write the result's files under ``out`` (atomically) and return them by role."""
         return self.files
@@ -52,6 +87,49 @@ class Result:
     def tracking_record(self) -> TrackingRecord | None:
         """What to log to MLflow, or None for a result that is not tracked."""
         return None
+
+
+REPR_CHARS = 300  # the longest repr of a result, in characters
+
+
+def data_name(result) -> str | None:
+    """The file name of the data a result was made from (``source``, ``sources``, the
+    readings' ``source``, ``params['data']``), ``N files`` for several, or None."""
+    found = getattr(result, "source", None)
+    if not found:
+        sources = getattr(result, "sources", None) or {}
+        names = sorted({str(v) for v in sources.values()}) if isinstance(sources, dict) else []
+        found = names[0] if len(names) == 1 else (f"{len(names)} files" if names else None)
+    if not found:
+        readings = getattr(result, "readings", None)
+        found = getattr(readings, "attrs", {}).get("source")
+    if not found:
+        params = getattr(result, "params", None)
+        found = params.get("data") if isinstance(params, dict) else None
+    return Path(str(found)).name if found else None
+
+
+def brief(value) -> str | None:
+    """``value`` in a few characters for a repr, or None to leave it out: a frame or array
+    as its shape (``12x8``), a number to 4 significant digits, text quoted and cut at 40
+    characters, a collection as its length in brackets (``[4]``), a nested result or any
+    other object as its ``name`` or class name; None and empty collections are left out."""
+    if value is None:
+        return None
+    shape = getattr(value, "shape", None)
+    if isinstance(shape, tuple):
+        return "x".join(str(n) for n in shape)
+    if isinstance(value, bool):
+        return str(value)
+    if isinstance(value, (int, float)):
+        return f"{value:.4g}"
+    if isinstance(value, (str, Path)):
+        text = value.name if isinstance(value, Path) else value
+        return repr(text if len(text) <= 40 else text[:37] + "...")
+    if isinstance(value, (list, tuple, set, dict)):
+        return f"[{len(value)}]" if value else None
+    name = getattr(value, "name", None)
+    return repr(name) if isinstance(name, str) else type(value).__name__
 
 
 def axis_alerts(items) -> list[dict]:

@@ -1,10 +1,18 @@
-"""MLflow glue: the one place that decides where runs, models and artifacts go.
+"""MLflow glue: the one place that decides where runs, models, artifacts and studies go.
 
-The tracking store is ``MLFLOW_TRACKING_URI`` (default ``sqlite:///mlflow.db`` in the working
-directory): a local SQLite file, a database URL, or ``http://HOST:PORT`` of a shared
-``mlflow server``. Artifacts go to ``BACKLASH_ARTIFACTS`` (default ``./mlartifacts``); against
-a server without ``BACKLASH_ARTIFACTS`` they go where the server stores them. ``configure()``
-applies this once per store; every other function here calls it, so commands never set URIs.
+One rule: everything the product tracks goes to the **tracking folder**, the CLI's
+``--tracking-dir DIR``, else ``BACKLASH_TRACKING_DIR``, else the working directory: the MLflow
+database ``mlflow.db``, the artifacts ``mlartifacts/`` and the Optuna studies ``optuna.db``
+(``tracking_dir``). A part given explicitly overrides it: ``MLFLOW_TRACKING_URI`` (a SQLite
+file, a database URL, or ``http://HOST:PORT`` of a shared ``mlflow server``),
+``BACKLASH_ARTIFACTS``, and ``tune``'s ``storage``; against a server without
+``BACKLASH_ARTIFACTS`` artifacts go where the server stores them. ``check_uri`` says once,
+as a note, where a command that finds no store yet will create it. ``configure()`` applies this
+once per store; every other function here calls it, so commands never set URIs.
+
+Quiet by default: MLflow's messages and log lines (and alembic's, which MLflow routes the same
+way) are off unless the user asked for them (``features.readings.errors.verbose``: the CLI's
+``--verbose``, ``BACKLASH_VERBOSE``, or a logging configuration of their own).
 
 ``log_result(result)`` is the one adapter from a workflow's result to MLflow: it logs the result's
 ``tracking_record()`` (params, metrics, artifacts, tags, a model to register, nested runs) and
@@ -39,21 +47,54 @@ from pipeline.results import TrackingRecord
 
 DEFAULT_URI = "sqlite:///mlflow.db"
 DEFAULT_ARTIFACTS = "mlartifacts"
+DEFAULT_STUDIES = "optuna.db"
+TRACKING_DIR = "BACKLASH_TRACKING_DIR"  # the tracking folder (the CLI's --tracking-dir)
 REMOTE_SCHEMES = ("http", "https", "databricks")
 DATABASE_SCHEMES = ("sqlite", "postgresql", "mysql", "mssql")
 MAX_KEY = 250  # MLflow's limit on metric and parameter names
 MAX_VALUE = 6000  # MLflow's limit on parameter values
 _BAD_KEY_CHARS = re.compile(r"[^\w.\- /]")
 _ready: set[str] = set()
+_silenced = False  # MLflow's messages are off in this process (``_silence_mlflow``)
 _LOCK_KEY = 0x6261636B6C617368  # "backlash": the advisory lock guarding schema creation
 
 
+def tracking_dir() -> Path | None:
+    """The tracking folder ``BACKLASH_TRACKING_DIR`` (absolute), or None: the working
+    directory."""
+    folder = os.environ.get(TRACKING_DIR)
+    return Path(folder).absolute() if folder else None
+
+
 def tracking_uri() -> str:
-    return os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_URI
+    """``MLFLOW_TRACKING_URI``, else ``mlflow.db`` in the tracking folder."""
+    folder = tracking_dir()
+    return (os.environ.get("MLFLOW_TRACKING_URI")
+            or (f"sqlite:///{folder / 'mlflow.db'}" if folder else DEFAULT_URI))
 
 
 def artifact_root() -> Path:
-    return Path(os.environ.get("BACKLASH_ARTIFACTS") or DEFAULT_ARTIFACTS).absolute()
+    """``BACKLASH_ARTIFACTS``, else ``mlartifacts`` in the tracking folder."""
+    folder = tracking_dir() or Path()
+    return Path(os.environ.get("BACKLASH_ARTIFACTS") or folder / DEFAULT_ARTIFACTS).absolute()
+
+
+def study_storage() -> str:
+    """The default Optuna storage: ``optuna.db`` in the tracking folder."""
+    folder = tracking_dir()
+    return f"sqlite:///{folder / DEFAULT_STUDIES}" if folder else f"sqlite:///{DEFAULT_STUDIES}"
+
+
+def where_note() -> str | None:
+    """Where a command that finds no local MLflow store yet will create it, with the rule
+    (one line), or None when the store exists or is not a local file."""
+    path = _sqlite_path(tracking_uri()) if _scheme(tracking_uri()) == "sqlite" else None
+    if path is None or path.exists():
+        return None
+    studies = study_storage().removeprefix("sqlite:///")
+    return (f"tracking into a new MLflow store {path} (artifacts {artifact_root()}, Optuna "
+            f"studies {Path(studies).absolute()}); --tracking-dir DIR or {TRACKING_DIR} "
+            "chooses the folder")
 
 
 def check_uri(uri: str | None = None) -> str:
@@ -63,6 +104,10 @@ def check_uri(uri: str | None = None) -> str:
     """
     from features.readings.errors import InputError
 
+    folder = tracking_dir()
+    if folder is not None and not folder.is_dir():
+        raise InputError(f"tracking folder {folder} ({TRACKING_DIR}, --tracking-dir) must be "
+                         "an existing folder")
     uri = uri or tracking_uri()
     scheme = _scheme(uri)
     if scheme == "sqlite":
@@ -73,6 +118,10 @@ def check_uri(uri: str | None = None) -> str:
         if path.is_dir() or not path.parent.is_dir():
             raise InputError(f"MLFLOW_TRACKING_URI {uri!r}: {path.parent} must be an existing "
                              "folder and the file not a folder")
+        if not path.exists():  # said once: the next command finds the store
+            from features.readings.errors import note
+
+            note(where_note())
         return uri
     if scheme in REMOTE_SCHEMES + DATABASE_SCHEMES[1:] + ("file",) or "://" not in uri:
         return uri  # a plain path is MLflow's file store
@@ -118,16 +167,45 @@ def import_store():
 
     The product sends no usage data: MLflow's telemetry is switched off here unless the user
     set ``MLFLOW_DISABLE_TELEMETRY`` explicitly. MLflow's per-file progress bars, which flash
-    by for the few small files of a model, are off unless the user turned them on.
+    by for the few small files of a model, are off unless the user turned them on, and so are
+    its messages and log lines (``Creating initial MLflow database tables``, ``Created version
+    '3' of model``) unless the user asked for them (``features.readings.errors.verbose``).
     """
+    from features.readings.errors import verbose
+
     os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
     import mlflow
+
+    if not verbose():
+        _silence_mlflow()
 
     if _scheme(tracking_uri()) in DATABASE_SCHEMES:
         import mlflow.store.model_registry.sqlalchemy_store
         import mlflow.store.tracking.sqlalchemy_store
     return mlflow
+
+
+def _silence_mlflow() -> None:
+    """MLflow's messages and log lines (and alembic's, which go the same way) off for the rest
+    of the process, the way MLflow silences them itself: a count of silencing contexts, held
+    open here, so that MLflow's own nested ones (entered and left by some of its lazy imports)
+    never switch them back on. ``disable_logging`` alone is undone by the first of those."""
+    global _silenced
+    if _silenced:
+        return
+    from mlflow.utils import logging_utils
+
+    try:
+        from mlflow.utils.autologging_utils.logging_and_warnings import (
+            MlflowEventsAndWarningsBehaviorGlobally as Behaviour,
+        )
+    except ImportError:  # a version without it: off until MLflow turns them on again
+        logging_utils.disable_logging()
+    else:
+        Behaviour(disable_event_logs=True, disable_warnings=False,
+                  reroute_warnings=False).__enter__()
+    _silenced = True
 
 
 def prepare_model_logging() -> None:
@@ -507,14 +585,18 @@ def log_model(model: dict) -> str:
 
 def signature(spec: dict):
     """The MLflow ``ModelSignature`` of a record's ``signature`` (plain data): one column per
-    input (conditions a plan may omit optional) and one ``double`` column per output."""
+    input (conditions a plan may omit optional) and one column per output (``double``; the
+    ``extrapolated`` inputs are text)."""
     from mlflow.models import ModelSignature
     from mlflow.types.schema import ColSpec, Schema
 
+    from models.serving import EXTRAPOLATED
+
     inputs = Schema([ColSpec(c["type"], c["name"], required=c["required"])
                      for c in spec["inputs"]])
-    return ModelSignature(inputs=inputs, outputs=Schema([ColSpec("double", name)
-                                                         for name in spec["outputs"]]))
+    return ModelSignature(inputs=inputs, outputs=Schema([
+        ColSpec("string" if name == EXTRAPOLATED else "double", name)
+        for name in spec["outputs"]]))
 
 
 def _log_pyfunc(model: dict, model_dir: Path):

@@ -204,6 +204,24 @@ def test_stable_series_exits_0(tmp_path, capsys):
     assert (tmp_path / "out" / "drift.png").stat().st_size > 1000
 
 
+def test_json_without_out_prints_the_series_and_writes_nothing(tmp_path, capsys):
+    from pipeline import cli
+
+    rng = np.random.default_rng(1)
+    path = tmp_path / "readings.csv"
+    visit_readings(3.0 + rng.normal(0, 0.05, 6)).to_csv(path, index=False)
+    before = set(tmp_path.iterdir())
+    assert cli.main(["drift", str(path), "--json"]) == 0
+    captured = capsys.readouterr()
+    series = json.loads(captured.out)["series"]
+    assert len(series) == 1 and len(series[0]["visits"]) == 6
+    assert "report:" not in captured.err and set(tmp_path.iterdir()) == before
+    # neither a report folder nor --json: one line, exit 2
+    assert cli.main(["drift", str(path)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "backlash drift: error: --out: give the report folder (--out) or --json"]
+
+
 def test_growing_series_with_adjustment_exits_3(tmp_path, capsys):
     months = np.arange(16.0)
     b = 2.0 + 0.25 * months

@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 import warnings
 from pathlib import Path
@@ -107,8 +108,10 @@ def test_signature_lists_the_plan_columns_the_wear_map_uses(wear_map):
     assert inputs.input_names() == ["machine_id", "axis", *estimator.used_features_]
     assert not any(name.startswith("deviation") for name in inputs.input_names())
     assert inputs.optional_input_names() == estimator.conditions_ == ["machine_temp_c"]
-    assert served.metadata.signature.outputs.input_names() == [
-        "backlash_um", "backlash_low_um", "backlash_high_um"]
+    outputs = served.metadata.signature.outputs
+    assert outputs.input_names() == ["backlash_um", "backlash_low_um", "backlash_high_um",
+                                     "extrapolated"]
+    assert [t.name for t in outputs.input_types()][-1] == "string"
 
 
 def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
@@ -117,7 +120,8 @@ def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
     spec = model_tracking.model_record(result.fit, result.files["model"])["signature"]
     names = [c["name"] for c in spec["inputs"]]
     assert names == list(result.trained.feature_names_) and "deviation_up_um" in names
-    assert all(c["required"] for c in spec["inputs"]) and spec["outputs"] == ["backlash_um"]
+    assert all(c["required"] for c in spec["inputs"])
+    assert spec["outputs"] == ["backlash_um", "extrapolated"]
 
 
 # --------------------------------------------------------------------------- champion rule
@@ -190,9 +194,13 @@ def test_pyfunc_returns_the_predict_frame_clipped_at_zero(wear_map, fleet):
     answer = served.predict(plan)
     expected = bl.predict(wear_map.files["model"], plan=plan).predictions
     columns = ["backlash_um", "backlash_low_um", "backlash_high_um"]
-    assert list(answer.columns) == columns
+    assert list(answer.columns) == [*columns, "extrapolated"]
     np.testing.assert_allclose(answer[columns], expected[columns], rtol=1e-12)
     assert (answer[columns] >= 0).all().all()
+    assert (answer["extrapolated"] == expected["extrapolated"]).all()
+    # a target beyond the trained travel, flagged as predict flags it
+    far = quiet(served.predict, plan.assign(target=plan["target"] + 5000.0))
+    assert (far["extrapolated"] == "target").all()
 
 
 # --------------------------------------------------------------------------- served over HTTP
@@ -253,6 +261,15 @@ def invoke(url: str, plan: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(json.loads(answer.read())["predictions"])
 
 
+def refused(url: str, plan: pd.DataFrame) -> tuple[int, str]:
+    """The HTTP status and body of a request the server refuses."""
+    try:
+        invoke(url, plan)
+    except urllib.error.HTTPError as err:
+        return err.code, err.read().decode()
+    pytest.fail("the server answered a request it should refuse")
+
+
 @pytest.mark.skipif(bool(serving_unavailable()), reason=serving_unavailable() or "-")
 def test_mlflow_models_serve_forecasts_a_plan_over_http(wear_map, fleet, tmp_path):
     _, version = logged_version(wear_map)
@@ -270,11 +287,27 @@ def test_mlflow_models_serve_forecasts_a_plan_over_http(wear_map, fleet, tmp_pat
             wait_until_up(server, url, log)
             answer = invoke(url, plan)
             without_feed = invoke(url, plan.drop(columns="feed_mm_min"))
+            far = invoke(url, plan.assign(target=plan["target"] + 5000.0))
+            negative = refused(url, plan.assign(operating_hours=-480.0))
+            rotary = refused(url, plan.assign(axis="A"))
         finally:
             stop(server)
     expected = bl.predict(wear_map.files["model"], plan=plan).predictions
     columns = ["backlash_um", "backlash_low_um", "backlash_high_um"]
-    assert list(answer.columns) == columns and len(answer) == len(plan)
+    assert list(answer.columns) == [*columns, "extrapolated"] and len(answer) == len(plan)
     np.testing.assert_allclose(answer[columns], expected[columns], rtol=1e-9)
+    # the plan's end targets (0 and 350 mm) lie beyond the training's interior ones
+    assert (answer["extrapolated"] == expected["extrapolated"]).all()
+    assert set(answer["extrapolated"]) == {"", "target"}
+    assert (far["extrapolated"] == "target").all()
+    # invalid inputs: 400, a body of one line that says what is wrong, no stack trace
+    for (status, body), words in ((negative, ("request, row 1, column 'operating_hours': -480 "
+                                              "is not operating hours >= 0")),
+                                  (rotary, ("M01 A, M02 A: backlash in arcsec, but the model "
+                                            "knows only axes in um"))):
+        assert status == 400 and "\n" not in body and "Traceback" not in body
+        message = json.loads(body)["message"]
+        assert words in message, message
+        assert "Failed to predict" not in message and len(message) < 300
     # the feed is no input of this wear map (one feed in training): the answer is the same
     np.testing.assert_allclose(without_feed[columns], answer[columns], rtol=1e-12)

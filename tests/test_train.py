@@ -46,7 +46,8 @@ def test_train_saves_model_figures_and_registers_champion(readings_csv, tmp_path
 
     # a frame of backlash_um (no interval for bspline), clipped at 0 like `predict`
     answer = served.predict(inputs)
-    assert list(answer.columns) == ["backlash_um"]
+    assert list(answer.columns) == ["backlash_um", "extrapolated"]
+    assert (answer["extrapolated"] == "").all()  # the training inputs lie inside their ranges
     assert list(answer["backlash_um"]) == pytest.approx(
         [max(v, 0.0) for v in load_model(out).predict(inputs)])
 
@@ -54,7 +55,7 @@ def test_train_saves_model_figures_and_registers_champion(readings_csv, tmp_path
     assert main(["predict", str(out), str(readings_csv), "--out", str(pred)]) == 0
     table = pd.read_csv(pred)
     assert list(table.columns) == ["machine_id", "axis", "visit", "feed_mm_min", "dwell_s",
-                                   "repeat", "target", "backlash_um"]
+                                   "repeat", "target", "backlash_um", "extrapolated"]
     assert len(table) == 3 * 6 and (table["backlash_um"] >= 0).all()
 
 

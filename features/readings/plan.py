@@ -67,31 +67,7 @@ def read_plan(path) -> pd.DataFrame:
         if column not in COLUMNS:
             raise InputError(f"unknown plan column; expected {', '.join(COLUMNS)}", file=path,
                              column=column)
-    if "target" not in raw:
-        raise InputError("missing column; a plan needs the target positions", file=path,
-                         column="target")
-    plan = pd.DataFrame(index=raw.index)
-    plan["target"] = to_float(raw["target"], path, "target", rows)
-    for column in LABELS:
-        if column in raw:
-            plan[column] = to_label(raw[column], path, column, rows)
-    if "axis" in plan:
-        bad = ~plan["axis"].isin((*schema.LINEAR_AXES, *schema.ROTARY_AXES))
-        if bad.any():
-            i = int(bad.to_numpy().nonzero()[0][0])
-            raise InputError(f"unknown axis {plan['axis'].iloc[i]!r}; expected one of "
-                             f"{', '.join((*schema.LINEAR_AXES, *schema.ROTARY_AXES))}",
-                             file=path, row=row_of(rows, i), column="axis")
-    if "repeat" in raw:
-        plan["repeat"] = to_int(raw["repeat"], path, "repeat", rows)
-    for column in NUMBERS:
-        if column in raw:
-            plan[column] = to_float(raw[column], path, column, rows, allow_nan=True)
-            checked = plan[[column]].assign(**{ROW: rows}).dropna()
-            if column in PLAUSIBLE and not checked.empty:
-                check_plausible(checked, column, path)
-    if "started_at" in raw:
-        plan["started_at"] = to_datetime(raw["started_at"], path, "started_at", rows)
+    plan = plan_points(raw, path, rows)
     keys = [c for c in ("machine_id", "axis", "visit", "repeat", "feed_mm_min", "dwell_s",
                         "target") if c in plan]
     doubled = plan.duplicated(keys, keep="first")
@@ -101,3 +77,50 @@ def read_plan(path) -> pd.DataFrame:
                          row=row_of(rows, i), column="target")
     plan.attrs["source"] = str(path)
     return plan.reset_index(drop=True)
+
+
+def plan_points(raw: pd.DataFrame, source, rows=1) -> pd.DataFrame:
+    """The plan columns (``COLUMNS``) of ``raw`` typed and checked by the readings' rules
+    (numbers finite and plausible, known axis names, whole repeats), other columns kept as
+    they are; the first problem is one ``InputError`` naming ``source``, the row and the column.
+
+    Parameters
+    ----------
+    raw : DataFrame
+        Points: a plan's columns as text or numbers (a request to a served model, a plan
+        built in code).
+    source : str or Path
+        What the error lines name (a file, ``request``).
+    rows : Series or int
+        File row of each point, or the row number of the first one (default 1: row N is the
+        N-th point).
+    """
+    if "target" not in raw:
+        raise InputError("missing column; a plan needs the target positions", file=source,
+                         column="target")
+    plan = pd.DataFrame(index=raw.index)
+    plan["target"] = to_float(raw["target"], source, "target", rows)
+    for column in LABELS:
+        if column in raw:
+            plan[column] = to_label(raw[column], source, column, rows)
+    if "axis" in plan:
+        bad = ~plan["axis"].isin((*schema.LINEAR_AXES, *schema.ROTARY_AXES))
+        if bad.any():
+            i = int(bad.to_numpy().nonzero()[0][0])
+            raise InputError(f"unknown axis {plan['axis'].iloc[i]!r}; expected one of "
+                             f"{', '.join((*schema.LINEAR_AXES, *schema.ROTARY_AXES))}",
+                             file=source, row=row_of(rows, i), column="axis")
+    if "repeat" in raw:
+        plan["repeat"] = to_int(raw["repeat"], source, "repeat", rows)
+    for column in NUMBERS:
+        if column in raw:
+            plan[column] = to_float(raw[column], source, column, rows, allow_nan=True)
+            checked = plan[[column]].assign(**{ROW: rows if isinstance(rows, pd.Series) else
+                                               range(rows, rows + len(plan))}).dropna()
+            if column in PLAUSIBLE and not checked.empty:
+                check_plausible(checked, column, source)
+    if "started_at" in raw:
+        plan["started_at"] = to_datetime(raw["started_at"], source, "started_at", rows)
+    for column in raw.columns.difference(plan.columns, sort=False):
+        plan[column] = raw[column]
+    return plan

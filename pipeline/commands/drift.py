@@ -16,7 +16,7 @@ ALERT_EXIT = 3
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_readings_argument(parser, help="readings file with several visits (visit, "
                                        "started_at)")
-    parser.add_argument("--out", required=True, help="output folder for the report")
+    parser.add_argument("--out", help="output folder for the report (optional with --json)")
     add_limit_arguments(parser)
     add_as_of_argument(parser)
     parser.add_argument("--model", metavar="DIR",
@@ -33,12 +33,15 @@ def run(args: argparse.Namespace) -> int:
 
     import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
 
+    from features.readings.errors import InputError
     from features.readings.fileio import dumps
     from pipeline import tracking
     from pipeline.background_run import BackgroundRun
     from pipeline.commands.data import readings_arg
     from pipeline.workflows.drift import drift
 
+    if args.out is None and not args.json:  # before any work
+        raise InputError("give the report folder (--out) or --json", parameter="out")
     tracking.check_uri()
     with BackgroundRun("drift", tracking.log_into) as mlflow_run:
         result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
@@ -47,10 +50,11 @@ def run(args: argparse.Namespace) -> int:
                        model=args.model, warn_months=args.warn_months, alpha=args.alpha,
                        min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
         mlflow_run.start(result.run_name)  # the input is valid: the run may start
-        result.write(args.out)
+        if args.out is not None:
+            result.write(args.out)
         mlflow_run.log(tracking.record_data(result.tracking_record()))
         mlflow_run.finish()
-    print_summary(result.series, result.files["html"], file=sys.stderr)
+    print_summary(result.series, result.files.get("html"), file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return ALERT_EXIT if result.alerts else 0
@@ -81,4 +85,5 @@ def print_summary(series, html_path, file) -> None:
                   f"{w['jump_um']:+.2f} {s.unit} at visit {w['visit']} (U = {w['U_um']:.2f} "
                   f"{s.unit})",
                   file=file)
-    print(f"report: {html_path}", file=file)
+    if html_path is not None:
+        print(f"report: {html_path}", file=file)

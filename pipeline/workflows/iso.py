@@ -96,6 +96,9 @@ class IsoResult(Result):
         """The uncertainty columns the figures carry (none without a budget)."""
         return [k for k in UNCERTAINTY_KEYS if k in self.figures.columns]
 
+    def repr_items(self) -> dict[str, str]:
+        return {"tests": str(len(self.figures)), **super().repr_items()}
+
     def to_json(self) -> list[dict]:
         """One object per test with ``JSON_KEYS`` (and, with a budget, ``UNCERTAINTY_KEYS``)
         and its ``per_target`` rows (``PER_TARGET_KEYS``); NaN becomes None."""

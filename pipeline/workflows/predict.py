@@ -23,8 +23,6 @@ from pipeline.workflows.constraints import StrOptions
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")
-# a plan this many times the training span of operating hours beyond its end gets a note
-EXTRAPOLATION_WARNING = 1.5
 PARAMETERS = {
     "model": [str, os.PathLike, TrainedModel],
     "data": [str, os.PathLike, pd.DataFrame, None],
@@ -43,7 +41,9 @@ class PredictionResult(Result):
     predictions : DataFrame
         The point's keys (or the plan's columns) and ``backlash_um``; a predictor with an
         interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
-        predictions are clipped at 0 (backlash is a magnitude). With a rotary axis among the
+        predictions are clipped at 0 (backlash is a magnitude). ``extrapolated`` names the
+        point's inputs outside the ranges the model was trained on (``feed_mm_min;target``),
+        empty when none (``models.serving.trained_ranges``). With a rotary axis among the
         points a ``unit`` column says each row's unit (``arcsec`` for a rotary axis).
     model : str
         Registry name of the predictor.
@@ -115,8 +115,12 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     Returns
     -------
     PredictionResult
-        A plan far beyond the training span of operating hours gets a note (the forecast
-        extrapolates the wear rate that far).
+        Every input with points outside the range the model was trained on gets a note
+        naming the input, the points and the trained range (a ``BacklashWarning``, also in
+        ``notes``), and the points say which in ``extrapolated``. A forecasting model (the wear
+        map) extrapolates in operating hours by design: its hours get a note (with the
+        extrapolation factor) only beyond ``models.serving.FORECAST_HORIZON`` training spans
+        past the last trained hour.
 
     Raises
     ------
@@ -125,7 +129,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         written, or points without ``machine_id`` and ``axis`` to record them by (nothing is
         recorded).
     """
-    from features.readings.plan import is_plan, read_plan
+    from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
     from models.serving import prediction_frame
@@ -144,7 +148,8 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         plan = data
     if plan is not None:
         source = str(plan) if isinstance(plan, (str, os.PathLike)) else "plan"
-        table = read_plan(plan) if isinstance(plan, (str, os.PathLike)) else plan
+        table = (read_plan(plan) if isinstance(plan, (str, os.PathLike))
+                 else plan_points(plan, source))
         inputs = plan_inputs(table, trained, source)
         keys = list(table.columns)
     else:
@@ -162,7 +167,10 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
              "wear maps (a wider interval)")
     predicted = prediction_frame(trained, inputs, source)
     out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
-    result = PredictionResult(predictions=out, model=trained.name)
+    lines = extrapolation_notes(trained, inputs)
+    for line in lines:
+        note(line)
+    result = PredictionResult(predictions=out, model=trained.name, notes=lines)
     if store is not None:
         points = out.copy()
         if "operating_hours" not in points and "operating_hours" in inputs:
@@ -246,8 +254,7 @@ def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
 
 
 def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None:
-    """A model trained on one spread of operating hours cannot forecast others; a plan far
-    beyond the training hours gets a note with the extrapolation factor."""
+    """A model trained on one spread of operating hours cannot forecast others."""
     if plan and getattr(model.estimator, "can_forecast_", True) is False:
         hours = model.input_ranges_.get("operating_hours")
         raise InputError(f"model {model.name!r} was trained on a single visit (no spread in "
@@ -258,17 +265,32 @@ def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None
         return
     low, high = model.input_ranges_["operating_hours"]
     hours = inputs["operating_hours"].astype(float)
-    if getattr(model.estimator, "can_forecast_", True) is False or high <= low:
-        if plan or (hours != low).any():
-            raise InputError(f"model {model.name!r} was trained on a single visit (operating "
-                             f"hours {low:g} h only): it cannot forecast other hours; train on "
-                             "several visits", file=source, column="operating_hours")
-        return
-    factor = (float(hours.max()) - high) / (high - low)
-    if factor > EXTRAPOLATION_WARNING:
-        note(f"operating_hours up to {hours.max():g} h is {factor:.1f}x the training span "
-             f"({low:g}-{high:g} h) beyond its end; the forecast extrapolates the wear rate "
-             "that far")
+    single = getattr(model.estimator, "can_forecast_", True) is False or high <= low
+    if single and (plan or (hours != low).any()):
+        raise InputError(f"model {model.name!r} was trained on a single visit (operating "
+                         f"hours {low:g} h only): it cannot forecast other hours; train on "
+                         "several visits", file=source, column="operating_hours")
+
+
+def extrapolation_notes(model, inputs: pd.DataFrame) -> list[str]:
+    """One note per input with points outside the trained range
+    (``models.serving.extrapolation_lines``); a forecasting model's operating hours only
+    beyond its forecast horizon (``models.serving.FORECAST_HORIZON`` training spans past the
+    last trained hour), with the extrapolation factor."""
+    from models.serving import FORECAST_HORIZON, extrapolation_lines, forecasts
+
+    if not forecasts(model):
+        return extrapolation_lines(model, inputs)
+    lines = extrapolation_lines(model, inputs, skip=("operating_hours",))
+    if "operating_hours" in inputs and "operating_hours" in model.input_ranges_:
+        low, high = model.input_ranges_["operating_hours"]
+        last = float(inputs["operating_hours"].astype(float).max())
+        factor = (last - high) / (high - low) if high > low else 0.0
+        if factor > FORECAST_HORIZON:
+            lines.append(f"operating_hours up to {last:g} h is {factor:.1f}x the training "
+                         f"span ({low:g}-{high:g} h) beyond its end; the forecast "
+                         "extrapolates the wear rate that far")
+    return lines
 
 
 WORKFLOW = Workflow(

@@ -117,6 +117,12 @@ class TrainResult(Result):
     target_reason: str = ""
     figures: list[Path] = field(default_factory=list)
 
+    def repr_items(self) -> dict[str, str]:
+        rmse = self.metrics.get("test_rmse_um")
+        return {"model": repr(self.model), "points": str(self.n_points),
+                "target": repr(self.target_kind),
+                **({"test_rmse_um": f"{rmse:.4g}"} if rmse is not None else {})}
+
     def write(self, out) -> dict[str, Path]:
         """Save the model directory ``out`` (``model.json``, the estimator, the training
         inputs) and the figures of the fit in ``out/figures``."""

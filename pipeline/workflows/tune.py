@@ -132,7 +132,8 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
         Trials to run in total (shared among the workers).
     storage : str, optional
         Optuna storage URL (``sqlite:///FILE``, ``postgresql://USER@HOST/DB``); default
-        ``sqlite:///optuna.db``.
+        ``optuna.db`` in the tracking folder (``pipeline.tracking.study_storage``: the working
+        directory unless ``BACKLASH_TRACKING_DIR`` names another).
     study : str
         Study name; a study that exists is continued.
     workers : int
@@ -154,12 +155,13 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     TuneResult
     """
     from models import tuning
+    from pipeline import tracking
 
     check_params(PARAMETERS, {"data": data, "trials": trials, "storage": storage,
                               "study": study, "workers": workers, "folds": folds,
                               "heartbeat_s": heartbeat_s, "format": format, "target": target,
                               "features": features, "seed": seed, "track": track}, "tune")
-    storage = check_storage(storage or tuning.DEFAULT_STORAGE)
+    storage = check_storage(storage or tracking.study_storage())
     loaded = model_data(data, format, target, features)
     table = loaded.table
     if len(table.y) < 2 * folds:
@@ -180,8 +182,6 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     if not track:
         result = _search(tuning, opened, work, trials, workers, progress, params, stale)
     else:
-        from pipeline import tracking
-
         killed = _close_killed_runs(opened, stale)
         with tracking.run("tune", f"tune {study}") as parent:
             tracking.mlflow_module().log_params(tracking.params(params))
