@@ -338,3 +338,18 @@ def test_a_store_of_the_previous_format_reads_and_is_upgraded_by_its_first_void(
             reason="r")
     with manifest(store) as conn:
         assert conn.execute("SELECT value FROM meta").fetchone() == ("3",)
+
+
+@pytest.mark.parametrize(("url", "words"), [
+    ("postgresql://[::1/fleet", "Invalid IPv6 URL"),
+    ("postgresql://ann:pw@[::1/fleet", "Invalid IPv6 URL"),
+    ("postgresql://ann:pw@db:99999/fleet", "Port out of range"),
+])
+def test_a_malformed_store_url_is_one_line_without_its_password(tmp_path, capsys, url, words):
+    for argv in (["iso", url], ["ingest", FILE_OF_ECMC, "--store", url]):
+        line = refused(capsys, argv)
+        assert "is not a valid URL" in line and words in line and "pw" not in line
+
+
+FILE_OF_ECMC = str(Path(__file__).resolve().parents[1] / "experiments/data/ecmc/"
+                   "ess_mcu1025_ISO230.dat")

@@ -46,7 +46,10 @@ def redact(location) -> str:
     text = str(location)
     if not is_url(text):
         return text
-    parts = urlsplit(text)
+    try:
+        parts = urlsplit(text)
+    except ValueError:  # not a URL urllib can take apart: hide whatever may be a password
+        return re.sub(r"^([^:/]+://[^:@/]*):[^@]*@", r"\1:***@", text)
     netloc = parts.netloc
     if parts.password is not None:
         user, _, host = netloc.rpartition("@")
@@ -89,7 +92,10 @@ def _postgres(url: str, write: bool, parameter: str | None):
     from pipeline.store.postgres import PostgresStore
 
     try:
-        password = urlsplit(url).password
-    except ValueError:
-        password = None
+        parts = urlsplit(url)
+        password, _ = parts.password, parts.port  # the port is parsed (and checked) lazily
+    except ValueError as err:
+        raise InputError(f"is not a valid URL ({err}); expected postgresql://USER@HOST[:PORT]/"
+                         "DATABASE (an IPv6 host in brackets: [::1])", file=redact(url),
+                         parameter=parameter) from None
     return PostgresStore(url, redact(url), password, write=write, parameter=parameter)
