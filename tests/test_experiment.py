@@ -198,7 +198,7 @@ TUNE = pytest.mark.skipif(not _has_workflow("tune"), reason="no tune workflow")
     ("name = 3\n" + STEP, "column 'name': expected text, got 3"),
     ('steps = "iso"\n', "column 'steps': expected a list of tables, got 'iso'"),
     ('steps = ["iso"]\n', "column 'steps[1]': expected a table, got 'iso'"),
-    ('[[steps]]\njob = "bake"\n', "step 1: unknown job 'bake'; expected one of convert, ingest, iso"),
+    ('[[steps]]\njob = "bake"\n', "step 1: unknown job 'bake'; expected one of convert, ingest, store, void, iso"),
     ('[[steps]]\ncommand = "bake"\n', "step 1: unknown job 'bake'"),
     ('[[steps]]\ncommand = ["iso"]\n', "column 'steps[1].command': expected text"),
     ('[[steps]]\ntitle = "no job"\n', "step 1: no job given; expected one of convert"),
