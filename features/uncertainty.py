@@ -355,6 +355,19 @@ class UncertaintyBudget:
     coverage_factor: float = 2.0
     arithmetic: Literal["iso", "paper"] = "iso"
     paper: PaperArithmetic | None = None
+    name: str = ""  # how a report names the budget (default: its file's name)
+
+    def digest(self) -> str:
+        """The first 12 hex digits of the SHA-256 of the budget's values (its keys sorted, as
+        JSON): two budgets with the same digest give the same uncertainties, whatever their
+        files' comments or layout; a report prints it beside the budget's name."""
+        import dataclasses
+        import hashlib
+        import json
+
+        values = {k: v for k, v in dataclasses.asdict(self).items() if k != "name"}
+        text = json.dumps(values, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
 
     def check(self, file=None) -> None:
         """Refuse a non-physical budget: one ``InputError`` naming the key."""

@@ -217,3 +217,17 @@ def test_missing_file_and_bad_parameter(cli, capsys, tmp_path):
     with pytest.raises(InputError, match=r"needs the budget's \[paper\] table") as err:
         uncertainty(table, arithmetic="paper")
     assert err.value.parameter == "arithmetic"
+
+
+def test_the_digest_follows_the_values_not_the_file(tmp_path):
+    """A report prints the budget's digest: comments and the name leave it, a value moves it."""
+    from features.uncertainty import read_budget
+
+    paper = read_budget(PAPER)
+    same = _budget(tmp_path, "drift_um = 1.0 ", "drift_um = 1.0   # re-measured, same value ")
+    renamed = PAPER.read_text(encoding="utf-8").replace("name = ", "name = 'other' #")
+    (tmp_path / "renamed.toml").write_text(renamed, encoding="utf-8")
+    assert read_budget(same).digest() == paper.digest() == read_budget(
+        tmp_path / "renamed.toml").digest()
+    moved = read_budget(_budget(tmp_path, "drift_um = 1.0 ", "drift_um = 1.1 "))
+    assert moved.digest() != paper.digest() and len(paper.digest()) == 12
