@@ -131,7 +131,8 @@ def header_lines(result, row, source, flags, meta) -> list[str]:
     who = signing(meta)
     sensors = [v for k, v in who if k == "sensor"]
     named = [p for p in who if p[0] != "sensor"]
-    lines += rows_of(named[:2], 2) + rows_of(named[2:], 3)  # who; then the instrument
+    # who; the instrument alone (its names are long); its serial and calibration
+    lines += rows_of(named[:2], 2) + rows_of(named[2:3], 1) + rows_of(named[3:], 2)
     lines += [f"environment sensor: {v}" for v in sensors] + [""]
     lines.append(uncertainty_line(result))
     state = "left out of" if result.dropped else "kept in"
