@@ -185,8 +185,38 @@ def test_the_pdf_pages_as_drawn_hold_the_charts(ess_file, psi_file, tmp_path, ca
         flagged = page[2].loc[page[3], "deviation_um"]
         assert sorted(found) == sorted(round(v, 1) for v in flagged)
         rings.append(sorted(found))
-    # the two readings ISO flags on the ESS file, none on the PSI file
+    # the two readings the outlier rule flags on the ESS file, none on the PSI file
     assert rings == [[62.8, 93.2], []]
+    for img, page in zip(images, iso_report._pages(result)):
+        # no blank band under the header: between the title and the chart, no run of white
+        # rows taller than half an inch (the pages had 1.1 in)
+        fig = iso_report.test_figure(result, *page)
+        (ax,) = [a for a in fig.axes if any(line.get_label() == "readings +" for line in a.lines)]
+        scale = RENDER_DPI / fig.dpi
+        chart_top = int((fig.bbox.height - ax.get_window_extent().y1) * scale)
+        inked = (img[:chart_top].min(axis=-1) < 0.8).any(axis=1)
+        rows = np.flatnonzero(inked)
+        assert np.diff(rows).max() < 0.5 * RENDER_DPI, np.diff(rows).max() / RENDER_DPI
+        # the signature block is drawn in the page's last 2 in: its lines are ink
+        foot = img[-2 * RENDER_DPI:]
+        assert ((foot.min(axis=-1) < 0.5).sum(axis=1) > 0.2 * img.shape[1]).sum() >= 2
+
+
+def test_every_table_label_fits_its_cell(ess_file):
+    """The per-target table's ISO 230-2 symbols and numbers lie inside their cells (the
+    "mean_down" header was clipped)."""
+    result = report(str(ess_file), uncertainty=str(BUDGET)).iso
+    fig = iso_report.test_figure(result, *next(iso_report._pages(result)))
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    [table] = [t for a in fig.axes for t in a.tables]
+    cells = table.get_celld()
+    assert len(cells) == 6 * 9  # header and 5 targets, 9 columns
+    for cell in cells.values():
+        box, text = cell.get_window_extent(renderer), cell.get_text().get_window_extent(renderer)
+        assert box.x0 <= text.x0 and text.x1 <= box.x1, cell.get_text().get_text()
 
 
 # --------------------------------------------------------------------------- a page one signs
