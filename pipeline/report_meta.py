@@ -3,20 +3,11 @@
 A readings file holds the machine's figures, not who stands behind them: the operator, the
 instrument and its calibration, the environment sensors and theirs. A test report is signed
 against them, so every page prints them above its signature block.
-``backlash report --meta META.toml``::
-
-    [report]
-    operator = "A. Sandström"
-    organisation = "European Spallation Source ERIC"
-    instrument = "Renishaw XL-80 laser interferometer"
-    instrument_serial = "XL80-123456"
-    instrument_calibrated_on = 2026-02-10
-    remarks = "Axis at 21.3 °C after 2 h warm-up."
-
-    [[report.sensors]]
-    name = "air temperature"
-    serial = "XC80-T-998"
-    calibrated_on = 2026-01-15
+``backlash report --meta META.toml`` reads its ``[report]`` table: ``operator``,
+``organisation``, ``instrument``, ``instrument_serial``, ``instrument_calibrated_on`` (a date),
+``remarks`` and one ``[[report.sensors]]`` table per environment sensor (``name``, ``serial``,
+``calibrated_on``); ``experiments/data/report_meta.toml`` is an example, ``docs/report.md``
+the reference.
 
 The table is read by the one configuration reader (``features.readings.config``): an unknown
 key, a missing one or a value of the wrong kind is one line naming the file and the key.
