@@ -129,8 +129,8 @@ def header_lines(result, row, source, flags, meta) -> list[str]:
 
     lines = rows_of(conditions(row, source), 3) + [""]
     who = signing(meta)
-    sensors = [v for k, v in who if k == "sensor"]
-    named = [p for p in who if p[0] != "sensor"]
+    sensors = [v for k, v in who if k == "environment sensor"]
+    named = [p for p in who if p[0] != "environment sensor"]
     # who; the instrument alone (its names are long); its serial and calibration
     lines += rows_of(named[:2], 2) + rows_of(named[2:3], 1) + rows_of(named[3:], 2)
     lines += [f"environment sensor: {v}" for v in sensors] + [""]

@@ -68,7 +68,7 @@ class ReportMeta:
             text = value.isoformat() if isinstance(value, dt.date) else str(value)
             if text:
                 out.append((label, text))
-        out += [("sensor", s.text()) for s in self.sensors]
+        out += [("environment sensor", s.text()) for s in self.sensors]
         return out
 
 
