@@ -121,8 +121,8 @@ def _pages(result):
 
 
 def header_lines(result, row, source, flags, meta) -> list[str]:
-    """The page's text above the chart: conditions, who tested with what, U and the outlier
-    rule, the axis figures."""
+    """The page's text above the chart: conditions, who tested with what, what U is and the
+    outlier rule."""
     def rows_of(pairs, per_line):
         return ["   ".join(f"{k}: {v}" for k, v in pairs[i:i + per_line])
                 for i in range(0, len(pairs), per_line)]
@@ -160,23 +160,25 @@ def test_figure(result, row, targets, readings, flags, source, meta=None):
     unit = display_unit(row["unit"])
     fig.text(0.06, 1 - 0.45 / A4_IN[1], f"{result.standard.title} positioning test — "
              f"{row['machine_id']}, axis {row['axis']}", fontsize=11, weight="bold")
-    lines = header_lines(result, row, source, flags, meta)
-    line_in = 0.125  # 7 pt monospace, one line [in]
-    fig.text(0.06, 1 - 0.65 / A4_IN[1], "\n".join(textwrap.fill(t, 118) if t else t
-                                                  for t in lines),
-             va="top", fontsize=6.6, family="monospace", linespacing=1.25)
-    wrapped = sum(max(1, len(textwrap.wrap(t, 118))) for t in lines)
-    top = 0.65 + wrapped * line_in + 0.35
-    ax = _band(fig, left, width, top, 3.3)
-    ax_b = _band(fig, left, width, top + 3.45, 0.9)
+    lines = [textwrap.fill(t, 118) if t else t for t in header_lines(result, row, source,
+                                                                     flags, meta)]
+    fig.text(0.06, 1 - 0.65 / A4_IN[1], "\n".join(lines), va="top", fontsize=6.6,
+             family="monospace", linespacing=1.25)
+    # 6.6 pt at 1.25 spacing is 0.115 in a line: 0.125 leaves room, then a gap for the title
+    top = 0.65 + sum(t.count("\n") + 1 for t in lines) * 0.125 + 0.35
+    # the chart takes what the header, the table's rows of 0.2 in and the foot leave (a long
+    # list of sensors or targets shrinks it, down to 1.5 in)
+    chart_in = min(3.3, max(1.5, A4_IN[1] - FOOT_IN - top - 1.8 - 0.2 * (len(targets) + 1)))
+    ax = _band(fig, left, width, top, chart_in)
+    ax_b = _band(fig, left, width, top + chart_in + 0.15, 0.9)
     ax_b.sharex(ax)
     ax.tick_params(labelbottom=False)
     draw_readings(ax, readings, flags)
     draw_test(ax, ax_b, targets, row,
               None if result.budget is None else result.budget.coverage_factor)
-    table_top = top + 3.45 + 0.9 + 0.75
+    table_top = top + chart_in + 0.15 + 0.9 + 0.75
     # rows of 0.2 in, narrower for a long table: it ends above the signature block
-    row_in = min(0.2, (A4_IN[1] - FOOT_IN - table_top) / (len(targets) + 1))
+    row_in = max(0.05, min(0.2, (A4_IN[1] - FOOT_IN - table_top) / (len(targets) + 1)))
     ax_t = _band(fig, 0.06, 0.88, table_top, row_in * (len(targets) + 1))
     ax_t.axis("off")
     table = ax_t.table(cellText=target_cells(targets),
