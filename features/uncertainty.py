@@ -329,6 +329,13 @@ class PaperArithmetic:
     device_sum: Literal["linear", "rss"] = "linear"
 
 
+# Bounds of a budget's numbers. No length, contributor or factor in these units comes near
+# 1e9 (1e9 um is a kilometre), and below it every square and sum of the lines stays finite:
+# a budget beyond it is a typing slip, whose lines would overflow or print as inf.
+MAX_VALUE = 1e9
+MAX_CYCLES = 1_000_000
+
+
 @dataclass
 class UncertaintyBudget:
     """An ISO/TR 230-9 uncertainty budget of one axis, as read from a TOML file.
@@ -348,6 +355,19 @@ class UncertaintyBudget:
     coverage_factor: float = 2.0
     arithmetic: Literal["iso", "paper"] = "iso"
     paper: PaperArithmetic | None = None
+    name: str = ""  # how a report names the budget (default: its file's name)
+
+    def digest(self) -> str:
+        """The first 12 hex digits of the SHA-256 of the budget's values (its keys sorted, as
+        JSON): two budgets with the same digest give the same uncertainties, whatever their
+        files' comments or layout; a report prints it beside the budget's name."""
+        import dataclasses
+        import hashlib
+        import json
+
+        values = {k: v for k, v in dataclasses.asdict(self).items() if k != "name"}
+        text = json.dumps(values, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
 
     def check(self, file=None) -> None:
         """Refuse a non-physical budget: one ``InputError`` naming the key."""
@@ -358,14 +378,23 @@ class UncertaintyBudget:
         for key, value in positive.items():
             if not value > 0:
                 raise InputError(f"must be > 0; got {value}", file=file, column=key)
+        bounded = dict(positive)
         if self.cycles < 2:
             raise InputError(f"must be at least 2 runs per direction; got {self.cycles}",
                              file=file, column="cycles")
+        if self.cycles > MAX_CYCLES:
+            raise InputError(f"must be at most {MAX_CYCLES} runs per direction", file=file,
+                             column="cycles")
         for section in ("device", "misalignment", "temperature", "environment", "setup"):
             for key, value in vars(getattr(self, section)).items():
                 if key != "machine_temperature_c" and value < 0:
                     raise InputError(f"a contributor cannot be negative; got {value}",
                                      file=file, column=f"{section}.{key}")
+                bounded[f"{section}.{key}"] = value
+        for key, value in bounded.items():
+            if abs(value) > MAX_VALUE:
+                raise InputError(f"must be at most {MAX_VALUE:g} in its unit; got {value:g}",
+                                 file=file, column=key)
         if self.misalignment.offset_mm > min(self.lengths("iso")[1], self.lengths()[1]):
             raise InputError("the offset cannot exceed the length it drifts over",
                              file=file, column="misalignment.offset_mm")

@@ -223,8 +223,13 @@ def _check_values(record, params: dict, path: Path, where: str) -> None:
     from pipeline.workflows import check_params
 
     module = sys.modules[record.function.__module__]
+    constraints = getattr(module, "PARAMETERS", {})
+    for name in record.inputs:  # a table where only paths are read: nothing would judge it
+        if isinstance(params.get(name), dict) and name not in constraints:
+            raise InputError(f"{where}: parameter {name!r}: expected a path (text) or a list "
+                             "of paths, got a table", file=path)
     try:
-        check_params(getattr(module, "PARAMETERS", {}), params, record.name)
+        check_params(constraints, params, record.name)
     except InputError as err:
         raise InputError(f"{where}: parameter {err.parameter!r}: {err.message}",
                          file=path) from None
@@ -260,10 +265,13 @@ def _expand_all(value, values, path, label):
 def _place(value, role: str, step: Step, values: dict, path: Path, label: str):
     """Resolve a path parameter: inputs against the file's folder (they must exist unless an
     earlier step writes them), outputs against the output folder (they must stay inside)."""
-    if isinstance(value, list):
+    if isinstance(value, list) and role == "input" and value:
         return [_place(v, role, step, values, path, label) for v in value]
+    if isinstance(value, dict) and role == "input":
+        return value  # an inline table (a budget, a campaign): the workflow's constraints judge
     if not isinstance(value, str):
-        return value  # a table or a number: the workflow's constraints judge it
+        expected = "a path (text)" if role == "output" else "a path (text) or a list of paths"
+        raise InputError(f"{label}: expected {expected}, got {_toml(value)}", file=path)
     if role == "input" and is_url(value):
         return value  # a store's URL (postgresql://...): no path to resolve
     out = Path(values["out"])
@@ -279,6 +287,13 @@ def _place(value, role: str, step: Step, values: dict, path: Path, label: str):
             raise InputError(f"{label}: no such file or folder {str(resolved)!r}", file=path)
         step.inputs.append(resolved)
     return str(resolved)
+
+
+def _toml(value) -> str:
+    """A value as the file writes it (``5``, ``true``, ``[1]``), for messages."""
+    import json
+
+    return json.dumps(value) if isinstance(value, (bool, int, float, list, dict)) else repr(value)
 
 
 def _check_storage(step: Step, out: Path, path: Path, where: str) -> None:

@@ -124,7 +124,9 @@ def test_discover_from_python_on_a_real_test(ess_file, tmp_path):
     assert result.named == ["lead_error_profile", "reversal_profile"]
     assert result.rmse_after_um <= 1.5 * result.repeatability_um
     shown = [str(w.message) for w in caught if w.category is BacklashWarning]
-    assert shown == result.notes and any("direct measuring system" in n for n in shown)
+    # the reader's note (an ecmc file names no axis letter), then the workflow's own notes
+    assert shown[0] == f"{ess_file}: the file states no axis; taken as X (name it with --axis)"
+    assert shown[1:] == result.notes and any("direct measuring system" in n for n in shown)
     files = result.write(tmp_path / "new" / "discover")  # the folder is created
     assert files["html"].is_file() and files["png"].is_file()
     record = result.tracking_record()

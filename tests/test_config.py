@@ -170,7 +170,7 @@ def test_simulate_workflow_returns_frames_and_writes_them(tmp_path):
 
 @pytest.mark.parametrize("kwargs, parameter, words", [
     ({"seed": -1}, "seed", "must be an int in the range"),
-    ({"seed": True}, "seed", "whole number"),
+    ({"seed": True}, "seed", r"must be an int in the range \[0, 4294967295\]; got True"),
     ({"session_seed": 1.5}, "session_seed", "must be an int"),
     ({"preset": "nope"}, "preset", "unknown preset 'nope'"),
     ({"config": 3}, "config", "must be an instance of"),

@@ -158,10 +158,10 @@ def test_failing_step_stops_the_experiment_and_leaves_no_empty_folder(
                       + convert_step(bad, "{out}/never-reached.csv"))
     assert main(["run", str(spec)]) == 2
     err = capsys.readouterr().err
-    # the step headers, then one error line naming the step
-    lines = err.strip().splitlines()
-    assert [line for line in lines if "error" in line] == lines[-1:] and "Traceback" not in err
-    assert lines[-1].startswith("backlash run: error: step 1 (convert): ") and "bad.csv" in err
+    # the error line naming the step is the first line the run prints: no step header before
+    lines = [line for line in err.strip().splitlines() if " INFO mlflow." not in line]
+    assert len(lines) == 1 and "Traceback" not in err and "[1/2]" not in err, err
+    assert lines[0].startswith("backlash run: error: step 1 (convert): ") and "bad.csv" in err
     assert "never-reached" not in err and "[2/2]" not in err
     assert not (tmp_path / "out").exists()  # nothing half-written, no empty folder
 
@@ -220,6 +220,25 @@ TUNE = pytest.mark.skipif(not _has_workflow("tune"), reason="no tune workflow")
     (ISO + 'drop_outliers = "yes"\n', "parameter 'drop_outliers': must be an instance of"),
     (ISO + 'format = "xml"\n', "parameter 'format': must be a str among"),
     (ISO + 'json = true\n', "unknown parameter 'json'"),
+    # every key of a step has its type: one line naming the file, the step and the key
+    (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = 5\n',
+     "exp.toml: step 1 (convert): parameter 'out': expected a path (text), got 5"),
+    (ISO + 'out = ["{out}/a"]\n', "step 1 (iso): parameter 'out': expected a path (text), got"),
+    ('[[steps]]\njob = "iso"\n[steps.with]\ndata = 5\n',
+     "step 1 (iso): parameter 'data': expected a path (text) or a list of paths, got 5"),
+    ('[[steps]]\njob = "iso"\n[steps.with]\ndata = ["{here}/exp.toml", 1]\n',
+     "step 1 (iso): parameter 'data': expected a path (text) or a list of paths, got 1"),
+    ('[[steps]]\njob = "rank"\n[steps.with]\ndata = true\n',
+     "step 1 (rank): parameter 'data': expected a path (text) or a list of paths, got true"),
+    ('[[steps]]\njob = "drift"\n[steps.with]\ndata = {a = 1}\n',
+     "step 1 (drift): parameter 'data': expected a path (text) or a list of paths, got a table"),
+    (SIM + 'seed = true\n', ("step 1 (simulate): parameter 'seed': must be an int in the range "
+     "[0, 4294967295]; got True")),
+    (SIM + 'compensation = 5\n', ("step 1 (simulate): parameter 'compensation': must be an "
+     "instance of 'dict' or None; got 5")),
+    ('[[steps]]\njob = "drift"\n[steps.with]\ndata = "{here}/exp.toml"\nthreshold_um = true\n',
+     ("step 1 (drift): parameter 'threshold_um': must be a float in the range (0.0, inf) or "
+     "None; got True")),
     (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{outdir}/a.csv"\n',
      "unknown placeholder {outdir} in '{outdir}/a.csv'; expected {data}, {out}, {here}"),
     (STEP + '[steps.with]\ndata = "{here}/exp.toml"\nout = "{out!r}/a.csv"\n',

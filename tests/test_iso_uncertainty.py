@@ -114,8 +114,8 @@ def test_chart_shows_figure_plus_minus_U(ess_file, tmp_path, capsys):
     assert main(["iso", str(ess_file), "--uncertainty", str(BUDGET), "--plot", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     row = bl.iso(ess_file, uncertainty=BUDGET).figures.iloc[0]
-    assert _box_line(row, "B") == f"B      {row['B']:9.3f} ± {row['U_B_um']:.3f}"
-    assert _box_line(row, "B_mean") == f"B_mean {row['B_mean']:9.3f}"
+    assert _box_line(row, "B") == f"B  {row['B']:9.3f} ± {row['U_B_um']:.3f}"
+    assert _box_line(row, "B_mean") == f"B̄  {row['B_mean']:9.3f}"  # ISO 230-2's symbol
 
 
 def negative_budget(tmp_path) -> Path:

@@ -178,6 +178,41 @@ def test_bad_active_file_is_one_line_and_writes_nothing(controller, make, extra,
     assert not out.exists() or not any(out.iterdir())
 
 
+# Per controller: the line of its written file whose number becomes NaN or infinity.
+NON_FINITE = {"linuxcnc": r"^(25\.2000000 )\S+", "siemens": r"^(\$AA_ENC_COMP\[0,1,AX1\]=)\S+",
+              "fanuc": r"^(PITCH \d+ = )\S+", "heidenhain": r"^(1 +\+25\.2000 +)\S+",
+              "marlin": r"^(M425 X)\S+", "reprap": r"^(M425 X)\S+", "grblhal": r"^(\$160=)\S+",
+              "csv": r"^(ess_mcu1025,X,measured,25\.200000,(?:[^,]*,){6})[^,]+"}
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+@pytest.mark.parametrize("controller", list(CONTROLLERS))
+def test_active_file_holding_a_non_finite_value_is_refused(controller, value, ess_file,
+                                                           ess_profile, tmp_path, capsys):
+    """Every --active reader refuses NaN and infinity: LinuxCNC's own sscanf reads them, and
+    a new table built on them would be NaN where the controller moves the axis."""
+    import re
+
+    files = _write(ess_profile, controller, tmp_path / "active")
+    changed = 0
+    for path in files.values():
+        text = path.read_text()
+        new, n = re.subn(NON_FINITE[controller], rf"\g<1>{value}", text, count=1,
+                         flags=re.MULTILINE)
+        path.write_text(new)
+        changed += n
+    assert changed == 1, controller
+    out = tmp_path / "out"
+    argv = ["compensate", str(ess_file), "--controller", controller, "--out", str(out)]
+    for path in files.values():
+        argv += ["--active", str(path)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--active" in err, err
+    assert "finite number" in err and f"{value!r}" in err or controller == "csv", err
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_active_needs_one_machine_axis_of_measured_tests(ess_file, ess_profile, tmp_path):
     files = list(_write(ess_profile, "csv", tmp_path / "a").values())
     readings = read_readings(ess_file)
@@ -291,8 +326,9 @@ def test_real_ess_reversal_varies_and_psi_does_not(ess_file, psi_file, capsys):
                                               "grblhal"), False)}
     axis = ess.to_json()["axes"][0]["reversal_variation"]
     assert axis["direction_dependent"] is True and axis["dof"] == 4
-    with warnings.catch_warnings():
+    with warnings.catch_warnings():  # no note of a varying reversal (the axis's name is noted)
         warnings.simplefilter("error", BacklashWarning)
+        warnings.filterwarnings("ignore", "(?s).*the file states no axis", BacklashWarning)
         psi = bl.compensate(psi_file, controller="siemens")
     assert psi.reversal[0]["direction_dependent"] is False and psi.reversal[0]["p"] > 0.05
 

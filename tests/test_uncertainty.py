@@ -158,6 +158,22 @@ BAD = {
     "paper without its table": ((None, "", "paper"), "needs a [paper] table"),
     "unknown key": (("offset_mm = 1.0", "offset_mm = 1.0\nofset_mm = 2.0"),
                     "unknown key 'misalignment.ofset_mm'"),
+    # beyond any physical value: the lines' squares would overflow (OverflowError, inf U)
+    "huge length": (("length_mm = 360.0", "length_mm = 1e308"),
+                    "'length_mm': must be at most 1e+09 in its unit; got 1e+308"),
+    "huge drift": (("drift_um = 1.0", "drift_um = 1e308"),
+                   "'environment.drift_um': must be at most 1e+09"),
+    "huge Abbe offset": (("abbe_offset_mm = 50.0", "abbe_offset_mm = 1e200"),
+                         "'setup.abbe_offset_mm': must be at most 1e+09"),
+    "huge coverage factor": (("coverage_factor = 2.0", "coverage_factor = 1e300"),
+                             "'coverage_factor': must be at most 1e+09"),
+    "huge paper length": (("device_length_mm = 100.0", "device_length_mm = 1e308"),
+                          "'paper.device_length_mm': must be at most 1e+09"),
+    "huge cycles": (("cycles = 5 ", "cycles = 1e308 "), "'cycles': must be at most 1000000"),
+    "infinite length": (("length_mm = 360.0", "length_mm = inf"),
+                        "'length_mm': expected a number (finite)"),
+    "NaN contributor": (("resolution_um = 0.1", "resolution_um = nan"),
+                        "'device.resolution_um': expected a number (finite)"),
 }
 
 
@@ -201,3 +217,17 @@ def test_missing_file_and_bad_parameter(cli, capsys, tmp_path):
     with pytest.raises(InputError, match=r"needs the budget's \[paper\] table") as err:
         uncertainty(table, arithmetic="paper")
     assert err.value.parameter == "arithmetic"
+
+
+def test_the_digest_follows_the_values_not_the_file(tmp_path):
+    """A report prints the budget's digest: comments and the name leave it, a value moves it."""
+    from features.uncertainty import read_budget
+
+    paper = read_budget(PAPER)
+    same = _budget(tmp_path, "drift_um = 1.0 ", "drift_um = 1.0   # re-measured, same value ")
+    renamed = PAPER.read_text(encoding="utf-8").replace("name = ", "name = 'other' #")
+    (tmp_path / "renamed.toml").write_text(renamed, encoding="utf-8")
+    assert read_budget(same).digest() == paper.digest() == read_budget(
+        tmp_path / "renamed.toml").digest()
+    moved = read_budget(_budget(tmp_path, "drift_um = 1.0 ", "drift_um = 1.1 "))
+    assert moved.digest() != paper.digest() and len(paper.digest()) == 12

@@ -9,8 +9,8 @@ CLI prints as one line with exit code 2.
 
 Supported annotations: ``bool``, ``int`` (whole numbers; ``3.0`` is read as ``3``), ``float``
 (finite; an integer is kept as written), ``str``, ``Literal["a", "b"]``, ``list[X]``,
-``dict[str, X]`` (a table of tables with free keys), ``dict`` (a free table), ``X | None``
-and nested dataclasses. Checks of meaning (a positive duration, a known name) belong to the
+``dict[str, X]`` (a table of tables with free keys), ``dict`` (a free table), ``datetime.date``
+(a TOML date, ``2026-03-01``, or the same as text), ``X | None`` and nested dataclasses. Checks of meaning (a positive duration, a known name) belong to the
 dataclass's ``check(where)`` method, called after the types are read.
 """
 
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import datetime as dt
 import math
 import types
 import typing
@@ -138,10 +139,20 @@ def _value(value, kind, key: str, file, base=None):
         return copy.deepcopy(value)
     if not _fits(value, kind):
         _bad(_name(kind), value, key, file)
+    if kind is dt.date and isinstance(value, str):
+        return dt.date.fromisoformat(value)
     return int(value) if kind is int else value
 
 
 def _fits(value, kind) -> bool:
+    if kind is dt.date:  # a day, not a moment: a TOML date-time is refused
+        if isinstance(value, str):
+            try:
+                dt.date.fromisoformat(value)
+            except ValueError:
+                return False
+            return len(value) == 10
+        return isinstance(value, dt.date) and not isinstance(value, dt.datetime)
     if kind is bool:
         return isinstance(value, bool)
     if kind in (int, float):
@@ -157,7 +168,7 @@ def _fits(value, kind) -> bool:
 
 def _name(kind) -> str:
     return {bool: "true or false", int: "a whole number", float: "a number (finite)",
-            str: "text"}.get(kind, "a value")
+            str: "text", dt.date: "a date (YYYY-MM-DD)"}.get(kind, "a value")
 
 
 def _plural(kind) -> str:

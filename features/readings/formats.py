@@ -201,6 +201,27 @@ _ECMC_TARGET = re.compile(r"TGT_DATA\[(\d+)\]\s*=\s*(.*)")
 _ECMC_REF = re.compile(r"REF_DATA_(FWD|BWD)\[(\d+),\s*(\d+)\]\s*=\s*(.*)")
 _ECMC_UNIT = re.compile(r"UNIT\s*=\s*(.*)")
 _ECMC_COUNT = re.compile(r"(CYCLES|POSITIONS)\s*=\s*(\d+)")
+_ECMC_SETPOINT = re.compile(r"TGT_SET_PV\s*=\s*(\S*)")
+# A part of an ecmc PV's axis name that is a machine axis: one axis letter, alone, after
+# "Axis" or before a digit (Z, AxisZ, Axis_Z, Z1); a number (Axis1, M1) names no letter.
+_PV_AXIS = re.compile(r"(?:[Aa]xis)?([XYZABC])\d?")
+
+
+def axis_from_pv(pv: str) -> str | None:
+    """The machine axis an ecmc PV's name gives, or None.
+
+    ecmc names an axis's PVs ``<IOC prefix>:<axis name>-<field>`` (``PosSet``, ``PosCmd``,
+    ``PosAct``...). The axis name is the record's part before its last ``-``, split at ``-``,
+    ``_`` and ``.``; the axis is the one part that is an axis letter (``_PV_AXIS``):
+    ``TARGET_DU:Z-PosCmd`` -> Z, ``LAB:Mtr-Y1-PosSet`` -> Y, ``MC:AxisX-PosSet`` -> X. The
+    IOC prefix is not read (``TARGET_DU``'s ``DU`` names no axis), nor is a name with parts of
+    two axes (``X-Y-PosSet``) or with none (``IOC_TEST:Axis1-PosSet``, ``ecat01:M1-PosSet``,
+    ``ec0-s4-EL7211-Enc-PosAct``: axis numbers and terminals).
+    """
+    record = pv.rsplit(":", 1)[-1]
+    name = record.rsplit("-", 1)[0] if "-" in record else record
+    found = {m[1] for part in re.split(r"[-_.]", name) if (m := _PV_AXIS.fullmatch(part))}
+    return found.pop() if len(found) == 1 else None
 
 
 def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
@@ -210,7 +231,7 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
     after it); the ``row`` of each reading is its line in the file.
     """
     text = read_text(path) if text is None else text
-    targets, refs, unit, declared = {}, [], None, {}
+    targets, refs, unit, declared, setpoint = {}, [], None, {}, ""
     for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if m := _ECMC_TARGET.fullmatch(line):
@@ -229,6 +250,8 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
             unit = m[1].strip().lower()
         elif m := _ECMC_COUNT.fullmatch(line):
             declared[m[1]] = (int(m[2]), lineno)
+        elif m := _ECMC_SETPOINT.fullmatch(line):
+            setpoint = m[1]
         elif line.startswith(("TGT_DATA", "REF_DATA")):
             raise InputError(f"cannot read {line[:40]!r}; expected TGT_DATA[i]=number or "
                              "REF_DATA_FWD/BWD[i,j]=number", file=path, row=lineno)
@@ -253,14 +276,33 @@ def read_ecmc(path: Path, text: str | None = None) -> pd.DataFrame:
     if unit == "um":
         ref["target"] = ref["target"] / 1000.0
         ref["measured"] = ref["measured"] / 1000.0
+    axis, named_by = _ecmc_axis(setpoint, rotary, path)
     frame = pd.DataFrame({
-        "machine_id": stem, "axis": "A" if rotary else "X", "test_id": path.stem,
+        "machine_id": stem, "axis": axis, "test_id": path.stem,
         "method": "linear", "target": ref["target"],
         "direction": np.where(ref["dir"] == "FWD", "+", "-"), "cycle": ref["cycle"],
         "deviation_um": ref["deviation_um"], "measured": ref["measured"], ROW: ref["row"],
     })
-    frame.attrs[schema.UNSTATED] = ("machine_id", "axis")  # the header names neither
+    # the header names neither: the axis comes at best from the PV's name, which --axis overrides
+    frame.attrs[schema.UNSTATED] = ("machine_id", "axis")
+    if named_by:
+        frame.attrs[schema.NAMED_BY] = {"axis": named_by}
     return frame
+
+
+def _ecmc_axis(setpoint: str, rotary: bool, path: Path) -> tuple[str, str]:
+    """The axis of an ecmc test and what named it: the set-point PV's axis letter
+    (``axis_from_pv``) when it is of the kind the file's UNIT says (deg: rotary); else X (A for
+    a rotary axis) and no namer, for ``Selection`` to note."""
+    default = "A" if rotary else "X"
+    letter = axis_from_pv(setpoint) if setpoint else None
+    if letter is None:
+        return default, ""
+    if schema.is_rotary(letter) != rotary:
+        note(f"{path}: the set-point PV TGT_SET_PV={setpoint} names axis {letter}, but UNIT "
+             f"{'deg is a rotary' if rotary else 'is a linear'} axis's: its name is not taken")
+        return default, ""
+    return letter, f"its set-point PV TGT_SET_PV={setpoint}"
 
 
 def _check_declared_counts(ref: pd.DataFrame, targets: dict, declared: dict,

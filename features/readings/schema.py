@@ -89,5 +89,10 @@ def deviation_scale(axis: str) -> float:
 
 # ``frame.attrs[UNSTATED]``: the name columns a reader filled in because its file does not state
 # them (an ecmc file names no axis; its machine is the file's name). ``--machine``/``--axis``
-# then name them instead of selecting tests (``features.readings.selection``).
+# then name them instead of selecting tests (``features.readings.selection``); with neither, a
+# note says which name was taken.
 UNSTATED = "unstated"
+# ``frame.attrs[NAMED_BY]``: column -> where a reader read an unstated name from, when it read it
+# from a naming convention rather than a field (an ecmc axis from its set-point PV's name,
+# ``TGT_SET_PV=TARGET_DU:Z-PosCmd``): no note then, and ``--axis`` still renames it.
+NAMED_BY = "named_by"

@@ -100,6 +100,7 @@ class Selection:
             No test is left (naming ``source`` and what it holds).
         """
         if self.empty:
+            _note_taken(readings, source)
             return readings
         readings, named = self._name_unstated(readings, source)
         keep = self._labels(readings, skip=named) & self._times(readings, source)
@@ -126,11 +127,16 @@ class Selection:
                                  f"it, got {', '.join(wanted)}", file=source, parameter=name)
             if name == "axis":
                 _check_same_kind(readings["axis"], wanted[0], source)
+            namer = readings.attrs.get(schema.NAMED_BY, {}).get(column)
+            said = (f"{namer} names {name} {', '.join(map(str, readings[column].unique()))}"
+                    if namer else f"the file states no {name}")
             if not named:
                 readings = readings.copy(deep=False)
             readings[column] = wanted[0]
             named.append(name)
-            note(f"{source}: the file states no {name}; named {wanted[0]} (--{name})")
+            note(f"{source}: {said}; named {wanted[0]} (--{name})")
+        if "axis" not in named:
+            _note_taken(readings, source)
         if named:
             readings.attrs[schema.UNSTATED] = tuple(
                 c for c in unstated if c not in map(_column, named))
@@ -166,6 +172,15 @@ class Selection:
         if self.until is not None:
             keep &= started <= self.until
         return keep.to_numpy()
+
+
+def _note_taken(readings, source) -> None:
+    """Note the axis a reader took for a file that names none, when no ``--axis`` named it
+    (an ecmc file whose set-point PV names no axis letter: X, or A when its UNIT is deg)."""
+    if "axis" in readings.attrs.get(schema.UNSTATED, ()) and "axis" not in readings.attrs.get(
+            schema.NAMED_BY, {}):
+        axes = ", ".join(map(str, readings["axis"].unique()))
+        note(f"{source}: the file states no axis; taken as {axes} (name it with --axis)")
 
 
 def _check_same_kind(axes, named: str, source) -> None:

@@ -95,8 +95,9 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     extra = [c for c in frame.columns if c not in ordered and c != ROW]
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
-    if raw.attrs.get(schema.UNSTATED):
-        out.attrs[schema.UNSTATED] = raw.attrs[schema.UNSTATED]
+    for key in (schema.UNSTATED, schema.NAMED_BY):
+        if raw.attrs.get(key):
+            out.attrs[key] = raw.attrs[key]
     return out
 
 

@@ -133,6 +133,9 @@ def _ascending(nominal: np.ndarray, path) -> None:
         raise InputError("nominal positions must be strictly ascending", file=path, row=row)
 
 
+LINUXCNC_COLUMNS = ("nominal", "actual position moving +", "actual position moving -")
+
+
 def linuxcnc(comp_path, ini_path=None) -> Compensation:
     """LinuxCNC joint compensation: a ``COMP_FILE_TYPE 0`` table and/or ``BACKLASH`` (INI)."""
     backlash, comp_file, comp_type = 0.0, None, 0
@@ -156,14 +159,20 @@ def linuxcnc(comp_path, ini_path=None) -> Compensation:
     if comp_path is None or (ini_path is not None and comp_file is None):
         return Compensation(backlash_mm=backlash, source="linuxcnc BACKLASH")
     rows = []
-    for line in file_text(comp_path).splitlines():
+    for row, line in enumerate(file_text(comp_path).splitlines(), start=1):
         parts = line.split()
         if len(parts) < 3:  # LinuxCNC: sscanf("%lf %lf %lf") != 3 ends the table
             break
         try:
-            rows.append([float(p) for p in parts[:3]])
+            values = [float(p) for p in parts[:3]]
         except ValueError:
             break
+        # sscanf reads "nan" and "inf" too: a table holding them cannot be interpreted
+        for name, text, value in zip(LINUXCNC_COLUMNS, parts, values):
+            if not np.isfinite(value):
+                raise InputError(f"{name}: {text!r} is not a finite number", file=comp_path,
+                                 row=row)
+        rows.append(values)
     if not rows:
         raise InputError("no 'nominal actual_plus actual_minus' lines", file=comp_path, row=1)
     if len(rows) > LINUXCNC_MAX_LINES:

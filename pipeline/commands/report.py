@@ -22,6 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drop-outliers", action="store_true",
                         help="leave flagged outliers out of the figures (still ringed on the "
                              "charts)")
+    parser.add_argument("--meta", metavar="META.toml",
+                        help="[report] table: operator, organisation, instrument, "
+                             "instrument_serial, instrument_calibrated_on, sensors, remarks; "
+                             "printed on every page above the signature block")
     add_standard_argument(parser)
     parser.add_argument("--json", action="store_true",
                         help="print the figures of every test as JSON (as iso --json)")
@@ -35,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.workflows.report import report
 
     result = report(readings_arg(args, "files"), args.format, args.drop_outliers,
-                    uncertainty=args.uncertainty, standard=args.standard)
+                    uncertainty=args.uncertainty, standard=args.standard, meta=args.meta)
     for role, path in result.write(args.out).items():
         print(f"{role}: {path}", file=sys.stderr)
     if args.json:

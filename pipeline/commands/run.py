@@ -27,7 +27,12 @@ def run(args: argparse.Namespace) -> int:
     from pipeline import experiment
 
     loaded = experiment.load(args.file, args.out)
-    result = experiment.execute(loaded, progress=_show_step)
+    # the step headers are printed once the run ends: a failing step's error is the first
+    # line the run prints (it names the step), not the last after the headers
+    headers: list[str] = []
+    result = experiment.execute(loaded, progress=lambda done, total, title: headers.append(
+        f"[{done + 1}/{total}] {title}") if done < total else None)
+    print("\n".join(headers), file=sys.stderr)
     print(file=sys.stderr)
     for done in result.steps:
         alert = " (alert)" if done.code == ALERT_EXIT else ""
@@ -40,11 +45,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"experiment {loaded.name!r}: MLflow run {result.run_id} in {result.tracking_uri}; "
           f"outputs in {_short(loaded.out)}/", file=sys.stderr)
     return result.code
-
-
-def _show_step(done: int, total: int, title: str) -> None:
-    if done < total:
-        print(f"\n[{done + 1}/{total}] {title}", file=sys.stderr, flush=True)
 
 
 def _listing(paths: list) -> str:

@@ -40,7 +40,9 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
         if name not in constraints:
             continue
         given = constraints[name]
-        if light.understood(given):
+        if isinstance(value, bool) and not light.takes_bool(given):
+            message = light.must_be(given, value, name, caller)
+        elif light.understood(given):
             message = light.violation(given, value, name, caller)
         else:
             message = _sklearn_violation(given, value, name, caller)

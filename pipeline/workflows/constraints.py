@@ -169,9 +169,24 @@ def violation(constraints: list, value, name: str, caller: str) -> str | None:
     checks = [_constraint(c) for c in constraints]
     if any(c.is_satisfied_by(value) for c in checks):
         return None
-    texts = [str(c) for c in checks]
+    return must_be(constraints, value, name, caller)
+
+
+def must_be(constraints: list, value, name: str, caller: str) -> str:
+    """scikit-learn's wording of ``value`` breaking ``constraints`` (theirs or these)."""
+    texts = [c if isinstance(c, str) and c not in NAMED else str(_constraint(c))
+             for c in constraints]  # scikit-learn's other names ("random_state") as written
     listed = texts[0] if len(texts) == 1 else f"{', '.join(texts[:-1])} or {texts[-1]}"
     return f"The {name!r} parameter of {caller} must be {listed}. Got {value!r} instead."
+
+
+def takes_bool(constraints: list) -> bool:
+    """Whether a parameter takes true or false as such. Python's ``True`` is also the int 1,
+    so an ``Interval`` or an ``int`` type alone would take it: a flag written where a number
+    belongs (``seed = true``) would run as 1."""
+    return any(c == "boolean" or c is bool or isinstance(c, _Boolean)
+               or (isinstance(c, Options) and any(isinstance(o, bool) for o in c.options))
+               for c in constraints)
 
 
 def _constraint(c) -> _Constraint:

@@ -167,10 +167,19 @@ def with_uncertainty(figures, targets, budget: unc.UncertaintyBudget):
     Raises
     ------
     InputError
-        A test on a rotary axis: the budget's contributors are lengths, not angles.
+        A test on a rotary axis (the budget's contributors are lengths, not angles), or on
+        another axis than the one the budget states (its misalignment, Abbe offset and
+        temperatures are that axis's).
     """
     keys = list(schema.TEST_KEYS)
-    per_test = unc.per_test_um(targets, budget)
+    per_test = unc.per_test_um(targets, budget)  # refuses a rotary axis first
+    if budget.axis:
+        other = figures.loc[figures["axis"].astype(str).str.upper() != budget.axis.upper()]
+        if len(other):
+            row = other.iloc[0]
+            raise InputError(f"the budget is written for axis {budget.axis}; test "
+                             f"{row['test_id']} is of axis {row['axis']}: give that axis's "
+                             "budget", parameter="uncertainty")
     return figures.merge(per_test[keys + list(UNCERTAINTY_KEYS)], on=keys, how="left")
 
 

@@ -5,20 +5,33 @@
 >>> result.write("report/")         # iso_report.html, iso_report.pdf              # doctest: +SKIP
 
 The figures are ``iso``'s (the same standard, outlier rule and uncertainty budget); the
-pages are drawn by ``pipeline.iso_report``.
+pages are drawn by ``pipeline.iso_report``. A meta file (``pipeline.report_meta``) names the
+operator, the instrument and its calibration and the environment sensors on every page:
+
+>>> result = bl.report("ess_mcu1025_ISO230.dat", uncertainty="paper_uncertainty.toml",
+...                    meta="meta.toml")                                     # doctest: +SKIP
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from features import standards
+from features import uncertainty as unc
+from pipeline.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
 from pipeline.workflows import Constraints, Workflow, check_params
 from pipeline.workflows import iso as iso_workflow
 
-PARAMETERS = Constraints(iso_workflow._parameters)
+
+def _parameters() -> dict:
+    """``iso``'s constraints and the meta file's."""
+    return {**iso_workflow._parameters(), "meta": [str, os.PathLike, dict, ReportMeta, None]}
+
+
+PARAMETERS = Constraints(_parameters)
 
 
 @dataclass
@@ -29,15 +42,18 @@ class ReportResult(Result):
     ----------
     iso : pipeline.workflows.iso.IsoResult
         Figures, readings, outliers, standard and budget of every test (one page each).
+    meta : pipeline.report_meta.ReportMeta or None
+        Operator, instrument and its calibration, sensors and remarks, printed on every page.
     """
 
     iso: object
+    meta: ReportMeta | None = None
 
     def write(self, out) -> dict[str, Path]:
         """Write ``iso_report.pdf`` and ``iso_report.html`` into the folder ``out``."""
         from pipeline.iso_report import write_report
 
-        self.files = write_report(self.iso, out)
+        self.files = write_report(self.iso, out, self.meta)
         return self.files
 
     def to_json(self) -> list[dict]:
@@ -46,7 +62,7 @@ class ReportResult(Result):
 
 
 def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=None,
-           standard: str = standards.DEFAULT) -> ReportResult:
+           standard: str = standards.DEFAULT, meta=None) -> ReportResult:
     """The test report of every test in one or more readings files.
 
     Parameters
@@ -58,9 +74,14 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
     drop_outliers : bool
         Leave the flagged outliers out of the figures (they stay on the charts, ringed).
     uncertainty : str, path-like, dict or UncertaintyBudget, optional
-        An ISO/TR 230-9 budget: every axis figure printed as ``value ± U`` (``iso``).
+        An ISO/TR 230-9 budget of the tests' axis: every axis figure printed as ``value ± U``
+        (``iso``), with the coverage factor k and the budget's name (its ``name`` key, else
+        its file's name) and digest (``UncertaintyBudget.digest``).
     standard : str
         The standard whose figures the pages print (``features.standards``).
+    meta : str, path-like, dict or ReportMeta, optional
+        A meta file's ``[report]`` table (``pipeline.report_meta``): operator, organisation,
+        instrument, its serial and calibration date, environment sensors, remarks.
 
     Returns
     -------
@@ -70,13 +91,21 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
     Raises
     ------
     InputError
-        As ``iso``: unreadable readings or budget, a standard that is not supported.
+        As ``iso``: unreadable readings or budget, a budget of another axis than a test's, a
+        standard that is not supported; an unreadable meta file (naming its key).
     """
     params = {"data": data, "format": format, "drop_outliers": drop_outliers,
               "uncertainty": uncertainty, "standard": standard}
-    check_params(PARAMETERS, params, "report")
+    check_params(PARAMETERS, {**params, "meta": meta}, "report")
+    signed = None if meta is None else read_meta(meta)
+    if uncertainty is not None:
+        budget = unc.checked_budget(uncertainty)
+        if not budget.name:  # the page names the budget: by its file when it has no name
+            given = isinstance(uncertainty, (str, os.PathLike))
+            budget = replace(budget, name=Path(uncertainty).name if given else "")
+        params["uncertainty"] = budget
     result = iso_workflow.iso(**params)
-    return ReportResult(iso=result, notes=list(result.notes))
+    return ReportResult(iso=result, meta=signed, notes=list(result.notes))
 
 
 WORKFLOW = Workflow(

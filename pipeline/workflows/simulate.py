@@ -30,7 +30,7 @@ def _parameters() -> dict:
     seed = Interval(Integral, 0, MAX_SEED, closed="both")
     return {"config": [str, os.PathLike, dict, Campaign, None],
             "preset": [str, None],  # checked against the shipped presets by ``load_config``
-            "seed": [seed], "session_seed": [seed, None]}
+            "seed": [seed], "session_seed": [seed, None], "compensation": [dict, None]}
 
 
 PARAMETERS = Constraints(_parameters)
@@ -133,7 +133,8 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
     from models.physics.campaign import simulate as run_twin
 
     check_params(_parameters(), {"config": config, "preset": preset, "seed": seed,
-                              "session_seed": session_seed}, "simulate")
+                              "session_seed": session_seed, "compensation": compensation},
+                 "simulate")
     for name, value in (("seed", seed), ("session_seed", session_seed)):
         if isinstance(value, bool):  # an Integral to Python, never meant as a seed
             raise InputError(f"must be a whole number, got {value!r}", parameter=name)
