@@ -89,7 +89,7 @@ def grouped_cv_rmse(X: np.ndarray, y: np.ndarray, groups,
     return math.sqrt(grouped_cv_sse(X, y, groups, solve) / len(y))
 
 
-def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
+def bspline_basis(t, n_control: int, degree: int = 2, sparse: bool = False):
     """B-spline basis N_i,k(t) on a uniform clamped (non-periodic) knot vector ([Mechta2022],
     eqs. 4-5).
 
@@ -103,20 +103,30 @@ def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
         Spline degree k; ``min(degree, n_control - 1)`` is used, so one control point gives
         the constant 1.
 
+    sparse : bool
+        Return the scipy sparse (CSR) matrix: each row has at most ``degree + 1`` non-zeros,
+        which long series (controller traces) need.
+
     Returns
     -------
-    (len(t), n_control) array
+    (len(t), n_control) array (CSR matrix with ``sparse``)
         The basis; each row sums to 1 (partition of unity) on [0, 1].
     """
     t = np.ravel(np.asarray(t, float))
     if n_control == 1 or t.size == 0:
-        return np.ones((t.size, n_control))
+        ones = np.ones((t.size, n_control))
+        if sparse:
+            from scipy.sparse import csr_array
+
+            return csr_array(ones)
+        return ones
     degree = min(degree, n_control - 1)
     inner = np.linspace(0.0, 1.0, n_control - degree + 1)
     knots = np.r_[[0.0] * degree, inner, [1.0] * degree]
     from scipy.interpolate import BSpline  # on first use: the twin imports this module
 
-    return BSpline.design_matrix(t, knots, degree).toarray()
+    design = BSpline.design_matrix(t, knots, degree)
+    return design if sparse else design.toarray()
 
 
 def within_share(values, groups) -> np.ndarray:

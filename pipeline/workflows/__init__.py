@@ -162,7 +162,7 @@ from dataclasses import dataclass
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
 NAMES = ("convert", "ingest", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
          "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
-         "uncertainty")
+         "uncertainty", "monitor")
 
 
 @dataclass(frozen=True)

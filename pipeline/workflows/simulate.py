@@ -157,3 +157,90 @@ WORKFLOW = Workflow(
     name="simulate", function=simulate, inputs=("config",),
     summary="Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and "
             "truth.")
+
+
+@dataclass
+class TraceSimulationResult(Result):
+    """Controller traces of the twin (``models.physics.traces``) and their truth.
+
+    Attributes
+    ----------
+    trace : DataFrame
+        The trace table (docs/data-contract.md section 10).
+    truth : DataFrame
+        Per machine axis and day: the true lost motion [um] and the event.
+    """
+
+    trace: object
+    truth: object
+    seed: int = 0
+
+    def write(self, out) -> dict[str, Path]:
+        """``traces/`` (a Parquet dataset partitioned by machine, axis and date) and
+        ``traces_truth.csv`` into folder ``out``, renamed into place together."""
+        import shutil
+
+        from features.traces.io import write_dataset
+
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = temp_folder_of(out)
+        try:
+            write_dataset(self.trace, tmp / "traces")
+            self.truth.to_csv(tmp / "traces_truth.csv", index=False)
+            out.mkdir(exist_ok=True)
+            if (out / "traces").exists():
+                shutil.rmtree(out / "traces")
+            for name in ("traces", "traces_truth.csv"):
+                os.replace(tmp / name, out / name)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        self.files = {"traces": out / "traces", "truth": out / "traces_truth.csv"}
+        return self.files
+
+    def summary(self) -> str:
+        return (f"{len(self.trace)} samples of {self.truth['axis'].nunique()} axes over "
+                f"{self.truth['date'].nunique()} days")
+
+    def to_json(self) -> dict:
+        return {"samples": len(self.trace), "days": int(self.truth["date"].nunique()),
+                "seed": self.seed, "files": {k: str(v) for k, v in self.files.items()}}
+
+
+def temp_folder_of(out: Path) -> Path:
+    from features.readings.fileio import temp_folder
+
+    return temp_folder(out)
+
+
+def simulate_traces(seed: int = 0, days: int = 30, rate_hz: float = 200.0,
+                    seconds: float = 60.0) -> TraceSimulationResult:
+    """Controller traces of the twin: three axes of one machine logged ``seconds`` a day at
+    ``rate_hz`` for ``days`` days, with motor encoder and load scale, wear growing and one
+    axis adjusted (``models.physics.traces.TraceCampaign``).
+
+    Parameters
+    ----------
+    seed : int
+        Random seed.
+    days : int
+        Logged days (1-3650).
+    rate_hz : float
+        Sampling rate [Hz] (100-1000).
+    seconds : float
+        Length of each day's log [s] (10-3600).
+    """
+    from numbers import Integral, Real
+
+    from models.physics.traces import TraceCampaign
+    from models.physics.traces import simulate_traces as run_twin
+    from pipeline.workflows.constraints import Interval
+
+    check_params({"seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
+                  "days": [Interval(Integral, 1, 3650, closed="both")],
+                  "rate_hz": [Interval(Real, 100, 1000, closed="both")],
+                  "seconds": [Interval(Real, 10, 3600, closed="both")]},
+                 {"seed": seed, "days": days, "rate_hz": rate_hz, "seconds": seconds},
+                 "simulate_traces")
+    trace, truth = run_twin(TraceCampaign(days=days, rate_hz=rate_hz, seconds=seconds), seed)
+    return TraceSimulationResult(trace, truth, seed=seed)
