@@ -54,23 +54,32 @@ def lead_error_mm(x_mm: np.ndarray) -> np.ndarray:
     return 1e-3 * (4.0 * u - 3.0 * u ** 2 + 0.8 * np.sin(2 * np.pi * x_mm / 25.0))
 
 
-def axis_day(rng, clearance_um: float, seconds: float = 60.0, rate_hz: float = 200.0,
-             servo_tau_s: float = 0.02, latency_s: float = 0.002, noise_um: float = 0.05):
-    """One day's samples of one axis: (t_s, commanded, motor, load) [s, mm]."""
-    cmd = routine_path(rng, seconds, rate_hz)
-    t = np.arange(len(cmd)) / rate_hz
+def axis_days(rng, clearance_um, seconds: float = 60.0, rate_hz: float = 200.0,
+              servo_tau_s: float = 0.02, latency_s: float = 0.002, noise_um: float = 0.05):
+    """Samples of one axis on several days, one clearance [um] each: (t_s, commanded, motor,
+    load), each (days, samples) [s, mm] but t_s (samples,)."""
+    clearance_um = np.atleast_1d(np.asarray(clearance_um, float))
+    cmd = np.stack([routine_path(rng, seconds, rate_hz) for _ in clearance_um])
+    t = np.arange(cmd.shape[1]) / rate_hz
     a = np.exp(-1.0 / (rate_hz * servo_tau_s))
-    motor = lfilter([1 - a], [1, -a], cmd, zi=[a * cmd[0]])[0]
+    motor = lfilter([1 - a], [1, -a], cmd, axis=1, zi=a * cmd[:, :1])[0]
     nut = motor - lead_error_mm(motor)
     half = clearance_um / 2000.0
     table = np.empty_like(nut)
-    p = nut[0]
-    for k in range(len(nut)):  # the dead zone: the table moves only when the nut pushes it
-        p = min(max(p, nut[k] - half), nut[k] + half)
-        table[k] = p
-    load = np.interp(t - latency_s, t, table)
+    p = nut[:, 0].copy()
+    for k in range(nut.shape[1]):  # the dead zone: the table moves only when the nut pushes it
+        p = np.minimum(np.maximum(p, nut[:, k] - half), nut[:, k] + half)
+        table[:, k] = p
+    load = np.stack([np.interp(t - latency_s, t, row) for row in table])
     noise = noise_um / 1000.0
-    return (t, cmd, motor + rng.normal(0, noise, len(t)), load + rng.normal(0, noise, len(t)))
+    return (t, cmd, motor + rng.normal(0, noise, motor.shape),
+            load + rng.normal(0, noise, load.shape))
+
+
+def axis_day(rng, clearance_um: float, **options):
+    """One day of ``axis_days``: (t_s, commanded, motor, load), each (samples,)."""
+    t, cmd, motor, load = axis_days(rng, [clearance_um], **options)
+    return t, cmd[0], motor[0], load[0]
 
 
 def fleet_traces(seed: int = 7, days: int = 30, seconds: float = 60.0, rate_hz: float = 200.0,
@@ -79,17 +88,18 @@ def fleet_traces(seed: int = 7, days: int = 30, seconds: float = 60.0, rate_hz: 
     adjusted on day 17 (its clearance drops by 4 um). Returns (trace frame, truth frame with
     machine_id, axis, date, lost_motion_um)."""
     rng = np.random.default_rng(seed)
-    clearance = {"X": lambda d: 3.0 + 0.05 * d, "Y": lambda d: 6.0 + 0.0 * d,
-                 "Z": lambda d: 8.0 + 0.08 * d - (4.0 if d >= 17 else 0.0)}
+    day = np.arange(days)
+    clearance = {"X": 3.0 + 0.05 * day, "Y": np.full(days, 6.0),
+                 "Z": 8.0 + 0.08 * day - np.where(day >= 17, 4.0, 0.0)}
     frames, truth = [], []
-    for axis, b_of in clearance.items():
-        for day in range(days):
-            b = b_of(day)
-            t, cmd, motor, load = axis_day(rng, b, seconds, rate_hz)
-            begin = pd.Timestamp(start, tz="UTC") + pd.Timedelta(days=day, hours=9)
+    for axis, b in clearance.items():
+        t, cmd, motor, load = axis_days(rng, b, seconds, rate_hz)
+        for d in day:
+            begin = pd.Timestamp(start, tz="UTC") + pd.Timedelta(days=int(d), hours=9)
             frames.append(pd.DataFrame({
                 "time": begin + pd.to_timedelta(t, unit="s"), "machine_id": "M7",
-                "axis": axis, "commanded_mm": cmd, "motor_mm": motor, "load_mm": load}))
+                "axis": axis, "commanded_mm": cmd[d], "motor_mm": motor[d],
+                "load_mm": load[d]}))
             truth.append({"machine_id": "M7", "axis": axis,
-                          "date": begin.date().isoformat(), "lost_motion_um": b})
+                          "date": begin.date().isoformat(), "lost_motion_um": b[d]})
     return pd.concat(frames, ignore_index=True), pd.DataFrame(truth)

@@ -7,10 +7,12 @@ one), so work on a dataset needs memory for one partition only, wherever it runs
 
 from __future__ import annotations
 
+import itertools
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
@@ -46,9 +48,15 @@ def read_trace(path) -> pd.DataFrame:
     return check_trace(raw, path, row_base=2)
 
 
-def _parquet(path: Path, columns=None) -> pd.DataFrame:
+def _parquet(path: Path) -> pd.DataFrame:
+    """A Parquet file with its label columns as categories (read as dictionaries: a label
+    repeats on every sample, and validation then checks each distinct value once)."""
+    import pyarrow.parquet as pq
+
     try:
-        return pd.read_parquet(path, columns=columns)
+        names = pq.read_schema(path).names
+        labels = [n for n in names if n.strip().lower() in ("machine_id", "axis")]
+        return pq.read_table(path, read_dictionary=labels).to_pandas()
     except Exception as err:  # noqa: BLE001 - pyarrow raises many types for a broken file
         raise InputError(f"cannot read Parquet file: {' '.join(str(err).split())}",
                          file=path) from None
@@ -161,3 +169,23 @@ def write_trace(trace: pd.DataFrame, path) -> Path:
         else:
             trace.to_csv(tmp, index=False, date_format="%Y-%m-%dT%H:%M:%S.%fZ")
     return path
+
+
+def groups(trace: pd.DataFrame, by_day: bool = False) -> list[pd.DataFrame]:
+    """The machine axes (and with ``by_day`` their UTC days) of a validated trace, each a
+    frame in time order. A trace written axis after axis is cut into slices without copying
+    or sorting; otherwise its rows are put in order once."""
+    key = trace["machine_id"].cat.codes.to_numpy(np.int64) * 64 \
+        + trace["axis"].cat.codes.to_numpy(np.int64)
+    if by_day:
+        key = key * 1_000_000 + trace[c.TIME].to_numpy().view(np.int64) // DAY_NS
+    cuts = np.flatnonzero(np.diff(key)) + 1
+    if len(cuts) + 1 != len(np.unique(key[np.r_[0, cuts]])):  # a key in two blocks: sort once
+        order = np.argsort(key, kind="stable")
+        trace, key = trace.iloc[order], key[order]
+        cuts = np.flatnonzero(np.diff(key)) + 1
+    bounds = [0, *cuts.tolist(), len(key)]
+    return [trace.iloc[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+DAY_NS = 86_400 * 10**9

@@ -50,10 +50,9 @@ def check_trace(frame: pd.DataFrame, source, row_base: int = 2) -> pd.DataFrame:
     out[c.TIME] = _times(frame[c.TIME], source, row_base)
     for col in c.CHANNELS:
         if col in frame:
-            out[col] = to_float(frame[col], source, col, row_base,
-                                allow_nan=col in c.OPTIONAL).to_numpy()
+            out[col] = _channel(frame[col], source, col, row_base, col in c.OPTIONAL)
     _check_deg_names(frame, out["axis"], source, row_base)
-    checked = pd.DataFrame(out, columns=[k for k in c.COLUMNS if k in out])
+    checked = pd.DataFrame(out, columns=[k for k in c.COLUMNS if k in out], copy=False)
     _check_order(checked, source, row_base)
     return checked
 
@@ -89,12 +88,26 @@ def _named(frame: pd.DataFrame, source) -> pd.DataFrame:
 
 def _labels(series: pd.Series, source, col: str, row_base: int) -> pd.Series:
     """A label column as a categorical, each distinct value checked once (``to_label``)."""
-    codes, uniques = pd.factorize(series, use_na_sentinel=False)
-    first = pd.Series(np.arange(len(codes))).groupby(codes).min().to_numpy()
-    labels = to_label(pd.Series(uniques, dtype=object), source, col, pd.Series(first + row_base))
+    if isinstance(series.dtype, pd.CategoricalDtype) and not series.isna().any():
+        codes, uniques = series.cat.codes.to_numpy(), series.cat.categories.to_numpy(object)
+    else:
+        codes, uniques = pd.factorize(series, use_na_sentinel=False)
+    present, first = _first_rows(np.asarray(codes))  # a dictionary may hold unused values
+    if len(present) < len(uniques):
+        codes = np.searchsorted(present, codes)
+    labels = to_label(pd.Series(np.asarray(uniques, object)[present], dtype=object), source, col,
+                      pd.Series(first + row_base))
     if col == "axis":
         labels = labels.str.upper()
     return pd.Series(pd.Categorical.from_codes(*_recoded(codes, labels.to_numpy())))
+
+
+def _first_rows(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct codes, sorted, and the row where each first occurs: found among the starts
+    of the runs of equal codes (a label repeats over long runs), without sorting every row."""
+    starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1] if len(codes) else np.zeros(0, int)
+    present, at = np.unique(codes[starts], return_index=True)
+    return present, starts[at]
 
 
 def _recoded(codes: np.ndarray, labels: np.ndarray):
@@ -123,6 +136,17 @@ def _times(series: pd.Series, source, row_base: int) -> np.ndarray:
     return times.to_numpy(dtype="datetime64[ns]")
 
 
+def _channel(series: pd.Series, source, col: str, row_base: int, optional: bool) -> np.ndarray:
+    """A channel as float64: one pass when it is already all finite numbers, else
+    ``to_float``, whose messages name the first bad row."""
+    if pd.api.types.is_float_dtype(series.dtype) or pd.api.types.is_integer_dtype(series.dtype):
+        values = series.to_numpy(dtype=float, na_value=np.nan)
+        if np.isfinite(values).all():
+            return values
+    return to_float(series.reset_index(drop=True), source, col, row_base,
+                    allow_nan=optional).to_numpy()
+
+
 def _check_deg_names(frame: pd.DataFrame, axis: pd.Series, source, row_base: int) -> None:
     """Positions named in deg belong to rotary axes only."""
     for col, given in frame.attrs.get("deg_names", {}).items():
@@ -138,8 +162,10 @@ def _check_order(frame: pd.DataFrame, source, row_base: int) -> None:
     group = frame["machine_id"].cat.codes.to_numpy(np.int64) * 64 \
         + frame["axis"].cat.codes.to_numpy(np.int64)
     t = frame[c.TIME].to_numpy().view(np.int64)
-    if (group == group[0]).all():  # the usual case: one machine axis, no sort needed
-        rows = np.flatnonzero(np.diff(t) < 0) + 1
+    step = np.diff(group) != 0
+    starts = group[np.r_[0, np.flatnonzero(step) + 1]]
+    if len(starts) == len(np.unique(starts)):  # each axis in one block: no sort
+        rows = np.flatnonzero((np.diff(t) < 0) & ~step) + 1
     else:
         order = np.argsort(group, kind="stable")
         g, ts = group[order], t[order]

@@ -208,8 +208,10 @@ def _partitions(traces) -> list:
 
 
 def _axes_of(trace, source) -> list:
+    from features.traces.io import groups
+
     _require_load(trace, source)
-    return [part for _, part in trace.groupby(["machine_id", "axis"], sort=True, observed=True)]
+    return groups(trace)
 
 
 def _require_load(trace, source) -> None:
