@@ -63,6 +63,14 @@ SAMPLES_PER_CONTROL = 40
 # singular; far below the weight of the samples under a control point.
 SMOOTHING = 1e-6
 MIN_REVERSALS = 2
+# Relative change of the commanded velocity from one sample to the next still called steady.
+STEADY = 1e-3
+# Consecutive usable samples of one move are averaged over bins of this length [s] before the
+# fit (weighted by their counts): the servo and the scale do not change within it, so the fit
+# loses nothing and its cost stops growing with the sampling rate.
+BIN_S = 0.02
+# Days are fitted together in runs of about this many samples (``daily_lost_motion``).
+CHUNK_SAMPLES = 100_000
 
 
 @dataclass
@@ -117,35 +125,52 @@ def motion_state(t_s: np.ndarray, commanded: np.ndarray, *, take_up: float = TAK
     usable : (n,) bool array
         Play taken up and the axis steady or at rest.
     move : (n,) int array
-        Index of the motion (between reversals) each sample belongs to.
+        Index of the motion each sample belongs to: a new one starts at every reversal and
+        after every gap in the log (ten sampling periods without a sample: what the axis did
+        meanwhile is unknown, so its play must be taken up again).
+    reversal : (n,) bool array
+        The samples where the direction reversed.
     """
-    dt = np.diff(t_s, prepend=t_s[0] - 1.0)
-    step = np.diff(commanded, prepend=commanded[0])
-    scale = max(float(np.max(np.abs(commanded))), 1.0)
-    moving = np.abs(step) > 1e-9 * scale
+    dt, step = _backward(t_s, 1.0), _backward(commanded, 0.0)
+    moving = np.abs(step) > 1e-9 * np.maximum(np.abs(commanded), 1.0)  # not float rounding
     sign = np.where(moving, np.sign(step), 0.0)
     last = np.maximum.accumulate(np.where(moving, np.arange(len(sign)), -1))
     direction = np.where(last >= 0, sign[np.maximum(last, 0)], 0.0)
     reversal = np.r_[False, (direction[1:] != direction[:-1]) & (direction[:-1] != 0)]
-    move = np.cumsum(reversal)
-    travel = np.cumsum(np.abs(step))
-    start = np.maximum.accumulate(np.where(reversal, np.arange(len(step)), 0))
-    taken_up = (travel - travel[start] >= take_up) & (direction != 0)
-    velocity = np.where(dt > 0, step / np.where(dt > 0, dt, 1.0), 0.0)
-    accel = np.abs(np.diff(velocity, prepend=velocity[0]))
-    # a gap in the log: ten sampling periods (the median of the first ones) without a sample
+    # a gap: ten sampling periods (the median of the first ones) without a sample
     gap = dt > 10 * np.median(dt[1:2001]) if len(dt) > 1 else np.zeros(len(dt), bool)
-    unsteady = (accel > 1e-6 * max(float(np.max(np.abs(velocity))), 1e-12)) | gap
+    new_move = reversal | gap
+    move = np.cumsum(new_move)
+    travel = np.cumsum(np.abs(step))
+    start = np.maximum.accumulate(np.where(new_move, np.arange(len(step)), 0))
+    taken_up = (travel - travel[start] >= take_up) & (direction != 0)
+    velocity = np.divide(step, dt, out=np.zeros(len(dt)), where=dt > 0)
+    # steady: the velocity within STEADY of the sample before (a controller's set points are
+    # rounded, so exact equality would find no steady motion)
+    before = np.r_[velocity[0], velocity[:-1]]
+    unsteady = (np.abs(velocity - before) > STEADY * np.maximum(np.abs(velocity),
+                                                                 np.abs(before))) | gap
     unsteady[0] = True
     since = t_s - np.maximum.accumulate(np.where(unsteady, t_s, -np.inf))
-    return direction, velocity, taken_up & (since >= settle_s), move
+    return direction, velocity, taken_up & (since >= settle_s), move, reversal
 
 
-def count_reversals(direction: np.ndarray, usable: np.ndarray, move: np.ndarray) -> int:
-    """Reversals with usable samples on both sides: consecutive moves that both hold some."""
-    used = move[usable]  # non-decreasing: its distinct values are where it steps
-    moves = used[np.r_[True, np.diff(used) != 0]] if len(used) else used
-    return int(np.sum(np.diff(moves) == 1))
+def _backward(values: np.ndarray, first: float) -> np.ndarray:
+    """values[i] - values[i - 1], and ``first`` at 0."""
+    out = np.empty(len(values))
+    out[:1] = first
+    np.subtract(values[1:], values[:-1], out=out[1:])
+    return out
+
+
+def count_reversals(usable: np.ndarray, move: np.ndarray, reversal: np.ndarray,
+                    day: np.ndarray, days: int) -> np.ndarray:
+    """Per day, the reversals with usable samples on both sides: the moves before and after
+    each reversal both hold some."""
+    has = np.bincount(move, weights=usable, minlength=move[-1] + 1) > 0
+    at = np.flatnonzero(reversal)
+    both = has[move[at] - 1] & has[move[at]]
+    return np.bincount(day[at[both]], minlength=days)
 
 
 def fit_day(t_s, commanded, motor, load, *, take_up: float = TAKE_UP_MM,
@@ -167,72 +192,147 @@ def fit_day(t_s, commanded, motor, load, *, take_up: float = TAKE_UP_MM,
         L [mm or deg] with its standard uncertainty; NaN when fewer than ``MIN_REVERSALS``
         reversals took up the play on both sides.
     """
-    direction, velocity, usable, move = motion_state(
-        np.asarray(t_s, float), np.asarray(commanded, float), take_up=take_up,
-        settle_s=settle_s)
-    reversals = count_reversals(direction, usable, move)
-    if reversals < MIN_REVERSALS:
-        return DayFit(np.nan, np.nan, reversals, int(usable.sum()), np.nan, 0)
-    x = np.asarray(motor, float)[usable]
-    y = (np.asarray(motor, float) - np.asarray(load, float))[usable]
-    dense = np.c_[direction[usable] / 2.0, velocity[usable]]
-    if np.ptp(dense[:, 1]) == 0:  # the axis only rested: nothing to learn a lag from
-        dense = dense[:, :1]
-    beta, u_l, n_control = _fit(x, y, dense, move[usable])
-    lag = float(beta[1]) if dense.shape[1] > 1 else np.nan
-    return DayFit(float(beta[0]), u_l, reversals, len(y), lag, n_control)
+    return fit_days(t_s, np.zeros(len(t_s), int), commanded, motor, load, take_up=take_up,
+                    settle_s=settle_s)[0]
 
 
-def _fit(x, y, dense, clusters):
-    """Least squares of ``y`` on the dense columns and the P-spline of position:
-    (beta, u of the first coefficient, control points).
+def fit_days(t_s, day, commanded, motor, load, *, take_up: float = TAKE_UP_MM,
+             settle_s: float = SETTLE_S) -> list[DayFit]:
+    """``fit_day`` of every day of one machine axis, all days in one pass.
 
-    Row i of the spline part is ``values[i]`` in columns ``first[i] + 0..DEGREE``, so its Gram
-    matrix C is banded and summed by diagonal in one pass over the samples. The normal
-    equations [[A, B'], [B, C]] z = r are solved by eliminating the spline block with a banded
-    Cholesky factorisation: O(k) work, and the same bits whatever threads the host's BLAS
-    has (every engine must give the same numbers).
+    Each day has its own spline and coefficients; the days' normal equations form one block
+    diagonal, banded system, so the work is one pass over the samples plus a handful of
+    array operations per day, however many days there are.
+
+    Parameters
+    ----------
+    t_s : (n,) array
+        Sample times [s], not decreasing.
+    day : (n,) int array
+        Day index 0..days-1 of each sample, not decreasing.
+    commanded, motor, load : (n,) arrays
+        As ``fit_day``.
+
+    Returns
+    -------
+    list of DayFit
+        One per day index.
+    """
+    t_s, commanded = np.asarray(t_s, float), np.asarray(commanded, float)
+    motor, day = np.asarray(motor, float), np.asarray(day)
+    days = int(day[-1]) + 1 if len(day) else 0
+    direction, velocity, usable, move, reversal = motion_state(
+        t_s, commanded, take_up=take_up, settle_s=settle_s)
+    reversals = count_reversals(usable, move, reversal, day, days)
+    fitted_day = reversals >= MIN_REVERSALS
+    keep = usable & fitted_day[day]
+    out = [DayFit(np.nan, np.nan, int(r), int(s), np.nan, 0) for r, s in
+           zip(reversals, np.bincount(day[usable], minlength=days))]
+    if not keep.any():
+        return out
+    rows = np.flatnonzero(keep)
+    starts, weight = _bins(rows, t_s[rows], move[rows])
+    mean = lambda v: np.add.reduceat(v[rows], starts) / weight  # noqa: E731
+    dense = np.c_[direction[rows[starts]] / 2.0, mean(velocity)]
+    fits = _fit(mean(motor), mean(motor - np.asarray(load, float)), dense, move[rows[starts]],
+                day[rows[starts]], weight)
+    for d, (beta, u_l, k) in fits.items():
+        out[d] = DayFit(float(beta[0]), u_l, int(reversals[d]), out[d].samples,
+                        float(beta[1]), k)
+    return out
+
+
+def _bins(rows: np.ndarray, t_s: np.ndarray, move: np.ndarray):
+    """Runs of consecutive usable samples of one move cut into bins of ``BIN_S``: the first
+    position of each bin in ``rows`` and its number of samples."""
+    new = np.r_[True, (np.diff(rows) != 1) | (np.diff(move) != 0)
+                | (np.diff(np.floor(t_s / BIN_S)) != 0)]
+    starts = np.flatnonzero(new)
+    return starts, np.diff(np.r_[starts, len(rows)]).astype(float)
+
+
+def _fit(x, y, dense, clusters, day, weight) -> dict:
+    """Weighted least squares of ``y`` on the dense columns and a P-spline of position, one
+    set of coefficients per day: {day: (beta, u of the first coefficient, control points)}.
+    Rows are bins of samples (their means, weighted by their counts).
+
+    Row i of a day's spline part is ``values[i]`` in its columns ``first[i] + 0..DEGREE``, so
+    the Gram matrix C of all days' splines is block diagonal and banded, summed by diagonal
+    in one pass. The normal equations [[A_d, B_d'], [B_d, C_d]] z_d = r_d are solved by
+    eliminating the spline blocks with one banded Cholesky factorisation: O(samples) work,
+    and the same bits whatever threads the host's BLAS has (every engine must give the same
+    numbers).
     """
     from scipy.linalg import solveh_banded
 
-    n, q = len(y), dense.shape[1]
-    k = int(np.clip(n // SAMPLES_PER_CONTROL, MIN_CONTROL, MAX_CONTROL))
-    lo, hi = float(x.min()), float(x.max())
-    first, values = bspline_rows((x - lo) / (hi - lo) if hi > lo else np.zeros_like(x), k,
-                                 DEGREE)
-    width = values.shape[1]
+    q = dense.shape[1]
+    starts = np.flatnonzero(np.r_[True, np.diff(day) != 0])  # day is sorted
+    present = day[starts]
+    n_day = np.add.reduceat(weight, starts).astype(int)  # samples per day
+    slot = np.searchsorted(present, day)  # 0..D-1 per sample
+    k_day = np.clip(n_day // SAMPLES_PER_CONTROL, MIN_CONTROL, MAX_CONTROL)
+    offset = np.r_[0, np.cumsum(k_day)[:-1]]
+    lo, hi = np.minimum.reduceat(x, starts), np.maximum.reduceat(x, starts)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    first, values = _rows((x - lo[slot]) / span[slot], k_day[slot])
+    col = offset[slot] + first  # the first non-zero column of each row in the whole system
+    total, width = int(k_day.sum()), values.shape[1]
 
-    def spline_t(w):  # B' w: (n,) -> (k,)
-        return sum(np.bincount(first + a, weights=values[:, a] * w, minlength=k)
+    def spline_t(w):  # B' w: (n,) -> (total,)
+        return sum(np.bincount(col + a, weights=values[:, a] * (weight * w), minlength=total)
                    for a in range(width))
 
-    a_dense = np.array([[np.sum(dense[:, j] * dense[:, m]) for m in range(q)]
-                        for j in range(q)])
-    cross = np.stack([spline_t(dense[:, j]) for j in range(q)], axis=1)  # (k, q)
-    band = _penalty_band(k, width) * (SMOOTHING * n)
-    for offset in range(width):  # C[j, j + offset] summed from the samples
-        diag = sum(np.bincount(first + a, weights=values[:, a] * values[:, a + offset],
-                               minlength=k) for a in range(width - offset))
-        band[width - 1 - offset, offset:] += diag[:k - offset]
-    rhs_dense = np.array([np.sum(dense[:, j] * y) for j in range(q)])
-    unit = np.zeros(q)
-    unit[0] = 1.0  # the first row of the inverse: L's lever on each sample
-    solved = solveh_banded(band, np.c_[cross, spline_t(y), np.zeros(k)], check_finite=False)
-    schur = a_dense - cross.T @ solved[:, :q]
-    z_dense = np.linalg.solve(schur, np.c_[rhs_dense, unit] - cross.T @ solved[:, q:])
-    z_spline = solved[:, q:] - solved[:, :q] @ z_dense
-    beta, lever_row = np.r_[z_dense, z_spline].T
+    def per_day(w):  # weighted sum of w over each day's rows
+        return np.add.reduceat(weight * w, starts)
 
-    def fitted(coef):  # X coef: (q + k,) -> (n,)
-        out = dense[:, 0] * coef[0]
-        for j in range(1, q):
-            out += dense[:, j] * coef[j]
+    a_dense = np.stack([np.stack([per_day(dense[:, j] * dense[:, m]) for m in range(q)], -1)
+                        for j in range(q)], 1)  # (D, q, q)
+    cross = np.stack([spline_t(dense[:, j]) for j in range(q)], axis=1)  # (total, q)
+    band = np.concatenate([_penalty_band(int(k), width) * (SMOOTHING * n)
+                           for k, n in zip(k_day, n_day)], axis=1)
+    for o in range(width):  # C[j, j + o], summed from the samples
+        diag = sum(np.bincount(col + a, weights=weight * values[:, a] * values[:, a + o],
+                               minlength=total) for a in range(width - o))
+        band[width - 1 - o, o:] += diag[:total - o]
+    solved = solveh_banded(band, np.c_[cross, spline_t(y)], check_finite=False)
+    block = np.repeat(np.arange(len(present)), k_day)  # the day slot of each spline column
+    bounds = np.r_[0, np.cumsum(k_day)[:-1]]
+
+    def block_t(u, v):  # u_d' v_d per day: (total, a), (total, b) -> (D, a, b)
+        return np.add.reduceat(u[:, :, None] * v[:, None, :], bounds)
+
+    schur = a_dense - block_t(cross, solved[:, :q])
+    rhs_dense = np.stack([per_day(dense[:, j] * y) for j in range(q)], -1)  # (D, q)
+    unit = np.zeros_like(rhs_dense)
+    unit[:, 0] = 1.0  # the first row of the inverse: L's lever on each sample
+    cross_rhs = block_t(cross, solved[:, q:])[:, :, 0]
+    z_dense = np.linalg.solve(schur, np.stack([rhs_dense - cross_rhs, unit], -1))  # (D, q, 2)
+    # the spline part of the right-hand sides: C^-1 B' y for beta, 0 for the lever
+    z_spline = (np.c_[solved[:, q], np.zeros(total)]
+                - np.einsum("ij,ijk->ik", solved[:, :q], z_dense[block]))
+
+    def fitted(which):  # X z for the coefficients ``which`` (0: beta, 1: the lever)
+        out = np.zeros(len(y))
+        for j in range(q):
+            out += dense[:, j] * z_dense[slot, j, which]
         for a in range(width):
-            out += values[:, a] * coef[q:][first + a]
+            out += values[:, a] * z_spline[col + a, which]
         return out
 
-    resid = y - fitted(beta)
-    return beta, _cluster_u(fitted(lever_row) * resid, clusters), k
+    scores = weight * fitted(1) * (y - fitted(0))
+    u = _cluster_u(scores, clusters, slot, len(present))
+    return {int(d): (z_dense[i, :, 0], u[i], int(k_day[i])) for i, d in enumerate(present)}
+
+
+def _rows(t: np.ndarray, k: np.ndarray):
+    """``features.statistics.bspline_rows`` for a different number of control points per
+    sample (one per day): each distinct number evaluated once."""
+    first = np.empty(len(t), int)
+    values = np.empty((len(t), DEGREE + 1))
+    for size in np.unique(k):
+        rows = k == size
+        first[rows], values[rows] = bspline_rows(t[rows], int(size), DEGREE)
+    return first, values
 
 
 @functools.lru_cache(maxsize=16)
@@ -248,14 +348,19 @@ def _penalty_band(k: int, width: int) -> np.ndarray:
     return band
 
 
-def _cluster_u(scores_per_sample, clusters) -> float:
-    """Cluster-robust standard uncertainty of the first coefficient,
-    var = G/(G-1) sum_g (a' X_g' e_g)^2 with a the first row of (X'X)^-1; the caller passes
-    the per-sample terms (a' x_i) e_i."""
-    scores = np.bincount(clusters - clusters.min(), weights=scores_per_sample)
-    scores = scores[np.bincount(clusters - clusters.min()) > 0]
-    g = len(scores)
-    return float(np.sqrt(g / max(g - 1, 1) * np.sum(scores ** 2)))
+def _cluster_u(scores: np.ndarray, clusters: np.ndarray, slot: np.ndarray,
+               days: int) -> np.ndarray:
+    """Cluster-robust standard uncertainty of the first coefficient per day,
+    var = G/(G-1) sum_g (a' X_g' e_g)^2 over the day's G moves, a the first row of (X'X)^-1;
+    ``scores`` are the per-sample terms (a' x_i) e_i."""
+    base = clusters - clusters.min()
+    per_move = np.bincount(base, weights=scores)
+    used = np.bincount(base) > 0
+    move_day = np.zeros(len(per_move), int)
+    move_day[base] = slot  # a move lies within one day (a day change is a gap)
+    g = np.bincount(move_day[used], minlength=days)
+    ss = np.bincount(move_day[used], weights=per_move[used] ** 2, minlength=days)
+    return np.sqrt(g / np.maximum(g - 1, 1) * ss)
 
 
 DAILY_COLUMNS = ("machine_id", "axis", "unit", "date", "lost_motion_um", "lost_motion_u_um",
@@ -275,13 +380,46 @@ def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
         rotary one (``unit``), ``reversals`` and ``samples`` used, ``lag_s`` and the spline's
         ``control_points``.
     """
-    from features.traces.io import groups
+    from features.traces.io import DAY_NS, groups
 
-    # One BLAS thread: the matrices are small (about 130 square), where threads only wait for
-    # each other, and an engine already runs one partition per core.
+    rows = []
+    # One BLAS thread: the matrices are small, where threads only wait for each other, and
+    # an engine already runs one partition per core.
     with _blas().limit(limits=1, user_api="blas"):
-        rows = [_day_row(day, take_up, settle_s) for day in groups(trace, by_day=True)]
+        for part in groups(trace):
+            ns = part["time"].to_numpy().view(np.int64)
+            columns = [part[c].to_numpy() for c in ("commanded_mm", "motor_mm", "load_mm")]
+            dates, day = _runs(ns // DAY_NS)
+            fits = []
+            for a, b in _chunks(day):
+                fits += fit_days((ns[a:b] - ns[a]) * 1e-9, day[a:b] - day[a],
+                                 *(v[a:b] for v in columns), take_up=take_up,
+                                 settle_s=settle_s)
+            axis = str(part["axis"].iloc[0])
+            scale = deviation_scale(axis)
+            rows += [(str(part["machine_id"].iloc[0]), axis, deviation_unit(axis),
+                      pd.Timestamp(int(date) * DAY_NS, tz="UTC").date().isoformat(),
+                      f.lost_motion * scale, f.lost_motion_u * scale, f.reversals, f.samples,
+                      f.lag_s, f.control_points) for date, f in zip(dates, fits)]
     return pd.DataFrame(rows, columns=list(DAILY_COLUMNS))
+
+
+def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of a sorted array and each element's index among them (what
+    ``np.unique(values, return_inverse=True)`` gives, without sorting again)."""
+    step = np.r_[False, values[1:] != values[:-1]]
+    return values[np.r_[True, step[1:]]] if len(values) else values, np.cumsum(step)
+
+
+def _chunks(day: np.ndarray):
+    """(start, stop) of runs of whole days of about ``CHUNK_SAMPLES``: fit together, a few
+    days amortise the per-call cost, and their arrays stay in the processor's cache."""
+    bounds = np.r_[0, np.flatnonzero(np.diff(day)) + 1, len(day)]
+    start = 0
+    for i in range(1, len(bounds)):
+        if bounds[i] - bounds[start] >= CHUNK_SAMPLES or i == len(bounds) - 1:
+            yield int(bounds[start]), int(bounds[i])
+            start = i
 
 
 @functools.lru_cache(maxsize=1)
@@ -290,16 +428,3 @@ def _blas():
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController()
-
-
-def _day_row(part: pd.DataFrame, take_up: float, settle_s: float) -> tuple:
-    ns = part["time"].to_numpy().view(np.int64)
-    fit = fit_day((ns - ns[0]) * 1e-9, part["commanded_mm"].to_numpy(),
-                  part["motor_mm"].to_numpy(), part["load_mm"].to_numpy(), take_up=take_up,
-                  settle_s=settle_s)
-    axis = str(part["axis"].iloc[0])
-    scale = deviation_scale(axis)
-    return (str(part["machine_id"].iloc[0]), axis, deviation_unit(axis),
-            pd.Timestamp(ns[0], tz="UTC").date().isoformat(), fit.lost_motion * scale,
-            fit.lost_motion_u * scale, fit.reversals, fit.samples, fit.lag_s,
-            fit.control_points)

@@ -113,6 +113,8 @@ def _first_rows(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _recoded(codes: np.ndarray, labels: np.ndarray):
     """Codes and categories with equal labels (``x`` and ``X``) merged."""
     categories, inverse = np.unique(labels.astype(str), return_inverse=True)
+    if (inverse == np.arange(len(inverse))).all():  # already distinct and sorted
+        return np.asarray(codes), categories
     return inverse[codes], categories
 
 
