@@ -232,7 +232,10 @@ def fit_days(t_s, day, commanded, motor, load, *, take_up: float = TAKE_UP_MM,
         return out
     rows = np.flatnonzero(keep)
     starts, weight = _bins(rows, t_s[rows], move[rows])
-    mean = lambda v: np.add.reduceat(v[rows], starts) / weight  # noqa: E731
+
+    def mean(v):  # each bin's mean
+        return np.add.reduceat(v[rows], starts) / weight
+
     dense = np.c_[direction[rows[starts]] / 2.0, mean(velocity)]
     fits = _fit(mean(motor), mean(motor - np.asarray(load, float)), dense, move[rows[starts]],
                 day[rows[starts]], weight)
