@@ -12,7 +12,8 @@ position l (linear scale) logged together, their difference holds three things:
 - while moving, a term proportional to the velocity v: the servo lag between the two
   channels' sampling, viscous wind-up.
 
-One least-squares fit per day separates them:
+One least-squares fit per day separates them (the usable samples of a move averaged over
+bins of ``BIN_S``, weighted by their counts):
 
 .. math:: m_i - l_i = \\frac{d_i}{2} L + c\\, v_i + \\sum_k \\beta_k N_k(x_i) + \\varepsilon_i
 
@@ -30,8 +31,8 @@ two reversals a cluster: samples of one move share their errors (the servo's, th
 interpolation), so the moves, not the samples, are the independent evidence.
 
 References: [Mechta2022] (B-spline intra-axis error model); Eilers & Marx (1996), "Flexible
-smoothing with B-splines and penalties", Statistical Science 11(2) (P-splines); Siemens, SINUMERIK Analyze
-MyMachine /Condition (a second, load-side encoder for backlash); Liang & Zeger (1986),
+smoothing with B-splines and penalties", Statistical Science 11(2) (P-splines); Siemens,
+SINUMERIK Analyze MyMachine /Condition (a second, load-side encoder for backlash); Liang & Zeger (1986),
 "Longitudinal data analysis using generalized linear models", Biometrika 73(1) (cluster-robust
 variance).
 """
@@ -69,6 +70,9 @@ STEADY = 1e-3
 # fit (weighted by their counts): the servo and the scale do not change within it, so the fit
 # loses nothing and its cost stops growing with the sampling rate.
 BIN_S = 0.02
+# 1 - r² of direction and velocity below which lost motion and servo lag are confounded (every
+# move at one feed, no rests): the day shows no lost motion.
+SEPARABLE = 1e-3
 # Days are fitted together in runs of about this many samples (``daily_lost_motion``).
 CHUNK_SAMPLES = 100_000
 
@@ -297,6 +301,10 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
         diag = sum(np.bincount(col + a, weights=weight * values[:, a] * values[:, a + o],
                                minlength=total) for a in range(width - o))
         band[width - 1 - o, o:] += diag[:total - o]
+    # a floor of 1e-12 of the largest diagonal keeps both blocks positive definite when the
+    # data leave a direction free (a day of rests only has no velocity to fit a lag to)
+    band[width - 1] += 1e-12 * band[width - 1].max()
+    a_dense = a_dense + np.eye(q) * 1e-12 * max(a_dense[:, range(q), range(q)].max(), 1e-300)
     solved = solveh_banded(band, np.c_[cross, spline_t(y)], check_finite=False)
     block = np.repeat(np.arange(len(present)), k_day)  # the day slot of each spline column
     bounds = np.r_[0, np.cumsum(k_day)[:-1]]
@@ -324,7 +332,13 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
 
     scores = weight * fitted(1) * (y - fitted(0))
     u = _cluster_u(scores, clusters, slot, len(present))
-    return {int(d): (z_dense[i, :, 0], u[i], int(k_day[i])) for i, d in enumerate(present)}
+    # L and c apart need velocities that do not follow the direction alone (several feeds, or
+    # rests): 1 - r² of the two columns (uncentred) below SEPARABLE leaves them confounded
+    r2 = a_dense[:, 0, 1] ** 2 / (a_dense[:, 0, 0] * a_dense[:, 1, 1]) if q > 1 else 0.0
+    blind = np.broadcast_to(1.0 - r2 < SEPARABLE, len(present))
+    return {int(d): (np.where(blind[i], np.nan, z_dense[i, :, 0]),
+                     np.nan if blind[i] else u[i], int(k_day[i]))
+            for i, d in enumerate(present)}
 
 
 def _rows(t: np.ndarray, k: np.ndarray):

@@ -119,6 +119,21 @@ def test_fit_separates_lead_error_and_lag_from_the_play():
     assert fit.reversals >= 5
 
 
+def test_one_feed_without_rests_shows_no_lost_motion():
+    """Moves at one feed and no rests: the velocity follows the direction, so lost motion and
+    servo lag are confounded; the day is left without a value rather than guessed."""
+    from models.physics.axis import play
+
+    t = np.arange(0.0, 60.0, 0.005)
+    triangle = 10 + 20 * np.abs((t / 4) % 2 - 1)
+    load = np.interp(t - 0.002, t, play(triangle[None, :], np.full((1, len(t)), 4.0))[0])
+    fit = fit_day(t, triangle, triangle, load)
+    assert fit.reversals > 10 and np.isnan(fit.lost_motion)
+    dwell = np.repeat(triangle[::40], 40)[:len(t)]  # the same path with rests: separable
+    load = np.interp(t - 0.002, t, play(dwell[None, :], np.full((1, len(t)), 4.0))[0])
+    assert fit_day(t, dwell, dwell, load).lost_motion * 1000 == pytest.approx(4.0, abs=0.05)
+
+
 def test_engine_local_mode_gives_the_in_process_result(tmp_path):
     pytest.importorskip("dask")
     trace, _ = fleet_traces(seed=2, days=3, seconds=20.0)

@@ -277,9 +277,10 @@ def _notes(daily) -> list[str]:
     blind = daily[daily["lost_motion_um"].isna()]
     if blind.empty:
         return []
-    return [(f"{len(blind)} day(s) without two reversals that took up the play (e.g. "
-            f"{blind.iloc[0].machine_id} {blind.iloc[0].axis} on {blind.iloc[0].date}) show no "
-            "lost motion; they are listed without a value")]
+    return [(f"{len(blind)} day(s) show no lost motion (e.g. {blind.iloc[0].machine_id} "
+            f"{blind.iloc[0].axis} on {blind.iloc[0].date}): fewer than two reversals took up "
+            "the play, or every move ran at one feed without rests, so that lost motion and "
+            "servo lag cannot be told apart; they are listed without a value")]
 
 
 def _source(traces) -> str:
