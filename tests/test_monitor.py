@@ -250,3 +250,17 @@ def test_a_day_given_twice_is_refused(small):
     path, _ = small
     with pytest.raises(InputError, match="in two inputs"):
         monitor([path, path])
+
+
+def test_simulate_writes_twin_traces_and_refuses_a_rate_out_of_range(tmp_path, capsys):
+    assert main(["simulate", "--traces", "--days", "2", "--seed", "1",
+                 "--out", str(tmp_path / "tw")]) == 0
+    truth = pd.read_csv(tmp_path / "tw" / "traces_truth.csv")
+    assert sorted(truth["axis"].unique()) == ["X", "Y", "Z"] and len(truth) == 6
+    assert (tmp_path / "tw" / "traces" / "machine_id=M01" / "axis=X" / "date=2026-03-02"
+            / "part-0.parquet").is_file()
+    capsys.readouterr()
+    assert main(["simulate", "--traces", "--rate-hz", "50", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--rate-hz" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "b").exists()

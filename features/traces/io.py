@@ -158,17 +158,11 @@ def write_dataset(trace: pd.DataFrame, folder) -> list[Path]:
 
 
 def write_trace(trace: pd.DataFrame, path) -> Path:
-    """Write a trace table as CSV or Parquet (by suffix), atomically."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise InputError("unknown output type; expected a .csv or .parquet file name", file=path)
-    with atomic_path(path) as tmp:
-        if suffix == ".parquet":
-            trace.to_parquet(tmp, index=False)
-        else:
-            trace.to_csv(tmp, index=False, date_format="%Y-%m-%dT%H:%M:%S.%fZ")
-    return path
+    """Write a trace table as CSV or Parquet (by suffix), atomically: the readings table's
+    writer, whose CSV times carry microseconds and the UTC offset."""
+    from features.readings.io import write_readings
+
+    return write_readings(trace, path)
 
 
 def groups(trace: pd.DataFrame, by_day: bool = False) -> list[pd.DataFrame]:

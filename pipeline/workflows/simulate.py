@@ -69,25 +69,15 @@ class SimulationResult(Result):
     def write(self, out) -> dict[str, Path]:
         """The four files into folder ``out`` together: written into a temporary folder, then
         renamed into place (a failure leaves none of them)."""
-        import shutil
-
         from features.readings import write_readings
-        from features.readings.fileio import temp_folder, write_json
+        from features.readings.fileio import write_json
 
-        out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = temp_folder(out)
-        try:
-            write_readings(self.readings, tmp / FILES["readings"])
-            self.truth.to_csv(tmp / FILES["truth"], index=False)
-            self.visits.to_csv(tmp / FILES["visits"], index=False)
-            write_json(tmp / FILES["parameters"], self.parameters)
-            out.mkdir(exist_ok=True)
-            for name in FILES.values():
-                os.replace(tmp / name, out / name)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        self.files = {role: out / name for role, name in FILES.items()}
+        written = write_together(out, {
+            FILES["readings"]: lambda path: write_readings(self.readings, path),
+            FILES["truth"]: lambda path: self.truth.to_csv(path, index=False),
+            FILES["visits"]: lambda path: self.visits.to_csv(path, index=False),
+            FILES["parameters"]: lambda path: write_json(path, self.parameters)})
+        self.files = {role: written[name] for role, name in FILES.items()}
         return self.files
 
     def summary(self) -> str:
@@ -178,24 +168,12 @@ class TraceSimulationResult(Result):
     def write(self, out) -> dict[str, Path]:
         """``traces/`` (a Parquet dataset partitioned by machine, axis and date) and
         ``traces_truth.csv`` into folder ``out``, renamed into place together."""
-        import shutil
-
         from features.traces.io import write_dataset
 
-        out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = temp_folder_of(out)
-        try:
-            write_dataset(self.trace, tmp / "traces")
-            self.truth.to_csv(tmp / "traces_truth.csv", index=False)
-            out.mkdir(exist_ok=True)
-            if (out / "traces").exists():
-                shutil.rmtree(out / "traces")
-            for name in ("traces", "traces_truth.csv"):
-                os.replace(tmp / name, out / name)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        self.files = {"traces": out / "traces", "truth": out / "traces_truth.csv"}
+        written = write_together(out, {
+            "traces": lambda path: write_dataset(self.trace, path),
+            "traces_truth.csv": lambda path: self.truth.to_csv(path, index=False)})
+        self.files = {"traces": written["traces"], "truth": written["traces_truth.csv"]}
         return self.files
 
     def summary(self) -> str:
@@ -207,10 +185,27 @@ class TraceSimulationResult(Result):
                 "seed": self.seed, "files": {k: str(v) for k, v in self.files.items()}}
 
 
-def temp_folder_of(out: Path) -> Path:
+def write_together(out, writers: dict) -> dict[str, Path]:
+    """Each ``writers[name](path)`` into a temporary folder beside ``out``, then every file
+    (or folder) renamed into ``out`` (a failure leaves none of them); returns name -> path."""
+    import shutil
+
     from features.readings.fileio import temp_folder
 
-    return temp_folder(out)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = temp_folder(out)
+    try:
+        for name, write in writers.items():
+            write(tmp / name)
+        out.mkdir(exist_ok=True)
+        for name in writers:
+            if (out / name).is_dir():  # a folder output replaces the one of an earlier run
+                shutil.rmtree(out / name)
+            os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {name: out / name for name in writers}
 
 
 def simulate_traces(seed: int = 0, days: int = 30, rate_hz: float = 200.0,
