@@ -59,9 +59,9 @@ def test_lost_motion_of_an_independent_generator_within_015_um(fleet):
 
 
 def test_monitor_costs_a_few_times_reading_the_parquet_file(fleet):
-    """CPU time of ``monitor`` (one core) against ``pd.read_parquet`` of the same file (which
-    uses every core): the goal is 3x; measured about 4.5x on the development machine, so
-    this guards against regressions at 6x (docs/monitor.md, Speed)."""
+    """Processor time of ``monitor`` (one core) against ``pd.read_parquet`` of the same file
+    (which uses every core): the goal is 3x, measured 2.8x on the development machine; this
+    guards at 4x so that a loaded machine does not fail it (docs/monitor.md, Speed)."""
     path, _ = fleet
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -77,7 +77,7 @@ def test_monitor_costs_a_few_times_reading_the_parquet_file(fleet):
 
         floor = best(lambda: pd.read_parquet(path))
         spent = best(lambda: monitor(path))
-    assert spent < 6 * floor, (spent, floor)
+    assert spent < 4 * floor, (spent, floor)
 
 
 def test_twin_traces_recover_the_twins_truth(tmp_path):
