@@ -264,3 +264,15 @@ def test_simulate_writes_twin_traces_and_refuses_a_rate_out_of_range(tmp_path, c
     err = capsys.readouterr().err.strip()
     assert "--rate-hz" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "b").exists()
+
+
+def test_time_may_interleave_axes_but_never_go_back_within_one():
+    from features.traces.validation import check_trace
+
+    t = pd.date_range("2026-03-01", periods=6, freq="10ms", tz="UTC")
+    frame = pd.DataFrame({"time": t[[0, 0, 1, 1, 2, 2]], "machine_id": "M", "axis":
+                          ["X", "Y"] * 3, "commanded_mm": 1.0, "motor_mm": 1.0})
+    assert len(check_trace(frame, "f.csv")) == 6  # X and Y rows alternate: fine
+    frame.loc[5, "time"] = t[0]  # Y goes back from t[1] to t[0] at row 5 + 2
+    with pytest.raises(InputError, match="row 7.*time goes back"):
+        check_trace(frame, "f.csv")

@@ -161,14 +161,18 @@ def _check_deg_names(frame: pd.DataFrame, axis: pd.Series, source, row_base: int
 
 def _check_order(frame: pd.DataFrame, source, row_base: int) -> None:
     """Time never goes back within a machine axis (rows of other axes may interleave)."""
-    group = frame["machine_id"].cat.codes.to_numpy(np.int64) * 64 \
-        + frame["axis"].cat.codes.to_numpy(np.int64)
+    machine = frame["machine_id"].cat.codes.to_numpy()
+    axis = frame["axis"].cat.codes.to_numpy()
     t = frame[c.TIME].to_numpy().view(np.int64)
-    step = np.diff(group) != 0
-    starts = group[np.r_[0, np.flatnonzero(step) + 1]]
-    if len(starts) == len(np.unique(starts)):  # each axis in one block: no sort
-        rows = np.flatnonzero((np.diff(t) < 0) & ~step) + 1
+    step = (machine[1:] != machine[:-1]) | (axis[1:] != axis[:-1])
+    starts = np.r_[0, np.flatnonzero(step) + 1]
+    pairs = machine[starts].astype(np.int64) * 64 + axis[starts]
+    if len(pairs) == len(np.unique(pairs)):  # each axis in one block: no sort
+        back = np.diff(t) < 0
+        back &= ~step
+        rows = np.flatnonzero(back) + 1
     else:
+        group = machine.astype(np.int64) * 64 + axis
         order = np.argsort(group, kind="stable")
         g, ts = group[order], t[order]
         back = np.flatnonzero((np.diff(ts) < 0) & (g[1:] == g[:-1]))
