@@ -230,7 +230,9 @@ def fit_days(t_s, day, commanded, motor, load, weight=None, *, take_up: float = 
     day = np.asarray(day)
     days = int(day[-1]) + 1 if len(day) else 0
     if weight is None:
-        key = np.floor(np.asarray(t_s, float) * (1.0 / BIN_S))
+        t_s = np.asarray(t_s, float)
+        span = (t_s[-1] - t_s[0]) / BIN_S + 2.0  # more bins than one day holds: a new day,
+        key = np.floor(t_s * (1.0 / BIN_S)) + day * span  # a new bin
         t_s, day, commanded, motor, load, weight = _binned(
             key, *(np.asarray(v, float) for v in (t_s, day, commanded, motor, load)))
         day = day.astype(int)  # a bin lies within one day
