@@ -19,18 +19,20 @@ from features.readings.errors import BacklashWarning, InputError
 # ``import backlash`` stays light).
 _WHERE = {
     "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
-    "ingest": "ingest",
+    "ingest": "ingest", "check_store": "store", "void": "void",
     "iso": "iso", "report": "report", "simulate": "simulate",
     "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
     "backtest": "compare", "tune": "tune",
     "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
     "hidden_effects": "hidden_effects", "compensate": "compensate", "uncertainty": "uncertainty",
-    "fleet": "fleet", "targets": "targets", "monitor": "monitor",
+    "fleet": "fleet", "targets": "targets",
+    "volumetric": "volumetric", "circle": "circle", "monitor": "monitor",
 }
 __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
-    "BacklashWarning", "InputError", "backtest", "compare", "compensate", "convert", "discover",
+    "BacklashWarning", "InputError", "backtest", "check_store", "circle", "compare", "compensate", "convert", "discover",
     "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "monitor", "predict", "rank", "read", "replicate", "report",
-    "simulate", "targets", "train", "tune", "uncertainty", "validate", "write",
+    "simulate", "targets", "train", "tune", "uncertainty", "validate", "void", "volumetric",
+    "write",
 ]
 
 

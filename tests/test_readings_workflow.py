@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -81,7 +82,9 @@ def test_every_record_reads_its_own_layout(tmp_path, ess_file):
                   "Dev_lin_r [mm]": [0.002] * 4, "Dev_pend_f [mm]": [0.001] * 4,
                   "Dev_pend_r [mm]": [0.003] * 4, "Speed [mm/min]": [500] * 4}).to_csv(
         paper, index=False)
-    files = {"canonical": canonical, "paper": paper, "ecmc": ess_file, "rtl": rtl}
+    camonitor = Path(__file__).parents[1] / "experiments/data/camonitor/ess_mcu1025_iso230.log"
+    files = {"canonical": canonical, "paper": paper, "ecmc": ess_file, "rtl": rtl,
+             "camonitor": camonitor}
     assert set(files) == set(layouts.BY_NAME)
     for name, path in files.items():
         assert layouts.detect_format(path) == name

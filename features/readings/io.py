@@ -14,7 +14,7 @@ from features.readings.layouts import BY_NAME, FORMATS, detect_format
 from features.readings.validation import validate
 
 
-def read_readings(path, format: str = "auto") -> pd.DataFrame:
+def read_readings(path, format: str = "auto", **options) -> pd.DataFrame:
     """Read a readings file in any accepted layout into the validated long frame.
 
     Parameters
@@ -24,6 +24,9 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
     format : str
         A layout name of ``features.readings.layouts.RECORDS``, or ``"auto"`` to recognise
         it from the file.
+    **options
+        Options of a raw log's reader (``channels``, ``reference_scale`` of the ``camonitor``
+        layout: ``features.readings.approaches``); None values are not given.
 
     Raises
     ------
@@ -37,7 +40,7 @@ def read_readings(path, format: str = "auto") -> pd.DataFrame:
     check_readable(path)
     if format == "auto":
         format = detect_format(path)
-    return validate(BY_NAME[format].read(path), path, None)
+    return validate(BY_NAME[format].read(path, **options), path, None)
 
 
 def check_readable(path: Path) -> None:

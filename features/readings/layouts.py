@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import codecs
 import importlib
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -95,6 +96,9 @@ class Layout:
         ``signature(probe) -> bool``: the file is of this layout whatever its content says.
     header : callable, optional
         ``header(names) -> bool`` on the set of column names of a CSV's first line.
+    options : tuple of str
+        Keyword options its reader takes beyond the path (a raw log's channel mapping); no
+        other layout accepts them.
     """
 
     name: str
@@ -104,11 +108,19 @@ class Layout:
     reader: str
     signature: Callable[[Probe], bool] | None = None
     header: Callable[[set[str]], bool] | None = None
+    options: tuple[str, ...] = ()
 
-    def read(self, path):
-        """The file's long readings (not validated): the reader, imported on first use."""
+    def read(self, path, **options):
+        """The file's long readings (not validated): the reader, imported on first use, given
+        ``options`` (only those of ``self.options`` whose value is not None)."""
+        given = {name: value for name, value in options.items() if value is not None}
+        extra = [name for name in given if name not in self.options]
+        if extra:
+            takers = _or_list([r.name for r in RECORDS if extra[0] in r.options])
+            raise InputError(f"applies to {takers} files only; this file is {self.name!r}",
+                             file=path, parameter=extra[0])
         module, _, function = self.reader.partition(":")
-        return getattr(importlib.import_module(module), function)(Path(path))
+        return getattr(importlib.import_module(module), function)(Path(path), **given)
 
 
 def _rtl_signature(probe: Probe) -> bool:
@@ -118,6 +130,17 @@ def _rtl_signature(probe: Probe) -> bool:
 
 def _ecmc_signature(probe: Probe) -> bool:
     return probe.text is not None and ("TGT_DATA[" in probe.text or "REF_DATA_" in probe.text)
+
+
+# A camonitor line: PV name, date, time of day (``features.readings.camonitor``).
+_CAMONITOR_LINE = re.compile(r"\S+[ \t]+\d{4}-\d{2}-\d{2}[ \t]+\d{2}:\d{2}:\d{2}(\.\d+)?[ \t]+\S")
+
+
+def _camonitor_signature(probe: Probe) -> bool:
+    if probe.text is None:
+        return False
+    first = next((line for line in probe.text.splitlines() if line.strip()), "")
+    return bool(_CAMONITOR_LINE.match(first.strip()))
 
 
 RECORDS: tuple[Layout, ...] = (
@@ -143,6 +166,12 @@ RECORDS: tuple[Layout, ...] = (
         expected="a Renishaw .rtl file (TARGET DATA::, RUNS::, DEVIATIONS:: sections)",
         suffixes=(".rtl",), reader="features.readings.rtl:read_rtl",
         signature=_rtl_signature),
+    Layout(
+        name="camonitor", help="EPICS camonitor log",
+        expected="an EPICS camonitor log of an ISO 230-2 run (lines 'PV date time value')",
+        suffixes=(".log", ".txt"),
+        reader="features.readings.approaches:read_camonitor_readings",
+        signature=_camonitor_signature, options=("channels", "reference_scale", "unit")),
 )
 BY_NAME = {record.name: record for record in RECORDS}
 # The ``--format`` choices: detection first, then every layout.

@@ -53,7 +53,9 @@ def _input(value: str, args):
         return value
     from pipeline.workflows.convert import read
 
-    return read(value, args.format, **filters)
+    # a raw log's options (``backlash convert --channels``) go to its reader
+    raw = {name: getattr(args, name, None) for name in ("channels", "reference_scale", "unit")}
+    return read(value, args.format, **filters, **raw)
 
 
 def selected(args, skip: tuple[str, ...] = ()) -> dict:

@@ -12,12 +12,14 @@ from dataclasses import dataclass
 
 from features.readings import schema
 from features.readings.errors import InputError
+from pipeline.store import tables
 
 # The version of the store's layout this code writes and reads. A store written by a newer
 # version (a larger number in its manifest or table) is refused, never guessed at. Version 2
 # added the record tables (``records``): a version-1 store reads as having no records and is
-# upgraded by its first record.
-FORMAT_VERSION = 2
+# upgraded by its first record. Version 3 added the void tables (``tables.VOIDED``, ``AUDIT``):
+# a reader of version 2 would read a voided test, so a store with voids must refuse it.
+FORMAT_VERSION = 3
 # The embedded store's manifest: a folder holding it is a store.
 MANIFEST = "manifest.sqlite"
 KEYS = list(schema.TEST_KEYS)
@@ -41,7 +43,41 @@ class Added:
 
 class Transaction:
     """What an engine does inside its write transaction (``Store.transaction()``, a context
-    manager holding the store's write lock, rolls back whatever was not committed)."""
+    manager holding the store's write lock, rolls back whatever was not committed).
+
+    ``conn`` is the engine's DB-API connection; ``ENGINE`` (0 embedded, 1 PostgreSQL),
+    ``MARK`` (its parameter mark), ``META`` and ``TESTS`` (its table names) let the SQL that
+    both engines share be written once."""
+
+    ENGINE: int
+    MARK: str
+    META: str
+    TESTS: str
+    conn: object
+
+    def has_table(self, name: str) -> bool:
+        raise NotImplementedError
+
+    def upgrade(self) -> None:
+        """Give a store of an older format every table of ``tables`` and this version."""
+        tables.upgrade(self.conn, self.META, tables.of_engine(self.ENGINE), self.MARK,
+                       FORMAT_VERSION)
+
+    def matching(self, machine: str, axis: str, visit=None, test_id=None,
+                 voided: bool = False) -> list[tuple]:
+        """Keys of the stored tests of ``machine`` and ``axis`` (and ``visit``, ``test_id``
+        when given) that are voided (``voided``) or not, sorted."""
+        given = {"machine_id": machine, "axis": axis, "visit": visit, "test_id": test_id}
+        given = {k: v for k, v in given.items() if v is not None}
+        where = " AND ".join(f"t.{k} = {self.MARK}" for k in given)
+        table = tables.VOIDED[self.ENGINE]
+        if self.has_table(table):
+            where += (f" AND {'' if voided else 'NOT '}EXISTS (SELECT 1 FROM {table} AS v WHERE "
+                      + " AND ".join(f"v.{k} = t.{k}" for k in KEYS) + ")")
+        elif voided:
+            return []
+        return sorted(self.conn.execute(f"SELECT {', '.join(KEYS)} FROM {self.TESTS} AS t "
+                                        f"WHERE {where}", tuple(given.values())).fetchall())
 
     def stored(self, digests):
         """Digest rows (``KEYS`` + ``sha256``) of the tests of ``digests`` already stored."""
@@ -89,6 +125,63 @@ class Store:
     def get_records(self, kind: str) -> list[tuple]:
         """Every stored row of ``kind`` (``records.COLUMNS``); none in an older store."""
         raise NotImplementedError
+
+    def rows(self, query: str, table: str) -> list[tuple]:
+        """The rows of a read-only ``query`` that reads ``table`` (none when the store or the
+        table does not exist yet)."""
+        raise NotImplementedError
+
+    def check(self, repair: bool = False):
+        """Verify the store (``check.Checked``); ``repair`` removes what is provably orphaned."""
+        raise NotImplementedError
+
+    def void(self, machine: str, axis: str, visit=None, test_id=None, *, reason: str,
+             undo: bool = False) -> list[tuple]:
+        """Retire the matching tests (``undo``: restore them) and keep who, when and why.
+
+        Returns
+        -------
+        list of tuple
+            The keys (``KEYS``) of the tests voided or restored.
+
+        Raises
+        ------
+        InputError
+            No stored test matches (none voided, with ``undo``); nothing is written.
+        """
+        import getpass
+
+        with self.transaction() as tx:
+            keys = tx.matching(machine, axis, visit, test_id, voided=undo)
+            if not keys:
+                what = ", ".join(f"{k} {v}" for k, v in (("machine", machine), ("axis", axis),
+                                 ("visit", visit), ("test_id", test_id)) if v is not None)
+                if not tx.matching(machine, axis, visit, test_id, voided=not undo):
+                    raise InputError(f"no test matches {what}", file=self.location)
+                state = "voided" if undo else "not voided"
+                raise InputError(f"no test that matches {what} is {state}; nothing changed",
+                                 file=self.location)
+            tx.upgrade()
+            tables.void_rows(tx.conn, tx.ENGINE, tx.MARK, keys, "undo" if undo else "void",
+                             tables.now(), getpass.getuser(), reason)
+            tx.commit()
+        return keys
+
+    def voids(self):
+        """The voided tests (``KEYS``) with the ``at``, ``user_name`` and ``reason`` of their
+        void, sorted by key (an empty frame when there are none)."""
+        import pandas as pd
+
+        engine = self.ENGINE
+        audit = self.rows(f"SELECT {', '.join(tables.AUDIT_COLUMNS)} FROM "
+                          f"{tables.AUDIT[engine]} WHERE action = 'void' ORDER BY at",
+                          tables.AUDIT[engine])
+        voided = self.rows(f"SELECT {', '.join(KEYS)} FROM {tables.VOIDED[engine]}",
+                           tables.VOIDED[engine])
+        audit = pd.DataFrame(audit, columns=list(tables.AUDIT_COLUMNS))
+        last = audit.drop_duplicates(KEYS, keep="last")
+        frame = pd.DataFrame(voided, columns=KEYS).merge(last, on=KEYS, how="left")
+        return frame[[*KEYS, "at", "user_name", "reason"]].sort_values(KEYS, ignore_index=True)
 
     def add(self, table, digests) -> Added:
         """Add tests in one transaction.

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 import os
 import sqlite3
 import stat
@@ -65,6 +66,7 @@ class FolderStore(Store):
     """
 
     def __init__(self, root, write: bool = False, parameter: str | None = None):
+        self.ENGINE = 0
         self.root = Path(root)
         self.location = str(root)
         self.manifest = self.root / MANIFEST
@@ -133,7 +135,14 @@ class FolderStore(Store):
     @contextlib.contextmanager
     def transaction(self):
         """The manifest's write lock (``BEGIN IMMEDIATE``: waits up to ``BUSY_S`` for
-        another ingest), held until commit or rollback."""
+        another ingest), held until commit or rollback; parts no manifest row names are
+        swept first."""
+        with self._locked() as tx:
+            tx.sweep()
+            yield tx
+
+    @contextlib.contextmanager
+    def _locked(self):
         if not self.manifest.exists():
             self.create()
         with self._connection(write=True) as conn:
@@ -141,12 +150,12 @@ class FolderStore(Store):
             tx = _FolderTransaction(self, conn)
             try:
                 check_version(conn, self.location)
-                tx.sweep()
                 yield tx
             finally:
                 if not tx.committed:
                     with contextlib.suppress(sqlite3.Error):
                         conn.execute("ROLLBACK")
+                    tx.remove_written()  # no part outlives an ingest that did not commit
 
     def create(self) -> None:
         """Create the manifest of a new store (two processes creating it at once both end
@@ -159,7 +168,7 @@ class FolderStore(Store):
         try:
             with contextlib.closing(sqlite3.connect(tmp, isolation_level=None)) as conn:
                 conn.executescript(_SCHEMA)
-                for table in _record_tables():
+                for table in tables.of_engine(0):
                     conn.execute(tables.create_sql(table))
                 conn.execute("INSERT INTO meta VALUES ('format_version', ?)",
                              (str(FORMAT_VERSION),))
@@ -171,7 +180,31 @@ class FolderStore(Store):
             with contextlib.suppress(OSError):
                 tmp.unlink()
 
+    # ------------------------------------------------------------------ checking
+    def check(self, repair: bool = False):
+        """Verify every part and test against the manifest (see ``check``). Under the write
+        lock (so an ingest under way is never taken for damage) where the manifest may be
+        written; ``repair`` relinks a test to the recorded part that holds its readings
+        intact, and removes files the manifest does not name and recorded parts that no test
+        reads and that hold nothing the store lacks."""
+        if not self.exists():
+            raise self._error("no such store (no manifest)")
+        if not repair and not os.access(self.manifest, os.W_OK):
+            with self._connection(write=False) as conn:
+                return _FolderCheck(self, conn, repair=False).run()
+        with self._locked() as tx:
+            checked = _FolderCheck(self, tx.conn, repair).run()
+            if checked.repaired:
+                tx.commit()
+            return checked
+
     # ------------------------------------------------------------------ reading
+    def rows(self, query: str, table: str) -> list[tuple]:
+        if not self.exists():
+            return []
+        with self._connection(write=False) as conn:
+            return conn.execute(query).fetchall() if _has_table(conn, table) else []
+
     def count(self) -> int:
         with self._connection(write=False) as conn:
             return conn.execute("SELECT count(*) FROM tests").fetchone()[0]
@@ -186,7 +219,7 @@ class FolderStore(Store):
 
     def put_records(self, kind: str, rows: list[tuple]) -> int:
         with self.transaction() as tx:
-            tables.upgrade(tx.conn, "meta", _record_tables(), "?")
+            tx.upgrade()
             added = tables.write_rows(tx.conn, tables.TABLES[kind][0], "?", rows)
             if added:
                 tx.commit()
@@ -196,44 +229,78 @@ class FolderStore(Store):
         table = tables.TABLES[kind][0]
         with self._connection(write=False) as conn:
             check_version(conn, self.location)
-            if conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
-                            (table,)).fetchone() is None:
+            if not _has_table(conn, table):
                 return []  # a store of format 1: no records yet
             return conn.execute(f"SELECT {', '.join(tables.COLUMNS)} FROM {table}").fetchall()
 
     def read_table(self, selection):
         import pyarrow as pa
-        import pyarrow.parquet as pq
 
         from pipeline.store.content import SCHEMA
 
         where, args = _where(selection)
         with self._connection(write=False) as conn:
             check_version(conn, self.location)
-            parts = conn.execute(
-                "SELECT part, machine_id, axis FROM parts WHERE part IN "
-                f"(SELECT part FROM tests {where}) ORDER BY part", args).fetchall()
-        found = []
-        for part, machine, axis in parts:
-            try:
-                table = pq.read_table(self.root / DATA / part)
-            except OSError as err:
-                raise self._error(f"cannot read part {part} of the store: {err}") from None
-            n = table.num_rows
-            table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
-            found.append(table.append_column("axis", pa.array([axis] * n, pa.string())))
+            if _has_table(conn, tables.VOIDED[0]):
+                where += (" AND" if where else "WHERE") + _NOT_VOIDED
+            rows = conn.execute(f"SELECT part, machine_id, axis, visit, test_id, readings "
+                                f"FROM tests AS t {where} ORDER BY part", args).fetchall()
+        found = [self._tests_in_part(part, list(tests))
+                 for part, tests in itertools.groupby(rows, key=lambda r: r[0])]
         if not found:
             return None
         return pa.concat_tables([t.select(SCHEMA.names).cast(SCHEMA) for t in found])
+
+    def _tests_in_part(self, part: str, tests: list[tuple]):
+        """The rows of ``tests`` (manifest rows: part, machine, axis, visit, test_id, count)
+        in their part; a part that cannot be read or lacks some of their readings is an
+        error, never a silently shorter table."""
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        table = self._read_part(part)
+        key = pc.binary_join_element_wise(table["visit"], table["test_id"], "\x1f")
+        wanted = pa.array([f"{t[3]}\x1f{t[4]}" for t in tests], pa.string())
+        table = table.filter(pc.is_in(key, value_set=wanted))
+        expected = sum(t[5] for t in tests)
+        if table.num_rows != expected:
+            raise self._error(f"part {part} holds {table.num_rows} readings of its "
+                              f"{len(tests)} tests, the manifest {expected}: the store is "
+                              "damaged; run backlash store check")
+        machine, axis = tests[0][1], tests[0][2]
+        n = table.num_rows
+        table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
+        return table.append_column("axis", pa.array([axis] * n, pa.string()))
+
+    def _read_part(self, part: str):
+        """One part file as Arrow; a missing or damaged file is one line."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        path = self.root / DATA / part
+        if not path.is_file():
+            raise self._error(f"part {part} is missing from the store folder; run backlash "
+                              "store check")
+        try:
+            return pq.read_table(path)
+        except (OSError, pa.ArrowException) as err:
+            raise self._error(f"part {part} cannot be read ({_first_line(err)}): the store is "
+                              "damaged; run backlash store check") from None
 
 
 class _FolderTransaction(Transaction):
     """What an ingest does under the manifest's write lock."""
 
+    ENGINE, MARK, META, TESTS = 0, "?", "meta", "tests"
+
     def __init__(self, store: FolderStore, conn: sqlite3.Connection):
         self.store = store
         self.conn = conn
         self.committed = False
+        self.written: list[Path] = []
+
+    def has_table(self, name: str) -> bool:
+        return _has_table(self.conn, name)
 
     def stored(self, digests):
         import pandas as pd
@@ -267,9 +334,16 @@ class _FolderTransaction(Transaction):
         stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
         part = (f"machine_id={_segment(machine)}/axis={_segment(axis)}/"
                 f"part-{stamp}-{uuid.uuid4().hex[:8]}.parquet")
-        with atomic_path(self.store.root / DATA / part) as tmp:
+        path = self.store.root / DATA / part
+        with atomic_path(path) as tmp:
             pq.write_table(rows.drop_columns(["machine_id", "axis"]), tmp)
+        self.written.append(path)
         return part
+
+    def remove_written(self) -> None:
+        for path in self.written:
+            with contextlib.suppress(OSError):
+                path.unlink()
 
     def commit(self) -> None:
         self.conn.execute("COMMIT")
@@ -286,10 +360,6 @@ class _FolderTransaction(Transaction):
             if path.relative_to(folder).as_posix() not in known:
                 with contextlib.suppress(OSError):
                     path.unlink()
-
-
-def _record_tables() -> list[str]:
-    return [embedded for embedded, _ in tables.TABLES.values()]
 
 
 def check_version(conn, location: str) -> None:
@@ -331,9 +401,15 @@ def _where(selection) -> tuple[str, list]:
 
 
 def _partitions(table):
-    """(machine_id, axis) and the rows of each, for a table sorted by test key."""
+    """(machine_id, axis) and all the rows of each, whatever the order of ``table``'s rows.
+
+    An ingest concatenates its files in the order given, so one machine axis may come in
+    several runs (X, Y, X); each machine axis must still become exactly one part, or the
+    tests of all but one of its runs would name a part that does not hold them. Arrow's sort
+    is stable: the rows of each test keep their order."""
     import numpy as np
 
+    table = table.sort_by([("machine_id", "ascending"), ("axis", "ascending")])
     machine = table["machine_id"].to_numpy(zero_copy_only=False)
     axis = table["axis"].to_numpy(zero_copy_only=False)
     cut = np.flatnonzero(np.r_[True, (machine[1:] != machine[:-1]) | (axis[1:] != axis[:-1])])
@@ -360,6 +436,153 @@ def _iso(stamp) -> str | None:
     if stamp is None or pd.isna(stamp):
         return None
     return pd.Timestamp(stamp).tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+class _FolderCheck:
+    """One check of a folder store on ``conn`` (see ``FolderStore.check``)."""
+
+    def __init__(self, store: FolderStore, conn, repair: bool):
+        import pandas as pd
+
+        self.store, self.conn, self.repair = store, conn, repair
+        self.parts = dict(conn.execute("SELECT part, readings FROM parts").fetchall())
+        self.tests = pd.DataFrame(conn.execute(
+            f"SELECT {', '.join(KEYS)}, sha256, readings, part FROM tests").fetchall(),
+            columns=[*KEYS, "sha256", "readings", "part"])
+        from pipeline.store.check import Checked
+
+        self.out = Checked(tests=len(self.tests), readings=int(self.tests["readings"].sum()))
+
+    def run(self):
+        held = self._read_parts()
+        self._unrecorded_files()
+        self._tests(held)
+        self._unread_parts(held)
+        return self.out
+
+    def _problem(self, text: str, mend=None) -> None:
+        """``text`` as a problem, or as repaired once ``mend()`` has run (``repair`` only)."""
+        if self.repair and mend is not None:
+            mend()
+            self.out.repaired.append(text)
+        else:
+            self.out.problems.append(text)
+
+    def _read_parts(self) -> dict:
+        """Part -> digest rows of the tests it holds (parts that cannot be read: problems)."""
+        import pyarrow as pa
+
+        from pipeline.store.check import found_digests
+
+        machine_axis = dict(self.conn.execute("SELECT part, machine_id || char(31) || axis "
+                                              "FROM parts").fetchall())
+        held = {}
+        for part, readings in self.parts.items():
+            try:
+                table = self.store._read_part(part)
+            except InputError as err:
+                self._problem(err.message)
+                continue
+            if table.num_rows != readings:
+                self._problem(f"part {part} holds {table.num_rows} readings, the manifest "
+                              f"records {readings}")
+            machine, axis = machine_axis[part].split("\x1f")
+            n = table.num_rows
+            table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
+            table = table.append_column("axis", pa.array([axis] * n, pa.string()))
+            held[part] = found_digests(table)
+        return held
+
+    def _unrecorded_files(self) -> None:
+        folder = self.store.root / DATA
+        if not folder.is_dir():
+            return
+        for path in sorted(p for p in folder.rglob("*") if p.is_file()):
+            part = path.relative_to(folder).as_posix()
+            if part not in self.parts:
+                self._problem(f"file {DATA}/{part} is not in the manifest (left by an "
+                              "interrupted ingest): nothing reads it", path.unlink)
+
+    def _tests(self, held: dict) -> None:
+        """Each test's readings intact in its part; else relinked to a part holding them."""
+        from pipeline.store.check import mismatch, name
+
+        where = {}  # test key -> [(part, digest row)]
+        for part, found in held.items():
+            for row in found.itertuples(index=False):
+                where.setdefault(tuple(getattr(row, k) for k in KEYS), []).append((part, row))
+        for i, test in enumerate(self.tests.itertuples(index=False)):
+            places = dict(where.get(tuple(getattr(test, k) for k in KEYS), []))
+            if test.part not in self.parts:
+                why = f"its part {test.part} is not recorded"
+            elif test.part not in held:
+                continue  # the part's own problem is listed
+            else:
+                why = mismatch(test, places.get(test.part))
+            if why is None:
+                continue
+            intact = [p for p, row in places.items() if mismatch(test, row) is None]
+            text = f"{name(test)}: {why} in part {test.part}"
+            if not intact:
+                self._problem(text)
+                continue
+            self.tests.loc[i, "part"] = intact[0]  # where it is read from once relinked
+            self._problem(f"{text}; part {intact[0]} holds them intact"
+                          + ("" if self.repair else ": --repair relinks the test to it"),
+                          lambda test=test, part=intact[0]: self._relink(test, part))
+
+    def _relink(self, test, part: str) -> None:
+        self.conn.execute("UPDATE tests SET part = ? WHERE machine_id = ? AND axis = ? AND "
+                          "visit = ? AND test_id = ?", (part, *(getattr(test, k) for k in KEYS)))
+
+    def _unread_parts(self, held: dict) -> None:
+        """Recorded parts no test reads: removed when every test they hold is intact in
+        the part it is read from (nothing the store lacks)."""
+        tests = self.tests.set_index(KEYS)
+        for part in sorted(set(self.parts) - set(self.tests["part"])):
+            found = held.get(part)
+            if found is None:
+                continue
+            own = [k for k in found.itertuples(index=False)
+                   if not _intact_elsewhere(tests, tuple(getattr(k, c) for c in KEYS), held)]
+            if own:
+                self._problem(f"part {part} is recorded but no test reads it, and it holds "
+                              f"{len(own)} tests the store has nowhere else: left as it is")
+                continue
+            self._problem(f"part {part} is recorded but no test reads it (every reading in it "
+                          "is stored elsewhere)", lambda part=part: self._drop_part(part))
+
+    def _drop_part(self, part: str) -> None:
+        self.conn.execute("DELETE FROM parts WHERE part = ?", (part,))
+        with contextlib.suppress(FileNotFoundError):
+            (self.store.root / DATA / part).unlink()
+
+
+def _intact_elsewhere(tests, key: tuple, held: dict) -> bool:
+    """Whether the test ``key`` is in the manifest and intact in the part it is read from."""
+    from pipeline.store.check import mismatch
+
+    if key not in tests.index:
+        return False
+    test = tests.loc[key]
+    found = held.get(test["part"])
+    if found is None:
+        return False
+    row = found[(found[KEYS] == list(key)).all(axis=1)]
+    return len(row) == 1 and mismatch(test, next(row.itertuples(index=False))) is None
+
+
+_NOT_VOIDED = (" NOT EXISTS (SELECT 1 FROM voided AS v WHERE v.machine_id = t.machine_id AND "
+               "v.axis = t.axis AND v.visit = t.visit AND v.test_id = t.test_id)")
+
+
+def _has_table(conn, name: str) -> bool:
+    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
+                        (name,)).fetchone() is not None
+
+
+def _first_line(err: Exception) -> str:
+    return (str(err).strip().splitlines() or [type(err).__name__])[0]
 
 
 def _existing_parent(path: Path) -> Path:

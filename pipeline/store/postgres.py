@@ -43,6 +43,7 @@ class PostgresStore(Store):
 
     def __init__(self, url: str, location: str, password: str | None = None,
                  write: bool = False, parameter: str | None = None):
+        self.ENGINE = 1
         self.url = url.replace("postgresql+psycopg://", "postgresql://", 1)
         self.location = location
         self._password = password
@@ -127,7 +128,7 @@ class PostgresStore(Store):
 
     def put_records(self, kind: str, rows: list[tuple]) -> int:
         with self.transaction() as tx:
-            tables.upgrade(tx.conn, META, _record_tables(), "%s")
+            tx.upgrade()
             added = tables.write_rows(tx.conn, tables.TABLES[kind][1], "%s", rows)
             tx.commit()
         return added
@@ -140,33 +141,68 @@ class PostgresStore(Store):
                 return []  # no store yet, or one of format 1: no records
             return conn.execute(f"SELECT {', '.join(tables.COLUMNS)} FROM {table}").fetchall()
 
+    def rows(self, query: str, table: str) -> list[tuple]:
+        with self._connection() as conn:
+            if not self._check_version(conn) or not _has_table(conn, table):
+                return []
+            return conn.execute(query).fetchall()
+
+    def check(self, repair: bool = False):
+        """Every test's readings as the manifest says (count and digest), read in one
+        transaction under the store's lock. The database's keys rule out the folder's other
+        faults (a reading of an unknown test, a missing part): nothing here to repair."""
+        import pandas as pd
+
+        from features.readings.selection import Selection
+        from pipeline.store.check import Checked, compare, found_digests
+
+        if not self.exists():
+            raise self._error("no such store (its tables do not exist)")
+        with self.transaction() as tx:
+            tests = pd.DataFrame(tx.conn.execute(
+                f"SELECT {', '.join(KEYS)}, sha256, readings FROM {TESTS}").fetchall(),
+                columns=[*KEYS, "sha256", "readings"])
+            table = _copy(tx.conn, Selection(), voids=False)
+        return Checked(tests=len(tests), readings=int(tests["readings"].sum()),
+                       problems=compare(tests, found_digests(table)))
+
     def read_table(self, selection):
-        import pyarrow as pa
-        import pyarrow.csv as pcsv
-
-        from pipeline.store.content import SCHEMA
-
-        buffer = io.BytesIO()
         with self._connection() as conn:
             if not self._check_version(conn):
                 return None
-            with conn.cursor().copy(_select(selection)) as copy:
-                for block in copy:
-                    buffer.write(block)
-        if not buffer.getbuffer().nbytes:
-            return pa.Table.from_pylist([], schema=SCHEMA)
-        buffer.seek(0)
-        return pcsv.read_csv(buffer, read_options=pcsv.ReadOptions(column_names=SCHEMA.names),
-                             convert_options=pcsv.ConvertOptions(
-                                 column_types=dict(zip(SCHEMA.names, SCHEMA.types)),
-                                 strings_can_be_null=False))
+            return _copy(conn, selection, _has_table(conn, tables.VOIDED[1]))
+
+
+def _copy(conn, selection, voids: bool):
+    """The store table of the readings ``_select`` picks, on ``conn``."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    from pipeline.store.content import SCHEMA
+
+    buffer = io.BytesIO()
+    with conn.cursor().copy(_select(selection, voids)) as copy:
+        for block in copy:
+            buffer.write(block)
+    if not buffer.getbuffer().nbytes:
+        return pa.Table.from_pylist([], schema=SCHEMA)
+    buffer.seek(0)
+    return pcsv.read_csv(buffer, read_options=pcsv.ReadOptions(column_names=SCHEMA.names),
+                         convert_options=pcsv.ConvertOptions(
+                             column_types=dict(zip(SCHEMA.names, SCHEMA.types)),
+                             strings_can_be_null=False))
 
 
 class _PostgresTransaction(Transaction):
     """What an ingest does inside its transaction (the advisory lock held)."""
 
+    ENGINE, MARK, META, TESTS = 1, "%s", META, TESTS
+
     def __init__(self, conn):
         self.conn = conn
+
+    def has_table(self, name: str) -> bool:
+        return _has_table(self.conn, name)
 
     def stored(self, digests):
         import pandas as pd
@@ -210,17 +246,14 @@ def _create(conn) -> None:
                  f"ingested_at timestamptz NOT NULL DEFAULT now(), PRIMARY KEY ({keys}))")
     conn.execute(f"CREATE TABLE {READINGS} ({columns}, PRIMARY KEY ({keys}, seq), "
                  f"FOREIGN KEY ({keys}) REFERENCES {TESTS})")
-    for table in _record_tables():
+    for table in tables.of_engine(1):
         conn.execute(tables.create_sql(table))
 
 
-def _record_tables() -> list[str]:
-    return [team for _, team in tables.TABLES.values()]
-
-
-def _select(selection):
-    """``COPY (SELECT ...) TO STDOUT``: the readings of the tests ``selection`` may keep,
-    times as ISO text in UTC (undated tests stay in: ``Selection.apply`` notes them)."""
+def _select(selection, voids: bool = False):
+    """``COPY (SELECT ...) TO STDOUT``: the readings of the tests ``selection`` may keep and
+    no voided test (``voids``: the store has the void table), times as ISO text in UTC
+    (undated tests stay in: ``Selection.apply`` notes them)."""
     from psycopg import sql
 
     from pipeline.store.content import SCHEMA
@@ -241,14 +274,23 @@ def _select(selection):
     if times:
         clauses.append(sql.SQL("(started_at IS NULL OR ({}))").format(
             sql.SQL(" AND ").join(times)))
-    where = sql.SQL("")
+    keys = sql.SQL(", ").join(map(sql.Identifier, KEYS))
+    conditions = []
     if clauses:
-        where = sql.SQL(" WHERE ({}) IN (SELECT {} FROM {} WHERE {})").format(
-            sql.SQL(", ").join(map(sql.Identifier, KEYS)),
-            sql.SQL(", ").join(map(sql.Identifier, KEYS)), sql.Identifier(TESTS),
-            sql.SQL(" AND ").join(clauses))
+        conditions.append(sql.SQL("({}) IN (SELECT {} FROM {} WHERE {})").format(
+            keys, keys, sql.Identifier(TESTS), sql.SQL(" AND ").join(clauses)))
+    if voids:
+        conditions.append(sql.SQL("({}) NOT IN (SELECT {} FROM {})").format(
+            keys, keys, sql.Identifier(tables.VOIDED[1])))
+    where = sql.SQL("")
+    if conditions:
+        where = sql.SQL(" WHERE ") + sql.SQL(" AND ").join(conditions)
     return sql.SQL("COPY (SELECT {} FROM {}{}) TO STDOUT (FORMAT csv)").format(
         columns, sql.Identifier(READINGS), where)
+
+
+def _has_table(conn, name: str) -> bool:
+    return conn.execute("SELECT to_regclass(%s)", (name,)).fetchone()[0] is not None
 
 
 def _message(err) -> str:

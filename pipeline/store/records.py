@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from features.readings import schema
 from features.readings.errors import InputError
+from pipeline.store.tables import now
 
 # The record's own layout: part of every record, so a future change can never be misread.
 RECORD_FORMAT = 1
@@ -187,11 +188,6 @@ def rows_of(kind: str, records: list[dict], recorded_at: str | None = None) -> l
     stamp = recorded_at or now()
     return [(r["machine_id"], r["axis"], digest(r), stamp, canonical(CHECKS[kind](r)))
             for r in records]
-
-
-def now() -> str:
-    """The time of recording as fixed-width ISO text in UTC (sorts as it compares)."""
-    return dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def parse(kind: str, row: tuple, location: str) -> dict:

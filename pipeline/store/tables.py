@@ -1,21 +1,50 @@
-"""The record tables of the fleet store, the same SQL for both engines: one table per kind
-of record (``records``), columns ``machine_id``, ``axis``, ``sha256`` (the digest of the
-record's canonical text), ``recorded_at`` (ISO 8601, UTC) and ``record`` (the JSON text), keyed
-by machine, axis and digest."""
+"""The tables every fleet store has beside its readings, the same SQL for both engines.
+
+Record tables (``records``): one per kind of record, columns ``machine_id``, ``axis``,
+``sha256`` (the digest of the record's canonical text), ``recorded_at`` (ISO 8601, UTC) and
+``record`` (the JSON text), keyed by machine, axis and digest.
+
+Void tables (``voids``): ``voided`` names the tests every reader skips; ``audit`` keeps every
+void and undo with when, who and why, never deleted.
+"""
 
 from __future__ import annotations
+
+import datetime as dt
 
 # Table per kind: (embedded store, PostgreSQL).
 TABLES = {"forecast": ("forecasts", "backlash_forecasts"),
           "compensation": ("compensations", "backlash_compensations")}
 COLUMNS = ("machine_id", "axis", "sha256", "recorded_at", "record")
+VOIDED = ("voided", "backlash_voided")
+AUDIT = ("audit", "backlash_audit")
+AUDIT_COLUMNS = ("at", "user_name", "action", "machine_id", "axis", "visit", "test_id",
+                 "reason")
+_KEYS = "machine_id text NOT NULL, axis text NOT NULL, visit text NOT NULL, test_id text NOT NULL"
+
+
+def now() -> str:
+    """The time of recording as fixed-width ISO text in UTC (sorts as it compares)."""
+    return dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def create_sql(table: str) -> str:
-    """CREATE of a record table (nothing when it exists: a store upgraded twice is the same)."""
+    """CREATE of a table of this module (nothing when it exists: a store upgraded twice is
+    the same)."""
+    if table in VOIDED:
+        return (f"CREATE TABLE IF NOT EXISTS {table} ({_KEYS}, "
+                "PRIMARY KEY (machine_id, axis, visit, test_id))")
+    if table in AUDIT:
+        return (f"CREATE TABLE IF NOT EXISTS {table} (at text NOT NULL, user_name text NOT NULL, "
+                f"action text NOT NULL, {_KEYS}, reason text NOT NULL)")
     return (f"CREATE TABLE IF NOT EXISTS {table} (machine_id text NOT NULL, axis text NOT NULL, "
             "sha256 text NOT NULL, recorded_at text NOT NULL, record text NOT NULL, "
             "PRIMARY KEY (machine_id, axis, sha256))")
+
+
+def of_engine(engine: int) -> list[str]:
+    """Every table of this module for the embedded store (0) or PostgreSQL (1)."""
+    return [names[engine] for names in (*TABLES.values(), VOIDED, AUDIT)]
 
 
 def insert_sql(table: str, mark: str) -> str:
@@ -23,17 +52,15 @@ def insert_sql(table: str, mark: str) -> str:
     return f"INSERT INTO {table} ({', '.join(COLUMNS)}) VALUES ({', '.join([mark] * 5)})"
 
 
-def upgrade(conn, meta: str, tables, mark: str) -> None:
-    """Give a store of an older format the record tables and this format's version (inside
-    the caller's transaction: undone with it)."""
-    from pipeline.store.base import FORMAT_VERSION
-
+def upgrade(conn, meta: str, tables, mark: str, version: int) -> None:
+    """Give a store of an older format the tables of this module and format ``version``
+    (inside the caller's transaction: undone with it)."""
     for table in tables:
         conn.execute(create_sql(table))
-    version = conn.execute(f"SELECT value FROM {meta} WHERE key = 'format_version'").fetchone()
-    if int(version[0]) < FORMAT_VERSION:
+    stored = conn.execute(f"SELECT value FROM {meta} WHERE key = 'format_version'").fetchone()
+    if int(stored[0]) < version:
         conn.execute(f"UPDATE {meta} SET value = {mark} WHERE key = 'format_version'",
-                     (str(FORMAT_VERSION),))
+                     (str(version),))
 
 
 def write_rows(conn, table: str, mark: str, rows: list[tuple]) -> int:
@@ -45,3 +72,19 @@ def write_rows(conn, table: str, mark: str, rows: list[tuple]) -> int:
     for row in new:
         conn.execute(insert_sql(table, mark), row)
     return len(new)
+
+
+def void_rows(conn, engine: int, mark: str, keys: list[tuple], action: str, at: str,
+              user: str, reason: str) -> None:
+    """Void (``action="void"``) or restore (``"undo"``) the tests of ``keys`` and add one
+    audit row each (inside the caller's transaction, the tables created)."""
+    voided, audit = VOIDED[engine], AUDIT[engine]
+    where = " AND ".join(f"{k} = {mark}" for k in ("machine_id", "axis", "visit", "test_id"))
+    for key in keys:
+        if action == "void":
+            conn.execute(f"INSERT INTO {voided} VALUES ({', '.join([mark] * 4)})", key)
+        else:
+            conn.execute(f"DELETE FROM {voided} WHERE {where}", key)
+        conn.execute(f"INSERT INTO {audit} ({', '.join(AUDIT_COLUMNS)}) VALUES "
+                     f"({', '.join([mark] * len(AUDIT_COLUMNS))})",
+                     (at, user, action, *key, reason))

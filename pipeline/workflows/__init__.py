@@ -104,7 +104,8 @@ def each_once(names: list, parameter: str) -> list:
     return names
 
 
-def readings_of(data, format: str = "auto", parameter: str = "data", selection=None):
+def readings_of(data, format: str = "auto", parameter: str = "data", selection=None,
+                options: dict | None = None):
     """The validated readings frame a workflow works on.
 
     Parameters
@@ -119,6 +120,9 @@ def readings_of(data, format: str = "auto", parameter: str = "data", selection=N
         The caller's parameter that passed ``data`` (named in errors).
     selection : features.readings.selection.Selection, optional
         Keep only these tests (a store reads only what it may keep).
+    options : dict, optional
+        Options of a raw log's reader (``channels``, ``reference_scale``: the ``camonitor``
+        layout); only a file of that layout takes them.
     """
     import os
 
@@ -129,18 +133,28 @@ def readings_of(data, format: str = "auto", parameter: str = "data", selection=N
         from pipeline.store import is_store, open_store
 
         if is_store(data) or os.path.isdir(data):
+            _no_options(options, data)
             if format != "auto":
                 raise InputError(f"is {format!r}, but a fleet store holds validated readings; "
                                  "expected 'auto'", parameter="format")
             return open_store(data).read(selection)
         from features.readings.io import read_readings
 
-        frame = read_readings(data, format)
+        frame = read_readings(data, format, **(options or {}))
     else:
         from features.readings.validation import check_readings
 
+        _no_options(options, parameter)
         frame = check_readings(data, parameter)
     return selection.apply(frame, frame.attrs.get("source", parameter))
+
+
+def _no_options(options: dict | None, source) -> None:
+    """A store or a frame holds readings already: a raw log's options do not apply."""
+    given = [name for name, value in (options or {}).items() if value is not None]
+    if given:
+        raise InputError(f"applies to a raw log (--format camonitor) only; {source} holds "
+                         "readings", parameter=given[0])
 
 
 def source_of(data, readings) -> str:
@@ -160,9 +174,9 @@ import importlib
 from dataclasses import dataclass
 
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
-NAMES = ("convert", "ingest", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
+NAMES = ("convert", "ingest", "store", "void", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
          "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
-         "uncertainty", "monitor")
+         "uncertainty", "volumetric", "circle", "monitor")
 
 
 @dataclass(frozen=True)

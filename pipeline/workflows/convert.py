@@ -23,6 +23,8 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of
 def _parameters() -> dict:
     """The constraints of the parameters (scikit-learn's constraint language), built on first
     use: the CLI reads the workflow records on every start."""
+    from numbers import Real
+
     import pandas as pd
 
     from pipeline.workflows.constraints import StrOptions
@@ -33,13 +35,17 @@ def _parameters() -> dict:
         "out": [str, os.PathLike],
         "format": [StrOptions(set(schema.FORMATS))],
         "source": [str, os.PathLike],
+        "channels": [str, dict, None],
+        "reference_scale": [Real, tuple, list, None],
+        "unit": [StrOptions({"mm", "um", "deg"}), None],
     }
 
 
 PARAMETERS = Constraints(_parameters)
 
 
-def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None):
+def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None,
+         channels=None, reference_scale=None, unit=None):
     """Read a readings file in any accepted layout, or a fleet store, into the validated
     readings frame; optionally only some tests.
 
@@ -58,6 +64,9 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
         Only tests whose ``started_at`` lies on or after ``since`` and on or before ``until``
         (ISO 8601; a date alone includes that whole day; UTC unless the time has an offset).
         Tests without ``started_at`` are left out when either is given (a note says how many).
+    channels, reference_scale, unit : optional
+        A raw log's channel mapping, reference scale and set-point unit
+        (``format="camonitor"``; see ``convert``).
 
     Returns
     -------
@@ -75,9 +84,10 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
     """
     from features.readings.selection import selection
 
-    check_params(_parameters(), {"path": path, "format": format}, "read")
+    raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
+    check_params(_parameters(), {"path": path, "format": format, **raw}, "read")
     chosen = selection(machine=machine, axis=axis, since=since, until=until)
-    return readings_of(path, format, "path", chosen)
+    return readings_of(path, format, "path", chosen, raw)
 
 
 def validate(frame, source: str = "<memory>"):
@@ -155,7 +165,8 @@ class ConvertResult(Result):
                 "out": None if self.out is None else str(self.out)}
 
 
-def convert(data, out=None, format: str = "auto") -> ConvertResult:
+def convert(data, out=None, format: str = "auto", channels=None, reference_scale=None,
+            unit=None) -> ConvertResult:
     """Read a readings file in any accepted layout, validate it and write the canonical table.
 
     Parameters
@@ -167,12 +178,24 @@ def convert(data, out=None, format: str = "auto") -> ConvertResult:
         ``ConvertResult.write``).
     format : str
         Input layout, ``"auto"`` to recognise it.
+    channels : str or dict, optional
+        A ``camonitor`` log's PVs: ``"target=PV,reference=PV,test=PV"`` or a dict (``test``
+        optional: without it the approaches are the settled stops at each target). None:
+        inferred from ecmc's PV names (``...-PosSet``, ``...TestNumber``, one other PV).
+    reference_scale : float or (float, float), optional
+        A ``camonitor`` log's gear ratio and offset [mm] from the reference PV to axis
+        coordinates (``measured = scale * reference + offset``). None: fitted to the set
+        points (a note gives them; see ``features.readings.approaches``).
+    unit : str, optional
+        A ``camonitor`` log's set-point unit: ``"mm"``, ``"um"`` or ``"deg"`` (a rotary axis).
+        None: deg when the set-point PV names an axis A, B or C, else mm.
 
     Returns
     -------
     ConvertResult
     """
-    check_params(_parameters(), {"data": data, "format": format}, "convert")
+    raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
+    check_params(_parameters(), {"data": data, "format": format, **raw}, "convert")
     if out is not None:
         check_params(_parameters(), {"out": out}, "convert")
         # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line
@@ -181,7 +204,7 @@ def convert(data, out=None, format: str = "auto") -> ConvertResult:
                 data):
             raise InputError("is the input file; expected a new file name (the original is "
                              "kept)", file=out, parameter="out")
-    readings = readings_of(data, format)
+    readings = readings_of(data, format, options=raw)
     tests = readings.groupby(list(schema.TEST_KEYS)).ngroups
     result = ConvertResult(readings=readings, tests=tests)
     if out is not None:  # exactly this file (a name without suffix is refused, not a folder)
@@ -191,6 +214,7 @@ def convert(data, out=None, format: str = "auto") -> ConvertResult:
 
 WORKFLOW = Workflow(
     name="convert", function=convert,
-    summary="Read a readings file (canonical, paper Table 2, ecmc or Renishaw .rtl) or a fleet "
-            "store, validate it, write CSV/Parquet.",
+    summary="Read a readings file (canonical, paper Table 2, ecmc, Renishaw .rtl or an EPICS "
+            "camonitor log of an ISO 230-2 run) or a fleet store, validate it, write "
+            "CSV/Parquet.",
     inputs=("data",))

@@ -1,0 +1,39 @@
+"""``backlash circle``: ISO 230-4 circular tests (ballbar) -> G, H and the diagnosis."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.workflows.circle import WORKFLOW
+
+HELP = WORKFLOW.summary
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+FLAGS = {"tolerance_um": "--tolerance", "data": "FILE"}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="FILE",
+                        help="circular-test table, CSV or Parquet (docs/circle.md)")
+    parser.add_argument("--out", metavar="DIR",
+                        help="output folder: a polar plot per circle, circles.csv, circles.html")
+    parser.add_argument("--tolerance", type=float, metavar="UM",
+                        help="width of the tolerance band drawn in the plots [um]")
+    parser.add_argument("--json", action="store_true",
+                        help="print G_um, H_um and the diagnosis of every circle as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.readings.fileio import dumps
+    from pipeline.workflows.circle import circle
+
+    result = circle(args.file, tolerance_um=args.tolerance)
+    if args.out:
+        result.write(args.out)
+    print(result.table(), file=sys.stderr)
+    if args.out:
+        print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
+    if args.json:
+        print(dumps(result.to_json()))
+    return 0

@@ -1,0 +1,42 @@
+"""``backlash store check``: verify a fleet store against its manifest (exit 1 on a problem)."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.workflows.store import WORKFLOW
+
+HELP = WORKFLOW.summary
+OUTPUTS = {}  # prints only (a repair changes the store itself)
+# Exit code when the check finds a problem it did not mend.
+PROBLEMS_EXIT = 1
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("action", choices=("check",), help="what to do with the store")
+    parser.add_argument("store", metavar="STORE",
+                        help="store folder or postgresql://USER@HOST/DB")
+    parser.add_argument("--repair", action="store_true",
+                        help="relink tests to the part that holds their readings intact and "
+                             "remove files and parts that are provably orphaned")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.readings.fileio import dumps
+    from pipeline.workflows.store import check_store
+
+    result = check_store(args.store, repair=args.repair)
+    if args.json:
+        print(dumps(result.to_json()))
+    else:
+        for line in result.repaired:
+            print(f"repaired: {line}")
+        for line in result.problems:
+            print(f"problem: {line}")
+    verdict = "no problem" if result.ok else f"{len(result.problems)} problems"
+    print(f"store {result.store}: {result.tests} tests, {result.readings} readings: {verdict}"
+          + (f", {len(result.repaired)} repaired" if result.repaired else ""), file=sys.stderr)
+    return 0 if result.ok else PROBLEMS_EXIT

@@ -1,0 +1,100 @@
+"""Store check: verify that a fleet store holds exactly what was ingested.
+
+>>> import backlash as bl
+>>> checked = bl.check_store("fleet/")                  # doctest: +SKIP
+>>> checked.problems                                    # doctest: +SKIP
+
+Every recorded test's readings are read back and compared with the manifest (their count and
+their digest); on the embedded store also every recorded part (present, readable, as many
+readings as recorded) and every file under ``readings/`` (named by the manifest). ``repair``
+mends only what is provably safe: a test whose readings another recorded part holds intact
+is relinked to it, a file the manifest does not name and a recorded part that no test reads
+and that holds nothing the store lacks are removed. See ``docs/store.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params
+
+
+def _parameters() -> dict:
+    return {"store": [str, os.PathLike], "repair": ["boolean"]}
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class StoreCheckResult(Result):
+    """What a check found.
+
+    Attributes
+    ----------
+    store : str
+        The store's location (a URL without its password).
+    tests, readings : int
+        Tests in the manifest (voided ones included) and the readings recorded for them.
+    problems : list of str
+        One line per problem left (after a repair, those it could not mend).
+    repaired : list of str
+        One line per problem the repair mended.
+    """
+
+    store: str
+    tests: int = 0
+    readings: int = 0
+    problems: list[str] = field(default_factory=list)
+    repaired: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def to_json(self) -> dict:
+        return {"store": self.store, "ok": self.ok, "tests": self.tests,
+                "readings": self.readings, "problems": self.problems, "repaired": self.repaired}
+
+    def __repr__(self) -> str:
+        return (f"StoreCheckResult(store={self.store!r}, tests={self.tests}, "
+                f"problems={len(self.problems)}, repaired={len(self.repaired)})")
+
+
+def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResult:
+    """Verify a fleet store against its manifest; optionally mend what is provably safe.
+
+    Parameters
+    ----------
+    store : str or path-like
+        A store folder or a ``postgresql://`` URL.
+    repair : bool
+        Relink tests to the recorded part that holds their readings intact, remove files the
+        manifest does not name and recorded parts no test reads (under the store's write
+        lock). Nothing else is ever changed.
+    progress : callable, optional
+        Unused (a check reads the store once); accepted as every workflow does.
+
+    Returns
+    -------
+    StoreCheckResult
+
+    Raises
+    ------
+    InputError
+        A location that is no store or cannot be opened.
+    """
+    check_params(_parameters(), {"store": store, "repair": repair}, "check_store")
+    from pipeline.store import open_store, redact
+
+    checked = open_store(store, write=repair, parameter="store").check(repair=repair)
+    return StoreCheckResult(store=redact(store), tests=checked.tests, readings=checked.readings,
+                            problems=checked.problems, repaired=checked.repaired)
+
+
+WORKFLOW = Workflow(
+    name="store", function=check_store,
+    summary="Check a fleet store: every recorded test's readings present and intact, every "
+            "part recorded, nothing orphaned (--repair mends what is provably safe).")

@@ -1,0 +1,114 @@
+"""Void: retire tests of a fleet store (a wrong setup, a test on the wrong axis) without
+deleting them.
+
+>>> import backlash as bl
+>>> bl.void("fleet/", machine="M01", axis="X", visit="03", reason="laser misaligned")  # doctest: +SKIP
+
+A voided test stays in the store; every reader skips it. The store's audit table keeps each
+void and undo with its time (UTC), the operating-system user and the reason; ``undo=True``
+restores the tests. See ``docs/store.md``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from features.readings.errors import InputError, note
+from pipeline.results import Result
+from pipeline.workflows import Constraints, Workflow, check_params
+
+
+def _parameters() -> dict:
+    return {"store": [str, os.PathLike], "machine": [str], "axis": [str],
+            "visit": [str, None], "test_id": [str, None], "reason": [str], "undo": ["boolean"]}
+
+
+PARAMETERS = Constraints(_parameters)
+
+
+@dataclass
+class VoidResult(Result):
+    """The tests a void retired (or an undo restored).
+
+    Attributes
+    ----------
+    store : str
+        The store's location (a URL without its password).
+    action : str
+        ``"void"`` or ``"undo"``.
+    tests : list of dict
+        ``machine_id``, ``axis``, ``visit``, ``test_id`` of each test.
+    reason : str
+        The reason kept in the audit table.
+    """
+
+    store: str
+    action: str
+    tests: list[dict] = field(default_factory=list)
+    reason: str = ""
+
+    def to_json(self) -> dict:
+        return {"store": self.store, "action": self.action, "reason": self.reason,
+                "tests": self.tests}
+
+    def __repr__(self) -> str:
+        return f"VoidResult(store={self.store!r}, action={self.action!r}, tests={len(self.tests)})"
+
+
+def void(store, *, machine: str, axis: str, visit: str | None = None,
+         test_id: str | None = None, reason: str, undo: bool = False,
+         progress=None) -> VoidResult:
+    """Retire the tests of a machine axis (a visit, one test) from every reader of a store.
+
+    Parameters
+    ----------
+    store : str or path-like
+        A store folder or a ``postgresql://`` URL.
+    machine, axis : str
+        The machine axis whose tests are voided.
+    visit, test_id : str, optional
+        Only this visit's tests, only this test.
+    reason : str
+        Why (kept in the audit table with the time and the user); not empty.
+    undo : bool
+        Restore the matching voided tests instead.
+    progress : callable, optional
+        Unused; accepted as every workflow does.
+
+    Returns
+    -------
+    VoidResult
+
+    Raises
+    ------
+    InputError
+        An empty reason, no matching test (no matching voided test with ``undo``), a store
+        that cannot be opened or written: nothing is changed.
+    """
+    check_params(_parameters(), {"store": store, "machine": machine, "axis": axis,
+                                 "visit": visit, "test_id": test_id, "reason": reason,
+                                 "undo": undo}, "void")
+    if not reason.strip():
+        raise InputError("is empty; say why the tests are voided", parameter="reason")
+    from pipeline.store import open_store, redact
+
+    target = open_store(store, write=True, parameter="store")
+    if not target.exists():
+        raise InputError("no such store", file=redact(store))
+    keys = target.void(machine, axis, visit, test_id, reason=reason.strip(), undo=undo)
+    result = VoidResult(store=redact(store), action="undo" if undo else "void",
+                        tests=[dict(zip(("machine_id", "axis", "visit", "test_id"), k))
+                               for k in keys], reason=reason.strip())
+    text = (f"{len(keys)} tests of machine {machine}, axis {axis} "
+            f"{'restored' if undo else 'voided'}: every reader "
+            f"{'reads them again' if undo else 'skips them'}")
+    result.notes.append(text)
+    note(text)
+    return result
+
+
+WORKFLOW = Workflow(
+    name="void", function=void,
+    summary="Retire tests of a fleet store from every reader, kept with when, who and why "
+            "in its audit table (--undo restores them).")
