@@ -276,3 +276,33 @@ def test_time_may_interleave_axes_but_never_go_back_within_one():
     frame.loc[5, "time"] = t[0]  # Y goes back from t[1] to t[0] at row 5 + 2
     with pytest.raises(InputError, match="row 7.*time goes back"):
         check_trace(frame, "f.csv")
+
+
+def test_a_dataset_is_read_one_partition_at_a_time(tmp_path):
+    from features.traces.io import partitions, read_partition
+
+    trace, _ = fleet_traces(seed=3, days=2, seconds=10.0)
+    write_dataset(trace, tmp_path / "ds")
+    parts = partitions(tmp_path / "ds")
+    assert [(p.machine_id, p.axis, p.date) for p in parts][:2] == [
+        ("M7", "X", "2026-03-01"), ("M7", "X", "2026-03-02")]
+    assert len(parts) == 6
+    one = read_partition(parts[0])
+    assert len(one) == len(trace) // 6 and set(one["axis"]) == {"X"}
+    # a file holding another machine than its folder names is refused
+    stray = tmp_path / "ds" / "machine_id=M8" / "axis=X" / "date=2026-03-01"
+    stray.mkdir(parents=True)
+    (tmp_path / "ds" / "machine_id=M7" / "axis=X" / "date=2026-03-01" / "part-0.parquet"
+     ).rename(stray / "part-0.parquet")
+    with pytest.raises(InputError, match="holds machine_id other than 'M8'"):
+        monitor(tmp_path / "ds")
+    (tmp_path / "ds" / "notes").mkdir()
+    (tmp_path / "ds" / "notes" / "x.parquet").write_bytes(b"")
+    with pytest.raises(InputError, match="is no partition"):
+        partitions(tmp_path / "ds")
+
+
+def test_an_address_needs_the_dask_engine(small):
+    with pytest.raises(InputError, match="takes no address") as err:
+        monitor(small[0], address="tcp://127.0.0.1:8786")
+    assert err.value.parameter == "address"
