@@ -14,7 +14,6 @@ TIME = "time"
 REQUIRED = ("time", "machine_id", "axis", "commanded_mm", "motor_mm")
 LOAD = "load_mm"  # needed for lost motion only
 OPTIONAL = ("motor_current_a", "following_error_mm", "machine_temp_c")
-POSITIONS = ("commanded_mm", "motor_mm", "load_mm", "following_error_mm")
 CHANNELS = ("commanded_mm", "motor_mm", "load_mm", *OPTIONAL)
 COLUMNS = (*REQUIRED, LOAD, *OPTIONAL)
 
