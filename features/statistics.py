@@ -89,7 +89,7 @@ def grouped_cv_rmse(X: np.ndarray, y: np.ndarray, groups,
     return math.sqrt(grouped_cv_sse(X, y, groups, solve) / len(y))
 
 
-def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
+def bspline_basis(t, n_control: int, degree: int = 2, sparse: bool = False):
     """B-spline basis N_i,k(t) on a uniform clamped (non-periodic) knot vector ([Mechta2022],
     eqs. 4-5).
 
@@ -103,12 +103,23 @@ def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
         Spline degree k; ``min(degree, n_control - 1)`` is used, so one control point gives
         the constant 1.
 
+    sparse : bool
+        Return the scipy sparse (CSR) matrix: each row has at most ``degree + 1`` non-zeros,
+        which long series (controller traces) need.
+
     Returns
     -------
-    (len(t), n_control) array
+    (len(t), n_control) array (CSR matrix with ``sparse``)
         The basis; each row sums to 1 (partition of unity) on [0, 1].
     """
     t = np.ravel(np.asarray(t, float))
+    if sparse:
+        from scipy.sparse import csr_array
+
+        first, values = bspline_rows(t, n_control, degree)
+        width = values.shape[1]
+        return csr_array((values.ravel(), (first[:, None] + np.arange(width)).ravel(),
+                          np.arange(0, width * t.size + 1, width)), shape=(t.size, n_control))
     if n_control == 1 or t.size == 0:
         return np.ones((t.size, n_control))
     degree = min(degree, n_control - 1)
@@ -117,6 +128,42 @@ def bspline_basis(t, n_control: int, degree: int = 2) -> np.ndarray:
     from scipy.interpolate import BSpline  # on first use: the twin imports this module
 
     return BSpline.design_matrix(t, knots, degree).toarray()
+
+
+def bspline_rows(t, n_control: int, degree: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """The non-zero part of ``bspline_basis``'s rows: row i is ``values[i]`` in the columns
+    ``first[i] .. first[i] + degree`` (Cox-de Boor recursion on the span of each t: Piegl & Tiller, The NURBS Book,
+    algorithm A2.2), so that long series (controller traces) never build the dense matrix.
+
+    Returns
+    -------
+    first : (len(t),) int array
+    values : (len(t), degree + 1) array
+        Each row sums to 1 on [0, 1].
+    """
+    t = np.clip(np.ravel(np.asarray(t, float)), 0.0, 1.0)
+    if n_control == 1:
+        return np.zeros(t.size, int), np.ones((t.size, 1))
+    p = min(degree, n_control - 1)
+    spans = n_control - p
+    knots = np.r_[[0.0] * p, np.linspace(0.0, 1.0, spans + 1), [1.0] * p]
+    span = np.minimum((t * spans).astype(int), spans - 1)
+    i = span + p  # the knot interval [knots[i], knots[i + 1]) holding t
+    # one contiguous array per basis function and per knot distance (columns of 2-d arrays
+    # would be strided)
+    values = [np.ones(t.size)]
+    left, right = [None], [None]
+    for j in range(1, p + 1):
+        left.append(t - knots[i + 1 - j])
+        right.append(knots[i + j] - t)
+        saved = np.zeros(t.size)
+        for r in range(j):
+            temp = values[r] / (right[r + 1] + left[j - r])
+            values[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        values.append(saved)
+    values = np.stack(values, axis=1)
+    return span, values
 
 
 def within_share(values, groups) -> np.ndarray:

@@ -26,11 +26,11 @@ _WHERE = {
     "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
     "hidden_effects": "hidden_effects", "compensate": "compensate", "uncertainty": "uncertainty",
     "fleet": "fleet", "targets": "targets",
-    "volumetric": "volumetric", "circle": "circle",
+    "volumetric": "volumetric", "circle": "circle", "monitor": "monitor",
 }
 __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
     "BacklashWarning", "InputError", "backtest", "check_store", "circle", "compare", "compensate", "convert", "discover",
-    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "predict", "rank", "read", "replicate", "report",
+    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "monitor", "predict", "rank", "read", "replicate", "report",
     "simulate", "targets", "train", "tune", "uncertainty", "validate", "void", "volumetric",
     "write",
 ]

@@ -178,7 +178,7 @@ from dataclasses import dataclass
 # Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
 NAMES = ("convert", "ingest", "store", "void", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
          "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
-         "uncertainty", "volumetric", "circle")
+         "uncertainty", "volumetric", "circle", "monitor")
 
 
 @dataclass(frozen=True)

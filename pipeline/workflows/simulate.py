@@ -69,25 +69,15 @@ class SimulationResult(Result):
     def write(self, out) -> dict[str, Path]:
         """The four files into folder ``out`` together: written into a temporary folder, then
         renamed into place (a failure leaves none of them)."""
-        import shutil
-
         from features.readings import write_readings
-        from features.readings.fileio import temp_folder, write_json
+        from features.readings.fileio import write_json
 
-        out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = temp_folder(out)
-        try:
-            write_readings(self.readings, tmp / FILES["readings"])
-            self.truth.to_csv(tmp / FILES["truth"], index=False)
-            self.visits.to_csv(tmp / FILES["visits"], index=False)
-            write_json(tmp / FILES["parameters"], self.parameters)
-            out.mkdir(exist_ok=True)
-            for name in FILES.values():
-                os.replace(tmp / name, out / name)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        self.files = {role: out / name for role, name in FILES.items()}
+        written = write_together(out, {
+            FILES["readings"]: lambda path: write_readings(self.readings, path),
+            FILES["truth"]: lambda path: self.truth.to_csv(path, index=False),
+            FILES["visits"]: lambda path: self.visits.to_csv(path, index=False),
+            FILES["parameters"]: lambda path: write_json(path, self.parameters)})
+        self.files = {role: written[name] for role, name in FILES.items()}
         return self.files
 
     def summary(self) -> str:
@@ -158,3 +148,95 @@ WORKFLOW = Workflow(
     name="simulate", function=simulate, inputs=("config",),
     summary="Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and "
             "truth.")
+
+
+@dataclass
+class TraceSimulationResult(Result):
+    """Controller traces of the twin (``models.physics.traces``) and their truth.
+
+    Attributes
+    ----------
+    trace : DataFrame
+        The trace table (docs/data-contract.md section 10).
+    truth : DataFrame
+        Per machine axis and day: the true lost motion [um] and the event.
+    """
+
+    trace: object
+    truth: object
+    seed: int = 0
+
+    def write(self, out) -> dict[str, Path]:
+        """``traces/`` (a Parquet dataset partitioned by machine, axis and date) and
+        ``traces_truth.csv`` into folder ``out``, renamed into place together."""
+        from features.traces.io import write_dataset
+
+        written = write_together(out, {
+            "traces": lambda path: write_dataset(self.trace, path),
+            "traces_truth.csv": lambda path: self.truth.to_csv(path, index=False)})
+        self.files = {"traces": written["traces"], "truth": written["traces_truth.csv"]}
+        return self.files
+
+    def summary(self) -> str:
+        return (f"{len(self.trace)} samples of {self.truth['axis'].nunique()} axes over "
+                f"{self.truth['date'].nunique()} days")
+
+    def to_json(self) -> dict:
+        return {"samples": len(self.trace), "days": int(self.truth["date"].nunique()),
+                "seed": self.seed, "files": {k: str(v) for k, v in self.files.items()}}
+
+
+def write_together(out, writers: dict) -> dict[str, Path]:
+    """Each ``writers[name](path)`` into a temporary folder beside ``out``, then every file
+    (or folder) renamed into ``out`` (a failure leaves none of them); returns name -> path."""
+    import shutil
+
+    from features.readings.fileio import temp_folder
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = temp_folder(out)
+    try:
+        for name, write in writers.items():
+            write(tmp / name)
+        out.mkdir(exist_ok=True)
+        for name in writers:
+            if (out / name).is_dir():  # a folder output replaces the one of an earlier run
+                shutil.rmtree(out / name)
+            os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {name: out / name for name in writers}
+
+
+def simulate_traces(seed: int = 0, days: int = 30, rate_hz: float = 200.0,
+                    seconds: float = 60.0) -> TraceSimulationResult:
+    """Controller traces of the twin: three axes of one machine logged ``seconds`` a day at
+    ``rate_hz`` for ``days`` days, with motor encoder and load scale, wear growing and one
+    axis adjusted (``models.physics.traces.TraceCampaign``).
+
+    Parameters
+    ----------
+    seed : int
+        Random seed.
+    days : int
+        Logged days (1-3650).
+    rate_hz : float
+        Sampling rate [Hz] (100-1000).
+    seconds : float
+        Length of each day's log [s] (10-3600).
+    """
+    from numbers import Integral, Real
+
+    from models.physics.traces import TraceCampaign
+    from models.physics.traces import simulate_traces as run_twin
+    from pipeline.workflows.constraints import Interval
+
+    check_params({"seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
+                  "days": [Interval(Integral, 1, 3650, closed="both")],
+                  "rate_hz": [Interval(Real, 100, 1000, closed="both")],
+                  "seconds": [Interval(Real, 10, 3600, closed="both")]},
+                 {"seed": seed, "days": days, "rate_hz": rate_hz, "seconds": seconds},
+                 "simulate_traces")
+    trace, truth = run_twin(TraceCampaign(days=days, rate_hz=rate_hz, seconds=seconds), seed)
+    return TraceSimulationResult(trace, truth, seed=seed)

@@ -1,0 +1,61 @@
+"""``backlash monitor``: lost motion per machine axis and day from dual-feedback traces."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.workflows.monitor import WORKFLOW
+
+HELP = WORKFLOW.summary
+OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+FLAGS = {"traces": "TRACE"}
+ALERT_EXIT = 3
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("traces", nargs="+", metavar="TRACE",
+                        help="trace table (CSV, Parquet) or Parquet dataset folder partitioned "
+                             "by machine_id=, axis=, date= (docs/data-contract.md section 10)")
+    parser.add_argument("--out", help="output folder: monitor.json, daily.csv, monitor.html")
+    parser.add_argument("--engine", choices=("local", "dask"), default="local",
+                        help="where the partitions run (default local: this process)")
+    parser.add_argument("--address", metavar="URL",
+                        help="Dask scheduler address (tcp://host:8786); default Dask's local "
+                             "scheduler")
+    parser.add_argument("--threshold-um", type=float, metavar="X",
+                        help="lost-motion limit [um]: alert at it, forecast its crossing")
+    parser.add_argument("--take-up-mm", type=float, default=0.05, metavar="X",
+                        help="travel after a reversal past which the play is taken up "
+                             "(default 0.05)")
+    parser.add_argument("--json", action="store_true", help="print the axes as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from features.readings.fileio import dumps
+    from pipeline.workflows.monitor import monitor
+
+    result = monitor(args.traces, engine=args.engine, address=args.address,
+                     threshold_um=args.threshold_um, take_up_mm=args.take_up_mm)
+    if args.out:
+        result.write(args.out)
+    print_summary(result, file=sys.stderr)
+    if args.json:
+        print(dumps(result.to_json()))
+    return ALERT_EXIT if result.alerts else 0
+
+
+def print_summary(result, file) -> None:
+    """One line per axis: days, the last day's lost motion, change points, slope, alerts."""
+    for a in result.axes:
+        known = a.days.dropna(subset=["lost_motion_um"])
+        last = (f"{known.lost_motion_um.iloc[-1]:.3f} +- {known.lost_motion_u_um.iloc[-1]:.3f} "
+                f"{a.unit} on {known.date.iloc[-1]}" if len(known) else "no lost motion seen")
+        slope = "-" if a.slope_um_per_day is None else f"{a.slope_um_per_day:+.4f}/day"
+        print(f"{a.machine_id} {a.axis}: {len(a.days)} days, {last}, change points "
+              f"{', '.join(a.change_points) or 'none'}, slope {slope}", file=file)
+        for alert in a.alerts:
+            print(f"  alert {alert['kind']}: {alert['message']}", file=file)
+    if result.files:
+        print(f"-> {result.files['html']}", file=file)

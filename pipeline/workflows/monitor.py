@@ -1,0 +1,297 @@
+"""Monitor: lost motion per machine axis and day from controller traces with dual feedback.
+
+>>> import backlash as bl
+>>> result = bl.monitor("traces/")                       # doctest: +SKIP
+>>> result.daily[["axis", "date", "lost_motion_um"]]     # doctest: +SKIP
+
+Each trace (docs/data-contract.md section 10: a CSV or Parquet table, or a Parquet dataset
+partitioned by machine, axis and date) is cut into partitions, one machine axis's day each
+(``models.lost_motion.daily_lost_motion``, a pure function of its partition); they run on the
+chosen engine (``pipeline.engines``: in-process by default, or Dask) and give the same numbers
+wherever they run. The daily series of each axis then gets the drift statistics of laser
+visits (``models.drift.analyse_series``): change points (an adjustment, a failure), the trend
+since the last one, alerts.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from features.readings.errors import InputError, note
+from pipeline.results import Result, axis_alerts
+from pipeline.workflows import Constraints, Workflow, check_params
+
+
+def _parameters() -> dict:
+    """The constraints of ``monitor``'s parameters, built on first use."""
+    from numbers import Real
+
+    import pandas as pd
+
+    from pipeline.engines import ENGINES
+    from pipeline.workflows.constraints import Interval, StrOptions
+
+    return {
+        "traces": [str, os.PathLike, list, tuple, pd.DataFrame],
+        "engine": [StrOptions(set(ENGINES))],
+        "address": [str, None],
+        "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
+        "take_up_mm": [Interval(Real, 0, None, closed="neither")],
+        "settle_s": [Interval(Real, 0, None, closed="left")],
+    }
+
+
+PARAMETERS = Constraints(_parameters)
+LOAD_NEEDED = "lost motion needs a load-side position (column load_mm)"
+
+
+@dataclass
+class AxisMonitor:
+    """One machine axis's daily lost motion and its drift analysis."""
+
+    machine_id: str
+    axis: str
+    unit: str
+    days: object  # DataFrame: the axis's rows of MonitorResult.daily
+    change_points: list = field(default_factory=list)  # ISO dates: first day after a change
+    slope_um_per_day: float | None = None
+    alerts: list = field(default_factory=list)
+    series: object = None  # models.drift.DriftSeries, or None below two days
+
+    def to_json(self) -> dict:
+        days = [{"date": r.date, "lost_motion_um": _num(r.lost_motion_um),
+                 "lost_motion_u_um": _num(r.lost_motion_u_um), "reversals": int(r.reversals)}
+                for r in self.days.itertuples()]
+        return {"machine_id": self.machine_id, "axis": self.axis, "unit": self.unit,
+                "days": days, "change_points": self.change_points,
+                "slope_um_per_day": self.slope_um_per_day, "alerts": self.alerts}
+
+
+def _num(value: float) -> float | None:
+    return None if math.isnan(value) else round(float(value), 4)
+
+
+@dataclass
+class MonitorResult(Result):
+    """Lost motion per machine axis and day.
+
+    Attributes
+    ----------
+    daily : DataFrame
+        One row per machine axis and day (``models.lost_motion.DAILY_COLUMNS``):
+        ``lost_motion_um`` and its standard uncertainty ``lost_motion_u_um`` (um, arcsec on a
+        rotary axis), ``reversals``, ``samples``, ``lag_s``, ``control_points``. What a fleet
+        store records per axis and day.
+    axes : list of AxisMonitor
+        Per machine axis: its days, change points, slope [um/day] and alerts.
+    source : str
+        The traces as given.
+    engine : str
+        Where the partitions ran.
+    """
+
+    daily: object
+    axes: list
+    source: str = ""
+    engine: str = "local"
+    parameters: dict = field(default_factory=dict)
+
+    @property
+    def alerts(self) -> list[dict]:
+        return axis_alerts(self.axes)
+
+    def to_json(self) -> dict:
+        return {"axes": [a.to_json() for a in self.axes], "notes": list(self.notes)}
+
+    def write(self, out) -> dict[str, Path]:
+        """``monitor.json``, ``daily.csv`` and the report page ``monitor.html`` (with its
+        chart ``monitor.png``) under ``out``."""
+        from features.readings.fileio import atomic_path, write_json
+        from pipeline.monitor_report import write_monitor_report
+
+        out = Path(out)
+        files = {"json": write_json(out / "monitor.json", self.to_json())}
+        with atomic_path(out / "daily.csv") as tmp:
+            self.daily.to_csv(tmp, index=False)
+        files["daily"] = out / "daily.csv"
+        files.update(write_monitor_report(self, out))
+        self.files = files
+        return files
+
+
+def monitor(traces, *, engine: str = "local", address: str | None = None,
+            threshold_um: float | None = None, take_up_mm: float = 0.05,
+            settle_s: float = 0.1, progress=None) -> MonitorResult:
+    """Lost motion per machine axis and day from dual-feedback traces, with change points.
+
+    Parameters
+    ----------
+    traces : str, path, list of them, or DataFrame
+        Trace tables (CSV, Parquet) and/or Parquet datasets partitioned by machine, axis and
+        date (folders), or a trace frame (docs/data-contract.md section 10). Each needs
+        ``load_mm``.
+    engine : {'local', 'dask'}
+        Where the partitions run (``pipeline.engines``).
+    address : str, optional
+        A Dask scheduler's address (``tcp://host:8786``); default Dask's local scheduler.
+    threshold_um : float, optional
+        Lost-motion limit [um]: alert at or above it, forecast its crossing.
+    take_up_mm : float
+        Travel after a reversal past which the play is taken up [mm or deg]; larger than
+        any lost motion.
+    settle_s : float
+        Time after an acceleration before a sample counts as steady [s].
+    progress : callable, optional
+        ``progress(done, total, what)`` per partition (local engine).
+
+    Returns
+    -------
+    MonitorResult
+
+    Raises
+    ------
+    InputError
+        A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
+        engine.
+    """
+    check_params(_parameters(), {"traces": traces, "engine": engine, "address": address,
+                                 "threshold_um": threshold_um, "take_up_mm": take_up_mm,
+                                 "settle_s": settle_s}, "monitor")
+    import pandas as pd
+
+    from models.lost_motion import DAILY_COLUMNS
+    from pipeline.engines import map_partitions
+
+    options = {"take_up": float(take_up_mm), "settle_s": float(settle_s)}
+    tasks = [(item, options) for item in _partitions(traces)]
+    frames = map_partitions(partition_days, tasks, engine=engine, address=address,
+                            progress=progress)
+    daily = (pd.concat(frames, ignore_index=True) if frames
+             else pd.DataFrame(columns=list(DAILY_COLUMNS)))
+    _check_each_day_once(daily)
+    daily = daily.sort_values(["machine_id", "axis", "date"], kind="stable",
+                              ignore_index=True)
+    axes = [_axis_monitor(group, threshold_um)
+            for _, group in daily.groupby(["machine_id", "axis"], sort=True)]
+    notes = _notes(daily)
+    for text in notes:
+        note(text)
+    return MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
+                         parameters={"engine": engine, "threshold_um": threshold_um,
+                                     "take_up_mm": take_up_mm, "settle_s": settle_s},
+                         notes=notes)
+
+
+def _partitions(traces) -> list:
+    """The work items: a dataset's partitions (read by the task), or a table's machine axes
+    (read here, whole: a single file fits one machine)."""
+    import pandas as pd
+
+    from features.traces.io import is_dataset, partitions, read_trace
+    from features.traces.validation import check_trace
+
+    if isinstance(traces, pd.DataFrame):
+        return _axes_of(check_trace(traces, "traces"), "traces")
+    items = []
+    for path in ([traces] if isinstance(traces, (str, os.PathLike)) else list(traces)):
+        if is_dataset(path):
+            items.extend(partitions(path))
+        else:
+            items.extend(_axes_of(read_trace(path), path))
+    if not items:
+        raise InputError("names no trace; expected one or more files or folders",
+                         parameter="traces")
+    return items
+
+
+def _axes_of(trace, source) -> list:
+    from features.traces.io import groups
+
+    _require_load(trace, source)
+    return groups(trace)
+
+
+def _require_load(trace, source) -> None:
+    from features.traces.contract import LOAD
+
+    if LOAD not in trace:
+        raise InputError(LOAD_NEEDED, file=source)
+
+
+def partition_days(task) -> object:
+    """The daily lost motion of one partition: a dataset partition (read here, so each task
+    holds one partition only) or a machine axis's trace frame. Pure: the same partition gives
+    the same frame on every engine."""
+    from features.traces.io import Partition, read_partition
+    from models.lost_motion import daily_lost_motion
+
+    item, options = task
+    if isinstance(item, Partition):
+        trace = read_partition(item)
+        _require_load(trace, item.files[0])
+    else:
+        trace = item
+    return daily_lost_motion(trace, **options)
+
+
+def _check_each_day_once(daily) -> None:
+    twice = daily.duplicated(["machine_id", "axis", "date"])
+    if twice.any():
+        r = daily[twice].iloc[0]
+        raise InputError(f"machine {r.machine_id} axis {r.axis} on {r.date} is in two inputs; "
+                         "expected each day once", parameter="traces")
+
+
+def _axis_monitor(days, threshold_um) -> AxisMonitor:
+    """The drift analysis of one axis's days with a lost motion (``models.drift``)."""
+    import pandas as pd
+
+    from features.visits import DAYS_PER_MONTH
+    from models.drift import analyse_series
+
+    first = days.iloc[0]
+    known = days.dropna(subset=["lost_motion_um"])
+    out = AxisMonitor(str(first.machine_id), str(first.axis), str(first.unit),
+                      days.reset_index(drop=True))
+    if len(known) < 2:
+        return out
+    visits = pd.DataFrame({"machine_id": out.machine_id, "axis": out.axis,
+                           "visit": known["date"].to_numpy(),
+                           "date": pd.to_datetime(known["date"]).to_numpy(),
+                           "backlash_um": known["lost_motion_um"].to_numpy(),
+                           "backlash_u_um": known["lost_motion_u_um"].to_numpy()})
+    s = analyse_series(visits, threshold_um=threshold_um)
+    out.series = s
+    out.change_points = [str(s.visits["visit"].iloc[c["index"]]) for c in s.change_points]
+    slope = s.trend.get("slope")
+    out.slope_um_per_day = (None if slope is None or math.isnan(slope)
+                            else round(float(slope) / DAYS_PER_MONTH, 6))
+    out.alerts = s.alerts
+    return out
+
+
+def _notes(daily) -> list[str]:
+    blind = daily[daily["lost_motion_um"].isna()]
+    if blind.empty:
+        return []
+    return [(f"{len(blind)} day(s) show no lost motion (e.g. {blind.iloc[0].machine_id} "
+            f"{blind.iloc[0].axis} on {blind.iloc[0].date}): fewer than two reversals took up "
+            "the play, or every move ran at one feed without rests, so that lost motion and "
+            "servo lag cannot be told apart; they are listed without a value")]
+
+
+def _source(traces) -> str:
+    if isinstance(traces, (str, os.PathLike)):
+        return str(traces)
+    if isinstance(traces, (list, tuple)):
+        return ", ".join(str(t) for t in traces)
+    return "traces"
+
+
+WORKFLOW = Workflow(
+    name="monitor", function=monitor, inputs=("traces",),
+    summary="Lost motion per machine axis and day from controller traces with motor- and "
+            "load-side positions, with its uncertainty, change points and trend.")
