@@ -92,7 +92,8 @@ def test_values_are_in_degrees(result):
 
 def test_summary_in_arcsec(result):
     lines = result.summary()
-    assert lines[0] == "R1 C (measured): backlash 20.000 arcsec, 8 targets"
+    assert lines[0] == ("R1 C (measured): reversal compensation 20.000 arcsec; the axis's lost "
+                        "motion 20.000 arcsec (docs/backlash.md), 8 targets")
     assert all(not LINEAR_UNITS.search(line) for line in lines)
 
 

@@ -58,10 +58,6 @@ class StoreCheckResult(Result):
         return {"store": self.store, "ok": self.ok, "tests": self.tests,
                 "readings": self.readings, "problems": self.problems, "repaired": self.repaired}
 
-    def __repr__(self) -> str:
-        return (f"StoreCheckResult(store={self.store!r}, tests={self.tests}, "
-                f"problems={len(self.problems)}, repaired={len(self.repaired)})")
-
 
 def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResult:
     """Verify a fleet store against its manifest; optionally mend what is provably safe.

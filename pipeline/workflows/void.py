@@ -52,9 +52,6 @@ class VoidResult(Result):
         return {"store": self.store, "action": self.action, "reason": self.reason,
                 "tests": self.tests}
 
-    def __repr__(self) -> str:
-        return f"VoidResult(store={self.store!r}, action={self.action!r}, tests={len(self.tests)})"
-
 
 def void(store, *, machine: str, axis: str, visit: str | None = None,
          test_id: str | None = None, reason: str, undo: bool = False,
