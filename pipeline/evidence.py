@@ -97,3 +97,38 @@ def sources_of(evidence, parameter: str = "evidence") -> tuple[str, ...]:
         raise InputError(f"names {', '.join(map(repr, unknown)) or 'no source'}; expected "
                          f"'all' or some of {', '.join(SOURCES)}", parameter=parameter)
     return tuple(s for s in SOURCES if s in names or s == "laser")
+
+
+def read_evidence(store) -> dict:
+    """The trace and ballbar records of a fleet store by kind and machine axis
+    (``pipeline.store.records.read_records``)."""
+    from pipeline.store import open_store
+    from pipeline.store.records import read_records
+
+    opened = open_store(store, parameter="store")
+    return {kind: read_records(opened, kind) for kind in KEYS}
+
+
+def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=None,
+                  coverage_factor: float | None = None) -> tuple[pd.DataFrame, dict, list]:
+    """The laser visits of every machine axis with the points of the other ``sources``
+    shifted onto the laser's definition (``models.evidence.combined``), the offsets per
+    machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
+    a point of another source gets ``backlash_U_um`` = k u and ``backlash_u_visit_um`` = u
+    (all of its uncertainty changes from day to day)."""
+    from features.visits import SERIES_KEYS
+    from models.evidence import combined
+
+    frames, found_all, notes = [], {}, []
+    for key, group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True):
+        key = tuple(map(str, key))
+        evidence = evidence_frame(records, key, as_of)
+        found, more = axis_offsets(group, evidence)
+        found_all[key], notes = found, notes + more
+        frames.append(combined(group, evidence, found, sources))
+    out = pd.concat(frames, ignore_index=True)
+    if coverage_factor is not None:
+        other = out["source"] != "laser"
+        out.loc[other, "backlash_u_visit_um"] = out.loc[other, "backlash_u_um"]
+        out.loc[other, "backlash_U_um"] = coverage_factor * out.loc[other, "backlash_u_um"]
+    return out, found_all, notes
