@@ -92,12 +92,13 @@ class DriftResult(Result):
         from features.readings.fileio import clean_nan
 
         series = [s.to_json() for s in self.series]
-        if self.offsets:  # which points came from which source, each source's offset
-            for j, s in zip(series, self.series):
-                j["offsets_um"] = {k: None if o is None else {
-                    "value": round(o["value"], 4), "u": round(o["u"], 4),
-                    "days_in_common": o["days_in_common"]}
-                    for k, o in self.offsets.get((s.machine_id, s.axis), {}).items()}
+        others = [k for k in (self.parameters.get("evidence") or "laser").split(",")
+                  if k != "laser"]
+        for j, s in zip(series if others else (), self.series):  # each source's offset
+            found = self.offsets.get((s.machine_id, s.axis), {})
+            j["offsets_um"] = {k: None if found.get(k) is None else {
+                "value": round(found[k]["value"], 4), "u": round(found[k]["u"], 4),
+                "days_in_common": found[k]["days_in_common"]} for k in others}
         return clean_nan({"as_of": self.parameters.get("as_of"),
                           "evidence": self.parameters.get("evidence"), "series": series})
 
