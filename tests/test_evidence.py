@@ -8,13 +8,12 @@ tests/independent_circle.py) with known offsets between the definitions."""
 from __future__ import annotations
 
 import json
-import uuid
 import warnings
 
 import numpy as np
 import pandas as pd
 import pytest
-from store_files import cli, refused, visits
+from store_files import cli, engine_location, refused, visits
 
 import backlash as bl
 from features.readings.errors import InputError
@@ -174,13 +173,7 @@ def test_offset_is_the_weighted_mean_with_the_birge_ratio():
 @pytest.fixture(params=["folder", pytest.param("postgres", marks=pytest.mark.postgres)])
 def store(request, tmp_path) -> str:
     """A store of each engine holding visits 01-02 of the twin's M01 X."""
-    if request.param == "folder":
-        location = str(tmp_path / "fleet")
-    else:
-        from pg_server import create_database
-
-        location = create_database(request.getfixturevalue("postgres_url"),
-                                   f"evidence_{uuid.uuid4().hex[:10]}")
+    location = engine_location(request, tmp_path, "evidence")
     bl.ingest(visits(tmp_path, which=("01", "02")), store=location)
     return location
 

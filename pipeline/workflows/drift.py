@@ -123,6 +123,7 @@ class DriftResult(Result):
                       model, (str, os.PathLike)) else type(model).__name__,
                   "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
                   "warn_months": p.get("warn_months"), "n_series": len(self.series),
+                  "evidence": p.get("evidence") or "laser",
                   "uncertainty": "" if p.get("uncertainty") is None else str(
                       p["uncertainty"]) if isinstance(p["uncertainty"], (str, os.PathLike))
                   else "given"}
