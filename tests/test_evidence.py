@@ -209,8 +209,22 @@ def test_ballbar_backlash_is_recorded_per_axis_and_once(store):
         assert (r["date"], r["plane"], r["visit"]) == ("2026-03-02", "XY", "b0")
 
 
-def test_a_store_of_records_before_evidence_reads_none(store):
-    assert read_records(store, "trace") == {} and read_records(store, "ballbar") == {}
+def test_a_store_of_records_before_evidence_reads_none_and_gets_its_tables(tmp_path):
+    import sqlite3
+
+    from pipeline.store.base import MANIFEST
+
+    location = tmp_path / "fleet"
+    bl.ingest(visits(tmp_path, which=("01", "02")), store=location)
+    conn = sqlite3.connect(location / MANIFEST, isolation_level=None)
+    conn.execute("DROP TABLE trace_days")  # as a store made before these records existed
+    conn.execute("DROP TABLE ballbar_runs")
+    conn.close()
+    assert read_records(location, "trace") == {} and read_records(location, "ballbar") == {}
+    assert bl.fleet(location).axes[0].to_json()["evidence"] == {"trace": [], "ballbar": []}
+    frame = _ballbar([pd.Timestamp("2026-03-02")], [(4.0, 7.0)])
+    assert bl.circle(frame, store=location).recorded.added == 2
+    assert sorted(read_records(location, "ballbar")) == [("M1", "X"), ("M1", "Y")]
 
 
 # --------------------------------------------------------------------- refusals
