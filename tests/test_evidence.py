@@ -289,3 +289,19 @@ def test_drift_evidence_refusals(tmp_path, capsys):
     bl.ingest(files, store=location)
     line = refused(capsys, ["drift", location, "--json", "--evidence", "laser,sonar"])
     assert "--evidence: names 'sonar'" in line
+
+
+def test_a_day_recorded_twice_counts_once_the_latest_and_as_of_cuts_later_days():
+    import datetime as dt
+
+    from pipeline.evidence import evidence_frame
+
+    older = {**GOOD_TRACE, "recorded_at": "2026-03-02T10:00:00.000000Z"}
+    newer = {**GOOD_TRACE, "lost_motion_um": 4.4, "source": "again.csv",
+             "recorded_at": "2026-03-05T10:00:00.000000Z"}
+    later = {**GOOD_TRACE, "date": "2026-04-01", "recorded_at": "2026-04-01T10:00:00.000000Z"}
+    records = {"trace": {("M1", "X"): [older, newer, later]}}
+    frame = evidence_frame(records, ("M1", "X"))
+    assert frame["value_um"].tolist() == [4.4, 4.0]
+    cut = evidence_frame(records, ("M1", "X"), as_of=dt.date(2026, 3, 31))
+    assert cut["label"].tolist() == ["trace 2026-03-02"]
