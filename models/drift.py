@@ -80,7 +80,7 @@ MIN_FLEET_RESIDUALS = 10
 WITHIN_KINDS = {"change_point": "the step", "last_visit": "the last visit's departure from "
                 "the trend", "trend": "the rise of the trend"}
 # Per-visit columns of the series that its JSON carries when present, each a quantity of its own.
-OPTIONAL_JSON = ("target_kind", "n_points", "reversal_mean_um", "reversal_max_um")
+OPTIONAL_JSON = ("target_kind", "n_points", "reversal_mean_um", "reversal_max_um", "source")
 
 
 def uncertainty_column(visits: pd.DataFrame) -> str:

@@ -63,8 +63,16 @@ def _panel(ax, s) -> None:
         ax.fill_between(dates(v["t_month"]), v["backlash_um"] - v["backlash_U_um"],
                         v["backlash_um"] + v["backlash_U_um"], color="C0", alpha=0.12, lw=0,
                         label=f"± U, measurement uncertainty (k = {s.coverage_factor:g})")
-    ax.errorbar(dates(v["t_month"]), v["backlash_um"], yerr=2 * v["sigma_um"], fmt="o",
-                ms=4, capsize=2, color="C0", label=f"backlash per visit, {_kinds(v)} (±2σ)")
+    laser = v[v["source"] == "laser"] if "source" in v else v
+    ax.errorbar(dates(laser["t_month"]), laser["backlash_um"], yerr=2 * laser["sigma_um"],
+                fmt="o", ms=4, capsize=2, color="C0",
+                label=f"backlash per visit, {_kinds(laser)} (±2σ)")
+    for source, (marker, colour) in EVIDENCE_MARKERS.items():  # drift --evidence
+        mine = v[v["source"] == source] if "source" in v else v.iloc[:0]
+        if len(mine):
+            ax.errorbar(dates(mine["t_month"]), mine["backlash_um"], yerr=2 * mine["sigma_um"],
+                        fmt=marker, ms=4, mfc="none", capsize=2, color=colour,
+                        label=f"{source}, shifted by its offset to the laser (±2σ)")
     seg = v.iloc[s.segment_start:]
     tr = s.trend
     t_end = float(v["t_month"].iloc[-1])
@@ -98,6 +106,8 @@ def _panel(ax, s) -> None:
 
 
 TITLE = "Backlash drift across visits"
+# The other sources of a series (``drift --evidence``): matplotlib marker and colour.
+EVIDENCE_MARKERS = {"trace": ("s", "C2"), "ballbar": ("D", "C4")}
 KIND_NAMES = {"paper": "pendulum − linear", "iso": "ISO |B_i|", "mixed": "mixed"}
 
 
@@ -127,11 +137,14 @@ def _interval(j: dict) -> str:
 def _visit_row(r: dict) -> str:
     """One visit of a series as a table row (columns a hand-built series lacks show –)."""
     def num(key, fmt=".3f"):
-        return _fmt(r.get(key), fmt)
+        value = r.get(key)  # counts turn float beside another source's points (no count)
+        whole = fmt == "d" and isinstance(value, float) and np.isfinite(value)
+        return _fmt(int(value) if whole else value, fmt)
 
     u = r.get("backlash_u_um", r.get("u_um"))
     cells = (num("n_tests", "d"), num("n_points", "d"),
-             html.escape(KIND_NAMES.get(r.get("target_kind"), "–")), num("backlash_um"),
+             html.escape(KIND_NAMES.get(r.get("target_kind"), r.get("source") or "–")),
+             num("backlash_um"),
              _fmt(u, ".3f"), *((num("backlash_U_um"),) if "backlash_U_um" in r else ()),
              num("sigma_um"), num("reversal_mean_um"), num("reversal_max_um"))
     return (f"<tr><td>{html.escape(str(r['visit']))}</td><td>{r['date'].date().isoformat()}</td>"

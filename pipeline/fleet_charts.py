@@ -132,6 +132,21 @@ class Plot:
                   for x, y in zip(px, py) if math.isfinite(y)]
         self.layers.append("".join(parts))
 
+    def marks(self, xs, ys, colour: str, shape: str, size: float = 3.5, err=None) -> None:
+        """Points drawn as open ``square`` or ``diamond`` markers, with vertical error bars
+        ± ``err`` when given: evidence of another kind than the filled dots beside them."""
+        ys = np.asarray(ys, float)
+        parts = []
+        if err is not None:
+            e = np.broadcast_to(np.asarray(err, float), ys.shape)
+            parts += [f"<line x1='{_num(x)}' x2='{_num(x)}' y1='{_num(lo)}' y2='{_num(hi)}' "
+                      f"stroke='{colour}' stroke-width='1'/>"
+                      for x, lo, hi in zip(self.px(xs), self.py(ys - e), self.py(ys + e))
+                      if math.isfinite(lo) and math.isfinite(hi)]
+        parts += [_marker(shape, colour, x, y, size)
+                  for x, y in zip(self.px(xs), self.py(ys)) if math.isfinite(y)]
+        self.layers.append("".join(parts))
+
     def vline(self, x: float, colour: str = GREY, dash: str = "4 3") -> None:
         px = _num(float(self.px(x)))
         self.layers.append(f"<line x1='{px}' x2='{px}' y1='{self.top}' "
@@ -207,7 +222,21 @@ class Plot:
                 f"{FONT} font-size='11'><title>{label}</title>{''.join(self.layers)}</svg>")
 
 
+def _marker(shape: str, colour: str, x: float, y: float, size: float) -> str:
+    """An open square or diamond of half-width ``size`` [px] centred on (x, y)."""
+    if shape == "square":
+        points = [(x - size, y - size), (x + size, y - size), (x + size, y + size),
+                  (x - size, y + size)]
+    else:
+        r = size * 1.3
+        points = [(x, y - r), (x + r, y), (x, y + r), (x - r, y)]
+    return (f"<polygon points='{' '.join(f'{_num(a)},{_num(b)}' for a, b in points)}' "
+            f"fill='white' stroke='{colour}' stroke-width='1.5'/>")
+
+
 def _legend_key(kind: str, colour: str, x: float, y: float) -> str:
+    if kind in ("square", "diamond"):
+        return _marker(kind, colour, x + 6, y, 3.5)
     if kind == "dot":
         return f"<circle cx='{_num(x + 6)}' cy='{y}' r='3' fill='{colour}'/>"
     if kind == "band":
@@ -277,7 +306,8 @@ def sparkline(history: dict, forecast: dict | None, *, threshold_um=None,
 def history_chart(history: dict, forecast: dict | None, trend: dict | None, origin: dt.date,
                   *, threshold_um=None, crossing: tuple = (None, None, None),
                   due_days: float | None = None, label: str = "",
-                  recorded: dict | None = None, unit: str = "um") -> str:
+                  recorded: dict | None = None, unit: str = "um",
+                  evidence: list | None = None) -> str:
     """The axis's backlash per visit with ±2 sigma bars, the Theil-Sen trend since the last
     change point, change points (dashed), the forecast band, the threshold and the crossing
     interval (shaded) and the day the next visit is due (``due_days``, green). Days are
@@ -286,16 +316,25 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
 
     ``trend``: ``days`` and ``fit`` of the trend line, or None; ``crossing``: (date, early,
     late) in days, each None when unknown; ``recorded``: the last recorded forecast (``day``,
-    ``fit``, ``low``, ``high``), drawn in purple with its interval, or None.
+    ``fit``, ``low``, ``high``), drawn in purple with its interval, or None; ``evidence``:
+    the other sources' points as recorded, each a dict ``shape`` (``square``, ``diamond``),
+    ``colour``, ``text`` (its legend entry), ``days``, ``values``, ``u`` (standard
+    uncertainty), drawn as open markers with ±2u bars.
     """
     days, y, sigma = (np.asarray(history[k], float) for k in ("days", "backlash_um", "sigma_um"))
+    evidence = [e for e in evidence or [] if len(e["days"])]
+    for e in evidence:
+        e["values"], e["u"] = np.asarray(e["values"], float), np.asarray(e["u"], float)
     ahead = forecast or {"days": [], "low": [], "high": [], "fit": []}
     rec_days, rec_values = _recorded_span(recorded)
-    x_hi = max([*days, *ahead["days"], *rec_days, *([] if due_days is None else [due_days])])
-    y_lo, y_hi = _span(y - 2 * sigma, y + 2 * sigma, ahead["low"], ahead["high"], rec_values)
+    x_hi = max([*days, *ahead["days"], *rec_days, *([] if due_days is None else [due_days]),
+                *(d for e in evidence for d in e["days"])])
+    x_lo = min([0.0, *(d for e in evidence for d in e["days"])])
+    y_lo, y_hi = _span(y - 2 * sigma, y + 2 * sigma, ahead["low"], ahead["high"], rec_values,
+                       *(e["values"] + k * e["u"] for e in evidence for k in (-2, 2)))
     if threshold_um is not None:
         y_lo, y_hi = min(y_lo, threshold_um), max(y_hi, threshold_um)
-    plot = Plot(760, 300, (0.0, x_hi), (min(y_lo, 0.0) if y_lo < 0.5 else y_lo, y_hi),
+    plot = Plot(760, 300, (x_lo, x_hi), (min(y_lo, 0.0) if y_lo < 0.5 else y_lo, y_hi),
                 margins=(52, 14, 40, 34))
     items = [("dot", BLUE, "backlash per visit (±2σ)")]
     if crossing[1] is not None:
@@ -319,10 +358,14 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
         items.append(("dash", GREEN, "next visit due"))
     plot.line(days, y, BLUE, 1.0)
     plot.dots(days, y, BLUE, 3.5, err=2 * sigma)
+    for e in evidence:
+        plot.marks(e["days"], e["values"], e["colour"], e["shape"], err=2 * e["u"])
+        items.append((e["shape"], e["colour"], e["text"]))
     if recorded is not None:
         _draw_recorded(plot, recorded, 4.5, 3.0)
         items.append(("dot", PURPLE, "last recorded forecast (95 %)"))
-    ticks = date_ticks(origin, origin + dt.timedelta(days=float(x_hi)))
+    ticks = date_ticks(origin + dt.timedelta(days=float(x_lo)),
+                       origin + dt.timedelta(days=float(x_hi)))
     plot.axes([((d - origin).days, d.strftime("%Y-%m")) for d in ticks],
               f"backlash [{unit_label(unit)}]")
     plot.legend(items)

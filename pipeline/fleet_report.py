@@ -316,7 +316,44 @@ def _history_chart(view, j: dict) -> str:
         _history(view), view.forecast, view.trend_line, origin, unit=view.series.unit,
         threshold_um=view.series.threshold_um, crossing=view.crossing_days,
         due_days=float((view.next_visit_due - origin).days), recorded=recorded_point(view, j),
-        label=f"{view.machine_id} {view.axis}: backlash per visit and forecast")
+        label=f"{view.machine_id} {view.axis}: backlash per visit and forecast",
+        evidence=evidence_marks(view, origin)) + _evidence_text(view)
+
+
+# The other sources' markers: (shape, colour, what they are).
+EVIDENCE_MARKS = {"trace": ("square", fleet_charts.GREEN, "trace lost motion per day"),
+                  "ballbar": ("diamond", fleet_charts.PURPLE, "ballbar backlash")}
+
+
+def evidence_marks(view, origin) -> list[dict]:
+    """The trace days and ballbar runs of the axis as the history chart draws them (as
+    recorded, not shifted; the legend gives each source's offset to the laser)."""
+    frame = view.evidence
+    if frame is None or frame.empty:
+        return []
+    out = []
+    for source, (shape, colour, text) in EVIDENCE_MARKS.items():
+        mine = frame[frame["source"] == source]
+        off = view.offsets.get(source)
+        shift = ("no offset: no laser visit near" if off is None
+                 else f"offset {off['value']:+.2f} ± {off['u']:.2f}")
+        out.append({"shape": shape, "colour": colour, "text": f"{text} ({shift})",
+                    "days": [(d.date() - origin).days for d in mine["date"]],
+                    "values": mine["value_um"].to_numpy(float),
+                    "u": mine["u_um"].to_numpy(float)})
+    return out
+
+
+def _evidence_text(view) -> str:
+    """One line per other source: its points and its offset to the laser's backlash."""
+    lines = []
+    for source, off in view.offsets.items():
+        n = int((view.evidence["source"] == source).sum())
+        lines.append(f"{source}: {n} point(s); " + (
+            f"offset to the laser {off['value']:+.3f} ± {off['u']:.3f} {view.series.unit} "
+            f"from {off['days_in_common']} day(s) in common" if off is not None else
+            "no laser visit close enough to estimate its offset"))
+    return "".join(f"<p class='note'>{_esc(line)}</p>" for line in lines)
 
 
 def _visit_table(view) -> str:

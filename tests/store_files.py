@@ -147,3 +147,16 @@ def refused(capsys, argv) -> str:
     assert code == 2 and len(err) == 1, (code, err)
     assert err[0].startswith(f"backlash {argv[0]}: error: "), err
     return err[0]
+
+
+def engine_location(request, tmp_path: Path, name: str) -> str:
+    """A new store's location on the engine ``request.param`` names: a folder under
+    ``tmp_path``, or a new database ``name_<random>`` on the test PostgreSQL server."""
+    if request.param == "folder":
+        return str(tmp_path / "fleet")
+    import uuid
+
+    from pg_server import create_database
+
+    return create_database(request.getfixturevalue("postgres_url"),
+                           f"{name}_{uuid.uuid4().hex[:10]}")

@@ -136,7 +136,7 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "days_overdue": (int, type(None)),
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
-         "page": str}
+         "page": str, "evidence": dict, "offsets_um": dict}
 
 
 def test_json_keys_and_types(mixed):
@@ -156,6 +156,8 @@ def test_json_keys_and_types(mixed):
         assert a["next_visit_reason"] in ("above_threshold", "crossing", "fleet_rate",
                                           "interval")
         assert set(a["history"]) == {"visits", "dates", "backlash_um", "backlash_u_um"}
+        assert a["evidence"] == {"trace": [], "ballbar": []}  # a file: no trace or ballbar
+        assert a["offsets_um"] == {"trace": None, "ballbar": None}
         assert len(a["history"]["backlash_um"]) == a["visits"]
         assert a["history"]["backlash_um"][-1] == a["backlash_um"]
     assert data["n_alerts"] == sum(len(a["alerts"]) for a in data["axes"])

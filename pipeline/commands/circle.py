@@ -18,6 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="output folder: a polar plot per circle, circles.csv, circles.html")
     parser.add_argument("--tolerance", type=float, metavar="UM",
                         help="width of the tolerance band drawn in the plots [um]")
+    parser.add_argument("--store", metavar="STORE",
+                        help="fleet store (folder or postgresql:// URL) to record each axis's backlash "
+                             "in (docs/fleet.md)")
     parser.add_argument("--json", action="store_true",
                         help="print G_um, H_um and the diagnosis of every circle as JSON")
 
@@ -28,10 +31,12 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.workflows.circle import circle
 
-    result = circle(args.file, tolerance_um=args.tolerance)
+    result = circle(args.file, tolerance_um=args.tolerance, store=args.store)
     if args.out:
         result.write(args.out)
     print(result.table(), file=sys.stderr)
+    if result.recorded is not None:
+        print(result.recorded.text, file=sys.stderr)
     if args.out:
         print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
     if args.json:

@@ -25,6 +25,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--uncertainty", metavar="BUDGET.toml",
                         help="ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
                              "each visit's backlash; steps within it do not alert")
+    parser.add_argument("--evidence", default="laser", metavar="SOURCES",
+                        help="sources of each series: laser (default), trace, ballbar, a "
+                             "comma-separated list or all; the others are shifted onto the "
+                             "laser by their estimated offsets (docs/drift.md)")
+    parser.add_argument("--store", metavar="STORE",
+                        help="fleet store holding the trace and ballbar records (default the "
+                             "readings when they name a store)")
     parser.add_argument("--json", action="store_true", help="print the series as JSON")
 
 
@@ -48,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
                        threshold_arcsec=args.threshold_arcsec, limits=args.limits,
                        as_of=args.as_of,
                        model=args.model, warn_months=args.warn_months, alpha=args.alpha,
-                       min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty)
+                       min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty,
+                       evidence=args.evidence, store=args.store)
         mlflow_run.start(result.run_name)  # the input is valid: the run may start
         if args.out is not None:
             result.write(args.out)

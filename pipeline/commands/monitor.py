@@ -27,6 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--take-up-mm", type=float, default=0.05, metavar="X",
                         help="travel after a reversal past which the play is taken up "
                              "(default 0.05)")
+    parser.add_argument("--store", metavar="STORE",
+                        help="fleet store (folder or postgresql:// URL) to record the daily lost motion "
+                             "in (docs/fleet.md)")
     parser.add_argument("--json", action="store_true", help="print the axes as JSON")
 
 
@@ -37,10 +40,13 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.workflows.monitor import monitor
 
     result = monitor(args.traces, engine=args.engine, address=args.address,
-                     threshold_um=args.threshold_um, take_up_mm=args.take_up_mm)
+                     threshold_um=args.threshold_um, take_up_mm=args.take_up_mm,
+                     store=args.store)
     if args.out:
         result.write(args.out)
     print_summary(result, file=sys.stderr)
+    if result.recorded is not None:
+        print(result.recorded.text, file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return ALERT_EXIT if result.alerts else 0

@@ -1,5 +1,7 @@
-"""What the store remembers besides readings: the forecasts made for a machine axis and the
-compensations written to its controller.
+"""What the store remembers besides readings: the forecasts made for a machine axis, the
+compensations written to its controller, and the other evidence of its backlash: the lost
+motion of each day of controller traces (``trace``, from ``monitor``) and the backlash of each
+circular test (``ballbar``, from ``circle``).
 
 A record is one JSON object per machine axis (a forecast: per visit it is for; a
 compensation: per controller), checked field by field when it is made and again when it is
@@ -180,7 +182,44 @@ def check_compensation(record) -> dict:
     return record
 
 
-CHECKS = {"forecast": check_forecast, "compensation": check_compensation}
+TRACE_KEYS = {"kind", "format", "machine_id", "axis", "date", "lost_motion_um",
+              "lost_motion_u_um", "reversals", "source"}
+BALLBAR_KEYS = {"kind", "format", "machine_id", "axis", "date", "plane", "visit", "radius_mm",
+                "feed_mm_min", "backlash_um", "backlash_u_um", "source"}
+
+
+def check_trace(record) -> dict:
+    """``record`` if it is a trace day (one machine axis's lost motion on one day, from
+    ``monitor``) this version can interpret, else one ``InputError``."""
+    kind = "trace record"
+    _head(record, kind, TRACE_KEYS)
+    if _date(record.get("date"), "date", kind) is None:
+        _fail(kind, "date is missing")
+    _number(record.get("lost_motion_um"), "lost_motion_um", kind)
+    _number(record.get("lost_motion_u_um"), "lost_motion_u_um", kind, minimum=0)
+    _number(record.get("reversals"), "reversals", kind, minimum=0)
+    _text(record.get("source"), "source", kind)
+    return record
+
+
+def check_ballbar(record) -> dict:
+    """``record`` if it is one axis's backlash from a circular test (``circle``) this version
+    can interpret, else one ``InputError``."""
+    kind = "ballbar record"
+    _head(record, kind, BALLBAR_KEYS)
+    if _date(record.get("date"), "date", kind) is None:
+        _fail(kind, "date is missing")
+    for key in ("plane", "visit", "source"):
+        _text(record.get(key), key, kind)
+    for key in ("radius_mm", "feed_mm_min"):
+        _number(record.get(key), key, kind, minimum=0)
+    _number(record.get("backlash_um"), "backlash_um", kind)
+    _number(record.get("backlash_u_um"), "backlash_u_um", kind, minimum=0)
+    return record
+
+
+CHECKS = {"forecast": check_forecast, "compensation": check_compensation,
+          "trace": check_trace, "ballbar": check_ballbar}
 
 
 def rows_of(kind: str, records: list[dict], recorded_at: str | None = None) -> list[tuple]:
@@ -292,7 +331,8 @@ def read_records(store, kind: str) -> dict[tuple[str, str], list[dict]]:
 def _order(record: dict) -> tuple:
     """Oldest first: by time of recording; records of one recording by the day (else visit)
     a forecast is for, or by controller."""
-    return (record["recorded_at"], record.get("for_date") or "", record.get("visit") or "",
+    return (record["recorded_at"], record.get("for_date") or record.get("date") or "",
+            record.get("visit") or "",
             record.get("controller") or "", canonical(record))
 
 
@@ -415,3 +455,34 @@ def _plain(value):
         return [_plain(v) for v in np.asarray(value, dtype=float).tolist()]
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+# --------------------------------------------------------------------------- evidence
+def trace_records(daily, source: str) -> list[dict]:
+    """One trace record per machine axis and day of a monitor's ``daily`` frame
+    (``pipeline.workflows.monitor.MonitorResult.daily``) with a lost motion [um, arcsec on a
+    rotary axis] and its standard uncertainty; days without one are not recorded."""
+    known = daily.dropna(subset=["lost_motion_um", "lost_motion_u_um"])
+    return [{"kind": "trace", "format": RECORD_FORMAT, "machine_id": str(r.machine_id),
+             "axis": str(r.axis), "date": str(r.date), "lost_motion_um": _plain(r.lost_motion_um),
+             "lost_motion_u_um": _plain(r.lost_motion_u_um), "reversals": int(r.reversals),
+             "source": source} for r in known.itertuples()]
+
+
+def ballbar_records(items, dates: dict, source: str) -> list[dict]:
+    """Two ballbar records per diagnosed circle (``pipeline.workflows.circle.CircleFigures``),
+    one per axis of its plane: the play fitted to the axis [um] and its standard uncertainty,
+    dated by ``dates`` (the circle's (machine, plane, visit, radius, feed) -> ISO day)."""
+    out = []
+    for item in items:
+        c, d = item.circle, item.diagnosis
+        if d is None:  # one direction only: no backlash
+            continue
+        day = dates[(c.machine_id, c.plane, c.visit, c.radius_mm, c.feed_mm_min)]
+        for axis, term in zip(c.axes, ("backlash_1", "backlash_2")):
+            out.append({"kind": "ballbar", "format": RECORD_FORMAT, "machine_id": c.machine_id,
+                        "axis": axis, "date": day, "plane": c.plane, "visit": c.visit,
+                        "radius_mm": float(c.radius_mm), "feed_mm_min": float(c.feed_mm_min),
+                        "backlash_um": _plain(d.value[term]),
+                        "backlash_u_um": _plain(d.u[term]), "source": source})
+    return out

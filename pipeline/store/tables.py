@@ -14,7 +14,9 @@ import datetime as dt
 
 # Table per kind: (embedded store, PostgreSQL).
 TABLES = {"forecast": ("forecasts", "backlash_forecasts"),
-          "compensation": ("compensations", "backlash_compensations")}
+          "compensation": ("compensations", "backlash_compensations"),
+          "trace": ("trace_days", "backlash_trace_days"),
+          "ballbar": ("ballbar_runs", "backlash_ballbar_runs")}
 COLUMNS = ("machine_id", "axis", "sha256", "recorded_at", "record")
 VOIDED = ("voided", "backlash_voided")
 AUDIT = ("audit", "backlash_audit")

@@ -34,7 +34,8 @@ def _parameters() -> dict:
     from pipeline.workflows.constraints import Interval
 
     return {"data": [str, os.PathLike, pd.DataFrame],
-            "tolerance_um": [None, Interval(Real, 0, None, closed="neither")]}
+            "tolerance_um": [None, Interval(Real, 0, None, closed="neither")],
+            "store": [str, os.PathLike, None]}
 
 
 PARAMETERS = Constraints(_parameters)
@@ -127,12 +128,15 @@ class CircleResult(Result):
         The file the tests came from.
     tolerance_um : float or None
         The tolerance band drawn in the plots [um].
+    recorded : pipeline.store.records.Recorded or None
+        What was recorded in the fleet store (``store``), else None.
     """
 
     circles: list
     source: str = ""
     tolerance_um: float | None = None
     parameters: dict = field(default_factory=dict)
+    recorded: object = None
 
     def to_json(self) -> dict:
         """``{"circles": [...]}`` as SCHEMA.md section 11 names it; NaN becomes None."""
@@ -245,7 +249,7 @@ def evaluate(circle: fc.Circle) -> CircleFigures:
                          mc.diagnose(runs, circle.radius_mm, circle.feed_mm_min))
 
 
-def circle(data, *, tolerance_um: float | None = None) -> CircleResult:
+def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResult:
     """Evaluate circular tests: ISO 230-4 G and H and the diagnosis of each circle.
 
     Parameters
@@ -255,6 +259,11 @@ def circle(data, *, tolerance_um: float | None = None) -> CircleResult:
     tolerance_um : float, optional
         Width of the tolerance band drawn in the polar plots [um] (e.g. the G a machine's
         acceptance allows); not drawn when not given.
+    store : str or path-like, optional
+        A fleet store (folder or ``postgresql://`` URL) to record each diagnosed circle's
+        backlash in: one ``ballbar`` record per axis of its plane, dated by the earliest
+        ``started_at`` of its runs (``pipeline.store.records.ballbar_records``); the same
+        circles again add nothing.
 
     Returns
     -------
@@ -267,21 +276,47 @@ def circle(data, *, tolerance_um: float | None = None) -> CircleResult:
     Raises
     ------
     InputError
-        The file breaks the contract (naming file, row and column).
+        The file breaks the contract (naming file, row and column); with ``store``, a store
+        that does not exist or cannot be written, or a circle without ``started_at`` (nothing
+        recorded).
 
     References
     ----------
     ISO 230-4:2022, Circular tests for numerically controlled machine tools.
     """
-    check_params(_parameters(), {"data": data, "tolerance_um": tolerance_um}, "circle")
+    check_params(_parameters(), {"data": data, "tolerance_um": tolerance_um, "store": store},
+                 "circle")
+    if store is not None:  # before any work: a store that cannot take the records
+        from pipeline.store.records import open_for_records
+
+        store = open_for_records(store)
     frame = fc.read_circles(data)
     items = [evaluate(c) for c in fc.circles(frame)]
     notes = [f"{i.circle.machine_id} {i.circle.plane} visit {i.circle.visit}: only "
              f"{next(iter(i.circle.runs))} was run; H and the diagnosis need CW and CCW"
              for i in items if i.diagnosis is None]
     source = str(data) if isinstance(data, (str, os.PathLike)) else "<frame>"
-    return CircleResult(circles=items, source=source, tolerance_um=tolerance_um,
-                        parameters={"tolerance_um": tolerance_um}, notes=notes)
+    result = CircleResult(circles=items, source=source, tolerance_um=tolerance_um,
+                          parameters={"tolerance_um": tolerance_um}, notes=notes)
+    if store is not None:
+        from pipeline.store.records import ballbar_records, record
+
+        records = ballbar_records(items, circle_days(frame, source), source)
+        result.recorded = record(store, "ballbar", records)
+    return result
+
+
+def circle_days(frame: pd.DataFrame, source: str) -> dict:
+    """The day (ISO, UTC) of each circle, (machine, plane, visit, radius, feed) -> the
+    earliest ``started_at`` of its runs: what dates its backlash in a fleet store."""
+    from features.readings.errors import InputError
+
+    if "started_at" not in frame or frame["started_at"].isna().any():
+        raise InputError("a circle recorded in a fleet store needs its date: started_at on "
+                         "every row", file=source, column="started_at")
+    first = frame.groupby(list(fc.CIRCLE_KEYS), sort=False)["started_at"].min()
+    return {(str(m), str(p), str(v), float(r), float(f)): t.date().isoformat()
+            for (m, p, v, r, f), t in first.items()}
 
 
 WORKFLOW = Workflow(

@@ -37,6 +37,8 @@ def _parameters() -> dict:
         "alpha": [Interval(Real, 0, 0.5, closed="neither")],
         "min_jump_sigma": [Interval(Real, 0, None, closed="neither")],
         "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
+        "evidence": [str, list, tuple],
+        "store": [str, os.PathLike, None],
     }
 
 
@@ -61,12 +63,17 @@ class DriftResult(Result):
         The validated readings.
     parameters : dict
         The workflow's parameters as given (logged with the run).
+    offsets : dict
+        With ``evidence`` beyond the laser: per (machine_id, axis) the offset of each other
+        source to the laser's backlash (``models.evidence.offset``), None where it has no
+        laser visit near.
     """
 
     series: list
     source: str
     readings: object = field(repr=False)
     parameters: dict = field(default_factory=dict)
+    offsets: dict = field(default_factory=dict)
 
     @property
     def alerts(self) -> list[dict]:
@@ -84,8 +91,16 @@ class DriftResult(Result):
     def to_json(self) -> dict:
         from features.readings.fileio import clean_nan
 
+        series = [s.to_json() for s in self.series]
+        others = [k for k in (self.parameters.get("evidence") or "laser").split(",")
+                  if k != "laser"]
+        for j, s in zip(series if others else (), self.series):  # each source's offset
+            found = self.offsets.get((s.machine_id, s.axis), {})
+            j["offsets_um"] = {k: None if found.get(k) is None else {
+                "value": round(found[k]["value"], 4), "u": round(found[k]["u"], 4),
+                "days_in_common": found[k]["days_in_common"]} for k in others}
         return clean_nan({"as_of": self.parameters.get("as_of"),
-                          "series": [s.to_json() for s in self.series]})
+                          "evidence": self.parameters.get("evidence"), "series": series})
 
     @property
     def run_name(self) -> str:
@@ -108,6 +123,7 @@ class DriftResult(Result):
                       model, (str, os.PathLike)) else type(model).__name__,
                   "alpha": p.get("alpha"), "min_jump_sigma": p.get("min_jump_sigma"),
                   "warn_months": p.get("warn_months"), "n_series": len(self.series),
+                  "evidence": p.get("evidence") or "laser",
                   "uncertainty": "" if p.get("uncertainty") is None else str(
                       p["uncertainty"]) if isinstance(p["uncertainty"], (str, os.PathLike))
                   else "given"}
@@ -127,7 +143,8 @@ class DriftResult(Result):
 def drift(data, *, format: str = "auto", threshold_um: float | None = None,
           threshold_arcsec: float | None = None, limits=None, as_of=None, model=None,
           warn_months: float = 6.0, alpha: float = 0.05,
-          min_jump_sigma: float = 3.0, uncertainty=None) -> DriftResult:
+          min_jump_sigma: float = 3.0, uncertainty=None, evidence="laser",
+          store=None) -> DriftResult:
     """Follow backlash across maintenance visits.
 
     The series of each machine axis is its backlash at each visit
@@ -164,6 +181,18 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         ``backlash_U_um``, the expanded uncertainty of its backlash
         (``features.visits.axis_backlash``), and a step within the expanded uncertainty of the
         difference of two visits is a note, not an alert (``models.drift``). Linear axes only.
+    evidence : str or list of str, default 'laser'
+        The sources of each axis's series: ``laser`` (the visits alone), ``trace`` (the lost
+        motion of controller-trace days, ``monitor --store``), ``ballbar`` (the backlash of
+        circular tests, ``circle --store``), a comma-separated list or ``all``. The laser
+        visits are always in; another source's points are shifted by its offset to the laser
+        (estimated from the days both measured, ``models.evidence``) and left out, with a
+        note, where it has none. The series' ``source`` column says where each point came
+        from; a point of another source is named ``trace <day>`` or ``ballbar <plane>
+        <visit>``.
+    store : str or path, optional
+        The fleet store (folder or ``postgresql://`` URL) holding the trace and ballbar
+        records; default ``data`` when it names a store.
 
     Returns
     -------
@@ -174,14 +203,19 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     ------
     InputError
         Bad readings or parameters, an unreadable or non-physical budget, a budget for a rotary
-        axis.
+        axis, an unknown evidence source, evidence beyond the laser without a fleet store.
     """
     values = {"format": format, "threshold_um": threshold_um,
               "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
               "model": model,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
-              "uncertainty": uncertainty}
+              "uncertainty": uncertainty, "evidence": evidence, "store": store}
     check_params(_parameters(), values, "drift")
+    from pipeline.evidence import sources_of
+
+    sources = sources_of(evidence)
+    values["evidence"] = ",".join(sources)
+    records = _evidence_records(data if store is None else store, sources)
     from pipeline.dated_view import as_of_date, dated_view
     from pipeline.limits import read_limits
 
@@ -203,6 +237,13 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
     visits = visit_backlash(readings, budget=budget)
     k = None if budget is None else budget.coverage_factor
+    offsets = {}
+    if records is not None:
+        from pipeline.evidence import with_evidence
+
+        visits, offsets, more = with_evidence(visits, records, sources,
+                                              None if as_of is None else day, k)
+        notes += more
     counts = visits.groupby(list(SERIES_KEYS)).size()
     notes += [f"{m} axis {a}: a single visit, no drift analysis"
               for (m, a), c in counts.items() if c < 2]
@@ -229,7 +270,31 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
             notes.append(text)
             note(text)
     source = source_of(data, readings)
-    return DriftResult(series, source, readings, values, notes=notes)
+    if store is not None:  # the result names a store without its password
+        from pipeline.store import redact
+
+        values["store"] = redact(store)
+    return DriftResult(series, source, readings, values, notes=notes, offsets=offsets)
+
+
+def _evidence_records(store, sources: tuple) -> dict | None:
+    """The trace and ballbar records ``sources`` ask for (None for the laser alone).
+
+    Raises
+    ------
+    InputError
+        Sources beyond the laser without a fleet store to read them from.
+    """
+    if sources == ("laser",):
+        return None
+    from features.readings.errors import InputError
+    from pipeline.evidence import read_evidence
+    from pipeline.store import is_store
+
+    if not isinstance(store, (str, os.PathLike)) or not is_store(store):
+        raise InputError("trace and ballbar evidence is read from a fleet store; give the "
+                         "store as data or store", parameter="evidence")
+    return read_evidence(store)
 
 
 def figures_with_uncertainty(readings, budget: unc.UncertaintyBudget):

@@ -117,6 +117,16 @@ class AxisView:
         The forecasts and compensations a fleet store recorded for the axis, oldest first
         (``pipeline.store.records``; a forecast without a day but with operating hours gets
         the day the axis's hours reach them, ``for_date_estimated``); empty for a file.
+    evidence : DataFrame or None
+        The trace days and ballbar runs a fleet store recorded for the axis
+        (``pipeline.evidence.evidence_frame``: ``source``, ``date``, ``value_um``, ``u_um``
+        [um], ``label``, ``plane``), up to the view's day; None for a file.
+    offsets : dict
+        Per source with points: its offset to the laser's backlash
+        (``models.evidence.offset``: ``value``, ``u`` [um], ``days_in_common``), or None
+        without a laser visit near any of its points.
+    evidence_notes : list of str
+        Why a source has no offset.
     """
 
     series: object
@@ -132,6 +142,9 @@ class AxisView:
     compensations: list = field(default_factory=list)
     fleet_rate: dict | None = None
     as_of: dt.date | None = None
+    evidence: object = None
+    offsets: dict = field(default_factory=dict)
+    evidence_notes: list = field(default_factory=list)
 
     @property
     def machine_id(self) -> str:
@@ -199,7 +212,19 @@ class AxisView:
                         "backlash_um": [_round(x) for x in v["backlash_um"]],
                         "backlash_u_um": [_round(x) for x in v["backlash_u_um"]]},
             "page": self.page,
+            **self.evidence_json(),
         }
+
+    def evidence_json(self) -> dict:
+        """``evidence`` and ``offsets_um`` (docs/fleet.md): empty lists and nulls for a
+        file."""
+        import pandas as pd
+
+        from pipeline.evidence import EVIDENCE_COLUMNS, evidence_json
+
+        frame = (self.evidence if self.evidence is not None
+                 else pd.DataFrame(columns=[*EVIDENCE_COLUMNS, "plane"]))
+        return evidence_json(frame, self.offsets)
 
 
 def _day(timestamp) -> dt.date:
@@ -367,6 +392,9 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         note(text)
     views = axis_views(series, readings, stats, interval_days,
                        store_records(data if store is None else store), as_of=day)
+    for text in (n for v in views for n in v.evidence_notes):
+        notes.append(text)
+        note(text)
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
 
@@ -403,7 +431,7 @@ def axis_views(series: list, readings, stats, interval_days: float,
                    iso230.axis_figures(readings, stats))
     rates = fleet_wear_rates(series, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
-    views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage))
+    views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage), as_of)
              for s in series]
     for view in views if as_of is not None else ():
         view.as_of = as_of
@@ -415,16 +443,22 @@ def axis_views(series: list, readings, stats, interval_days: float,
 
 
 def _view(s, parts: _Parts, interval_days: float, records: dict,
-          fleet_rate: dict | None = None) -> AxisView:
+          fleet_rate: dict | None = None, as_of: dt.date | None = None) -> AxisView:
     due, reason = next_visit(s, interval_days, fleet_rate)
     end = _forecast_end(s, interval_days)
     wear, why = wear_map(s, parts)
     key = (s.machine_id, s.axis)
     forecasts = [dated(f, s, parts) for f in records.get("forecast", {}).get(key, [])]
-    return AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
+    view = AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
                     last_iso(s, parts), forecasts=forecasts,
                     compensations=records.get("compensation", {}).get(key, []),
                     fleet_rate=fleet_rate)
+    if records:  # a store: the other evidence of the axis's backlash
+        from pipeline.evidence import axis_offsets, evidence_frame
+
+        view.evidence = evidence_frame(records, key, as_of)
+        view.offsets, view.evidence_notes = axis_offsets(s.visits, view.evidence)
+    return view
 
 
 def fleet_wear_rates(series: list, parts: _Parts) -> dict[str, dict]:

@@ -41,6 +41,7 @@ def _parameters() -> dict:
         "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
         "take_up_mm": [Interval(Real, 0, None, closed="neither")],
         "settle_s": [Interval(Real, 0, None, closed="left")],
+        "store": [str, os.PathLike, None],
     }
 
 
@@ -91,6 +92,8 @@ class MonitorResult(Result):
         The traces as given.
     engine : str
         Where the partitions ran.
+    recorded : pipeline.store.records.Recorded or None
+        What was recorded in the fleet store (``store``), else None.
     """
 
     daily: object
@@ -98,6 +101,7 @@ class MonitorResult(Result):
     source: str = ""
     engine: str = "local"
     parameters: dict = field(default_factory=dict)
+    recorded: object = None
 
     @property
     def alerts(self) -> list[dict]:
@@ -124,7 +128,7 @@ class MonitorResult(Result):
 
 def monitor(traces, *, engine: str = "local", address: str | None = None,
             threshold_um: float | None = None, take_up_mm: float = 0.05,
-            settle_s: float = 0.1, progress=None) -> MonitorResult:
+            settle_s: float = 0.1, progress=None, store=None) -> MonitorResult:
     """Lost motion per machine axis and day from dual-feedback traces, with change points.
 
     Parameters
@@ -146,6 +150,10 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         Time after an acceleration before a sample counts as steady [s].
     progress : callable, optional
         ``progress(done, total, what)`` per partition (local engine).
+    store : str or path-like, optional
+        A fleet store (folder or ``postgresql://`` URL) to record the daily lost motion in:
+        one ``trace`` record per machine axis and day with a value
+        (``pipeline.store.records.trace_records``); the same days again add nothing.
 
     Returns
     -------
@@ -155,11 +163,15 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     ------
     InputError
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
-        engine.
+        engine, a ``store`` that does not exist or cannot be written (nothing recorded).
     """
     check_params(_parameters(), {"traces": traces, "engine": engine, "address": address,
                                  "threshold_um": threshold_um, "take_up_mm": take_up_mm,
-                                 "settle_s": settle_s}, "monitor")
+                                 "settle_s": settle_s, "store": store}, "monitor")
+    if store is not None:  # before any work: a store that cannot take the records
+        from pipeline.store.records import open_for_records
+
+        store = open_for_records(store)
     import pandas as pd
 
     from models.lost_motion import DAILY_COLUMNS
@@ -179,10 +191,15 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     notes = _notes(daily)
     for text in notes:
         note(text)
-    return MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
-                         parameters={"engine": engine, "threshold_um": threshold_um,
-                                     "take_up_mm": take_up_mm, "settle_s": settle_s},
-                         notes=notes)
+    result = MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
+                           parameters={"engine": engine, "threshold_um": threshold_um,
+                                       "take_up_mm": take_up_mm, "settle_s": settle_s},
+                           notes=notes)
+    if store is not None:
+        from pipeline.store.records import record, trace_records
+
+        result.recorded = record(store, "trace", trace_records(daily, result.source))
+    return result
 
 
 def _partitions(traces) -> list:
