@@ -270,7 +270,18 @@ def axis_body(view) -> str:
         "<h2>Wear-rate map since the last change point</h2>", _wear(view),
         "<h2>Last visit: ISO 230-2 chart</h2>", _iso(view),
         "<h2>Recorded forecasts</h2>", _forecasts(view),
-        "<h2>Compensation history</h2>", _compensations(view)])
+        "<h2>Compensation history</h2>", _compensations(view),
+        *(["<h2>Voided tests (read by no command)</h2>", _voided(view)] if view.voided else [])])
+
+
+def _voided(view) -> str:
+    """The axis's voided tests with when, who and why (``backlash void``)."""
+    rows = "".join(f"<tr><td>{_esc(t['visit'])}</td><td>{_esc(t['test_id'])}</td>"
+                   f"<td>{_esc(t['at'][:19].replace('T', ' '))} UTC</td>"
+                   f"<td>{_esc(t['user_name'])}</td><td>{_esc(t['reason'])}</td></tr>"
+                   for t in view.voided)
+    return ("<table><tr><th>visit</th><th>test</th><th>voided at</th><th>by</th>"
+            f"<th>reason</th></tr>{rows}</table>")
 
 
 def _summary(view, j: dict) -> str:

@@ -136,7 +136,7 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "days_overdue": (int, type(None)),
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
-         "page": str, "evidence": dict, "offsets_um": dict}
+         "page": str, "voided_tests": list, "evidence": dict, "offsets_um": dict}
 
 
 def test_json_keys_and_types(mixed):

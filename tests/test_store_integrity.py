@@ -353,3 +353,31 @@ def test_a_malformed_store_url_is_one_line_without_its_password(tmp_path, capsys
 
 FILE_OF_ECMC = str(Path(__file__).resolve().parents[1] / "experiments/data/ecmc/"
                    "ess_mcu1025_ISO230.dat")
+
+
+def test_the_fleet_view_lists_an_axis_s_voided_tests_and_reads_them_not(tmp_path, fleet_files):
+    store = tmp_path / "fleet"
+    bl.ingest(fleet_files, store=store)
+    bl.void(store, machine="M1", axis="X", visit="03", reason="laser misaligned")
+    result = bl.fleet(store, threshold_um=4.0, out=tmp_path / "site")
+    axis = next(a for a in result.to_json()["axes"] if (a["machine_id"], a["axis"]) == ("M1", "X"))
+    assert axis["history"]["visits"] == ["01", "02"]
+    assert [(t["visit"], t["reason"]) for t in axis["voided_tests"]] == [
+        ("03", "laser misaligned")] * 2
+    page = (tmp_path / "site" / axis["page"]).read_text(encoding="utf-8")
+    assert "Voided tests" in page and "laser misaligned" in page
+    others = [a for a in result.to_json()["axes"] if a["axis"] != "X" or a["machine_id"] != "M1"]
+    assert all(a["voided_tests"] == [] for a in others)
+
+
+def test_an_undated_test_in_a_store_is_left_out_of_the_fleet_view_with_one_note(tmp_path,
+                                                                                 fleet_files):
+    store = tmp_path / "fleet"
+    bl.ingest([*fleet_files, FILE_OF_ECMC], store=store)  # an ecmc test has no start date
+    with pytest.warns(bl.BacklashWarning) as caught:
+        result = bl.fleet(store, threshold_um=4.0)
+    notes = [str(w.message) for w in caught if "no start date" in str(w.message)
+             or "undated" in str(w.message) or "without a start" in str(w.message)]
+    assert len(notes) == 1 and "ess_mcu1025_ISO230" in notes[0], notes
+    assert {(a["machine_id"], a["axis"]) for a in result.to_json()["axes"]} == {
+        ("M1", "X"), ("M1", "Y"), ("M2", "X")}

@@ -127,6 +127,9 @@ class AxisView:
         without a laser visit near any of its points.
     evidence_notes : list of str
         Why a source has no offset.
+    voided : list of dict
+        The axis's voided tests in a store (``visit``, ``test_id``, ``at``, ``user_name``,
+        ``reason``: ``backlash void``); no reader reads them.
     """
 
     series: object
@@ -145,6 +148,7 @@ class AxisView:
     evidence: object = None
     offsets: dict = field(default_factory=dict)
     evidence_notes: list = field(default_factory=list)
+    voided: list = field(default_factory=list)
 
     @property
     def machine_id(self) -> str:
@@ -212,6 +216,8 @@ class AxisView:
                         "backlash_um": [_round(x) for x in v["backlash_um"]],
                         "backlash_u_um": [_round(x) for x in v["backlash_u_um"]]},
             "page": self.page,
+            "voided_tests": [{k: t[k] for k in ("visit", "test_id", "at", "user_name", "reason")}
+                             for t in self.voided],
             **self.evidence_json(),
         }
 
@@ -415,7 +421,11 @@ def store_records(data) -> dict:
     if not isinstance(data, (str, os.PathLike)) or not is_store(data):
         return {}
     store = open_store(data, parameter="store")
-    return {kind: read_records(store, kind) for kind in TABLES}
+    records = {kind: read_records(store, kind) for kind in TABLES}
+    voids = store.voids()
+    records["voided"] = {key: rows.drop(columns=["machine_id", "axis"]).to_dict("records")
+                         for key, rows in voids.groupby(["machine_id", "axis"])}
+    return records
 
 
 def axis_views(series: list, readings, stats, interval_days: float,
@@ -452,7 +462,7 @@ def _view(s, parts: _Parts, interval_days: float, records: dict,
     view = AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
                     last_iso(s, parts), forecasts=forecasts,
                     compensations=records.get("compensation", {}).get(key, []),
-                    fleet_rate=fleet_rate)
+                    fleet_rate=fleet_rate, voided=records.get("voided", {}).get(key, []))
     if records:  # a store: the other evidence of the axis's backlash
         from pipeline.evidence import axis_offsets, evidence_frame
 
