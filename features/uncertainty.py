@@ -699,6 +699,31 @@ def per_test_um(stats, budget: UncertaintyBudget):
         {c: float for c in (*TEST_UNCERTAINTY_KEYS, *REVERSAL_PARTS)})
 
 
+def with_uncertainty(figures, stats, budget: UncertaintyBudget):
+    """``figures`` with the ``TEST_UNCERTAINTY_KEYS`` columns [um] of every test: the budget at
+    its own measuring length and runs per direction (``per_test_um``).
+
+    Parameters
+    ----------
+    figures : DataFrame
+        One row per test (``features.iso230.axis_figures``).
+    stats : DataFrame
+        The per-target statistics the figures came from (``features.iso230.per_target``).
+    budget : UncertaintyBudget
+        The contributors and k.
+
+    Raises
+    ------
+    InputError
+        A test on a rotary axis: the budget's contributors are lengths, not angles.
+    """
+    from features.readings import schema
+
+    keys = list(schema.TEST_KEYS)
+    per_test = per_test_um(stats, budget)
+    return figures.merge(per_test[keys + list(TEST_UNCERTAINTY_KEYS)], on=keys, how="left")
+
+
 def _at_test(budget: UncertaintyBudget, length_mm: float, cycles: int) -> dict:
     """``TEST_UNCERTAINTY_KEYS`` and ``REVERSAL_PARTS`` [um] of one test of (L, n)."""
     values = _test_values(budget, length_mm, cycles)

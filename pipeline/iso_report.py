@@ -140,7 +140,7 @@ def write_report(result, out) -> dict[str, Path]:
 
     Parameters
     ----------
-    result : pipeline.workflows.iso.IsoResult
+    result : pipeline.steps.iso.IsoResult
         The figures, readings and outliers of the tests.
     out : str or path-like
         The folder (created if needed); both files are written atomically.

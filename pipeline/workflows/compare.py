@@ -15,9 +15,9 @@ import pandas as pd
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
+from pipeline.steps.model_data import DATA_PARAMETERS, SPLITS, model_data
 from pipeline.workflows import Workflow, check_params, each_once
 from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.train import DATA_PARAMETERS, SPLITS, model_data
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
 BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "coverage_pct",

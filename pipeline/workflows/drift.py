@@ -188,9 +188,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
     per_axis = None if limits is None else read_limits(limits)
-    from pipeline.workflows.iso import _budget
-
-    budget = None if uncertainty is None else _budget(uncertainty)
+    budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     from features.visits import SERIES_KEYS, visit_backlash
     from models import drift as drift_model
     from models import monitoring
@@ -230,22 +228,6 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
             note(text)
     source = source_of(data, readings)
     return DriftResult(series, source, readings, values, notes=notes)
-
-
-def figures_with_uncertainty(readings, budget: unc.UncertaintyBudget):
-    """The ISO 230-2 figures of every test with the budget's expanded uncertainties ``U_*_um``
-    [um] at its own measuring length (``pipeline.workflows.iso.with_uncertainty``).
-
-    Raises
-    ------
-    InputError
-        Readings of a rotary axis: a budget holds lengths, not angles.
-    """
-    from features import iso230
-    from pipeline.workflows.iso import with_uncertainty
-
-    stats = iso230.per_target(readings)
-    return with_uncertainty(iso230.axis_figures(readings, stats), stats, budget)
 
 
 WORKFLOW = Workflow(

@@ -177,7 +177,7 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     check_params(_parameters(), values, "rank")
     from features.table import feature_table
     from models.influence import explain
-    from pipeline.workflows.train import check_feature_names
+    from pipeline.steps.model_data import check_feature_names
 
     classes = parse_bins(bins)
     names = check_feature_names(features)

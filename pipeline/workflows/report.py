@@ -15,8 +15,8 @@ from pathlib import Path
 
 from features import standards
 from pipeline.results import Result
+from pipeline.steps import iso as iso_workflow
 from pipeline.workflows import Constraints, Workflow, check_params
-from pipeline.workflows import iso as iso_workflow
 
 PARAMETERS = Constraints(iso_workflow._parameters)
 
