@@ -50,7 +50,8 @@ NAMED_AXES = 4
 BUDGET_PARTS = ("backlash_u_setup_um", "backlash_u_env_um")
 
 
-def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) -> pd.DataFrame:
+def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None,
+                     stats: pd.DataFrame | None = None) -> pd.DataFrame:
     """Backlash per point of a readings table.
 
     Parameters
@@ -63,6 +64,9 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) ->
         An ISO/TR 230-9 budget (``features.uncertainty``; e.g.
         ``experiments/data/paper_uncertainty.toml``): adds ``backlash_U_um``
         (``point_uncertainty``). Linear axes only.
+    stats : DataFrame, optional
+        ``features.iso230.per_target(readings)`` when already computed (a job computes it once
+        and passes it down).
 
     Returns
     -------
@@ -81,8 +85,8 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) ->
         An unknown ``kind``, unpaired tests for ``paper``, an unreadable or non-physical
         budget, a budget for a rotary axis.
     """
-    return targets_of(iso230.per_target(readings), kind,
-                      readings.attrs.get("source", "readings"), budget)
+    stats = iso230.per_target(readings) if stats is None else stats
+    return targets_of(stats, kind, readings.attrs.get("source", "readings"), budget)
 
 
 def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings", budget=None,

@@ -34,13 +34,15 @@ DATA_PARAMETERS = {
 @dataclass
 class ModelData:
     """What a model job works on: the readings, their feature table, the noise floor of one
-    measured backlash point [um], the twin's truth table (or None) and the data's name."""
+    measured backlash point [um], the twin's truth table (or None), the data's name and the
+    readings' per-target ISO statistics (computed once, passed down to every step)."""
 
     readings: pd.DataFrame
     table: object  # features.table.FeatureTable
     noise_floor_um: float
     truth: pd.DataFrame | None
     source: str
+    stats: pd.DataFrame | None = None  # features.iso230.per_target(readings), computed once
 
     @property
     def digest(self) -> str:
@@ -52,17 +54,23 @@ class ModelData:
 def model_data(data, format: str = "auto", target: str = "auto", features=None,
                truth=None) -> ModelData:
     """Readings -> feature table (checked), noise floor and truth table (see ``train``)."""
+    from features import iso230
     from features.table import check_features, feature_table
+    from features.targets import MIXED
     from models.evaluation import read_truth, target_noise_floor
 
     readings = readings_of(data, format)
     source = source_of(data, readings)
-    table = feature_table(readings, target=target, features=check_feature_names(features))
+    stats = iso230.per_target(readings)
+    table = feature_table(readings, target=target, features=check_feature_names(features),
+                          stats=stats)
     check_features(table.X, source)
     if truth is not None and not isinstance(truth, pd.DataFrame):
         truth = read_truth(truth)
-    return ModelData(readings, table, target_noise_floor(readings, table.target_kind), truth,
-                     source)
+    # a mixed table's points name their kinds: no second pass over the readings for them
+    kinds = table.meta["target_kind"] if table.target_kind == MIXED else table.target_kind
+    return ModelData(readings, table, target_noise_floor(readings, kinds), truth, source,
+                     stats)
 
 
 def check_feature_names(features) -> list[str] | None:

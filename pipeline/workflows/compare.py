@@ -240,7 +240,7 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
                               "seed": seed}, "backtest")
     names = model_names(models)
     loaded = model_data(data, format, target, features, truth)
-    visits, why_not = visit_series(loaded.readings)
+    visits, why_not = visit_series(loaded.readings, loaded.stats)
     if visits is None:
         note(f"adjustments from operating hours and events only; {why_not}")
     origins = rolling.backtest(loaded.table, names, loaded.truth, seed, progress=progress,
@@ -248,21 +248,23 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
     params = {"data": loaded.source, "data_sha256": loaded.digest, "split": "backtest",
               "target_kind": loaded.table.target_kind, "seed": seed, "models": ",".join(names),
               "noise_floor_um": loaded.noise_floor_um}
-    wear = wear_rates(loaded.table, loaded.readings) if "wear-map" in names else None
+    wear = (wear_rates(loaded.table, loaded.readings, loaded.stats) if "wear-map" in names
+            else None)
     return BacktestResult(origins=origins, summary=rolling.summary(origins), wear_map=wear,
                           noise_floor_um=loaded.noise_floor_um,
                           target_kind=loaded.table.target_kind, n_points=len(loaded.table.y),
                           params=params)
 
 
-def wear_rates(table, readings=None) -> pd.DataFrame | None:
+def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:
     """The wear map fitted on the visits since the last adjustment: w(x) with its interval;
-    None when the data cannot give a wear rate (one visit)."""
+    None when the data cannot give a wear rate (one visit). ``stats``: the readings'
+    ``features.iso230.per_target`` when already computed."""
     from models.registry import with_axes
     from models.training import hours_origins, since_adjustment
     from models.wear_map import WearMap, epoch_lines
 
-    kept, clock = since_adjustment(table, readings)
+    kept, clock = since_adjustment(table, readings, stats)
     for line in epoch_lines(clock["series"]):
         note(line)
     model = WearMap().fit(with_axes(kept.X, kept.meta), kept.y,

@@ -355,8 +355,9 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from models.drift import analyse_visits, two_visit_notes
 
     readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
-    stats = iso230.per_target(readings)  # once, for the series and the pages alike
-    visits = visit_backlash(readings, stats)
+    # once, for the series and the pages alike
+    parts = fleet_parts(readings, iso230.per_target(readings))
+    visits = visit_backlash(readings, parts.stats, points=parts.points, figures=parts.figures)
     series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
                             threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
@@ -365,7 +366,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     notes += two_visit_notes(series)
     for text in notes:
         note(text)
-    views = axis_views(series, readings, stats, interval_days,
+    views = axis_views(series, readings, parts, interval_days,
                        store_records(data if store is None else store), as_of=day)
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
@@ -390,17 +391,23 @@ def store_records(data) -> dict:
     return {kind: read_records(store, kind) for kind in TABLES}
 
 
-def axis_views(series: list, readings, stats, interval_days: float,
-               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
-    """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
-    the readings' per-target ISO statistics (``features.iso230.per_target``), ``records``
-    what ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
+def fleet_parts(readings, stats) -> _Parts:
+    """The readings' per-target ISO statistics ``stats`` (``features.iso230.per_target``),
+    their backlash points and per-test figures, computed once for the series and the pages."""
     from features import iso230
     from features.targets import targets_of
+
+    return _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
+                  iso230.axis_figures(readings, stats))
+
+
+def axis_views(series: list, readings, parts: _Parts, interval_days: float,
+               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
+    """One ``AxisView`` per analysed series, worst first, each with its page name; ``parts``
+    the readings' statistics, points and figures (``fleet_parts``), ``records`` what
+    ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
     from models.wear_clock import usage_rates
 
-    parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
-                   iso230.axis_figures(readings, stats))
     rates = fleet_wear_rates(series, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
     views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage))

@@ -177,7 +177,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     registry.check_name(name)
     budget = None if uncertainty is None else checked_budget(uncertainty)
     loaded = model_data(data, format, target, features, truth)
-    U_B = None if budget is None else measurement_U_B_um(loaded.readings, budget)
+    U_B = None if budget is None else measurement_U_B_um(loaded.stats, budget)
     table, clock, origins, usage = loaded.table, None, {}, []
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
         from models.training import hours_origins
@@ -186,7 +186,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
 
         usage = usage_rates(loaded.readings)  # turns a date into hour-counter readings
 
-        table, clock = since_adjustment(table, loaded.readings)
+        table, clock = since_adjustment(table, loaded.readings, loaded.stats)
         origins = hours_origins(table, clock["series"])
         for line in [*epoch_lines(clock["series"]), clock["change_points"]]:
             if line and line != "searched":
@@ -219,10 +219,11 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
                        target_kind=table.target_kind, target_reason=table.reason)
 
 
-def measurement_U_B_um(readings, budget) -> float:
+def measurement_U_B_um(stats, budget) -> float:
     """U(B) [um] of the data's backlash measurement: the median over its tests of the budget's
     expanded uncertainty of B at each test's measuring length and runs per direction
-    (``features.uncertainty.per_test_um``).
+    (``features.uncertainty.per_test_um``); ``stats`` the readings' per-target statistics
+    (``features.iso230.per_target``).
 
     Raises
     ------
@@ -231,10 +232,9 @@ def measurement_U_B_um(readings, budget) -> float:
     """
     import numpy as np
 
-    from features import iso230
     from features.uncertainty import per_test_um
 
-    U = per_test_um(iso230.per_target(readings), budget)["U_B_um"].to_numpy(float)
+    U = per_test_um(stats, budget)["U_B_um"].to_numpy(float)
     if not np.isfinite(U).any():
         raise InputError("no test has two targets: the budget has no measuring length to be "
                          "evaluated at", parameter="uncertainty")
