@@ -115,10 +115,6 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
             return list(self.features)
         return [f"x{i}" for i in range(n_columns)]
 
-    def _frame(self, X) -> pd.DataFrame:
-        names = self._names(X, np.shape(X)[1])
-        return pd.DataFrame(np.asarray(X, float), columns=names)
-
     # ---- design -------------------------------------------------------------------------
     def _basis(self, x: np.ndarray, choice) -> np.ndarray:
         if choice == "targets":

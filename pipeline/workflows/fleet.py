@@ -48,7 +48,6 @@ DEFAULT_INTERVAL_DAYS = 90.0
 FORECAST_CAP_MONTHS = 24.0
 FORECAST_STEPS = 40
 MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
-NEXT_VISIT_REASONS = ("above_threshold", "crossing", "fleet_rate", "interval")
 # The fleet's wear rate an axis without a trend of its own is planned with: a high quantile of
 # the rates of the fleet's axes, as the axis may wear as fast as most of them.
 FLEET_RATE_QUANTILE = 0.9
