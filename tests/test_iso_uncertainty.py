@@ -16,7 +16,7 @@ import backlash as bl
 from features import uncertainty as unc
 from features.readings.errors import InputError
 from pipeline.cli import main
-from pipeline.iso_chart import _box_line
+from pipeline.reports.iso_chart import _box_line
 from pipeline.steps.iso import JSON_KEYS
 
 ROOT = Path(__file__).resolve().parents[1]

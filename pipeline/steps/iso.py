@@ -131,7 +131,7 @@ class IsoResult(Result):
         InputError
             ``path`` is not a .png name, or there are too many tests for one chart.
         """
-        from pipeline.iso_chart import MAX_PANELS, plot_tests
+        from pipeline.reports.iso_chart import MAX_PANELS, plot_tests
 
         path = Path(path)
         if path.suffix.lower() != ".png":
@@ -147,7 +147,7 @@ class IsoResult(Result):
         """Write ``iso_figures.csv``, ``iso_targets.csv`` and (for at most ``MAX_PANELS``
         tests) the chart ``iso_chart.png`` into the folder ``out``."""
         from features.readings.fileio import atomic_path
-        from pipeline.iso_chart import MAX_PANELS
+        from pipeline.reports.iso_chart import MAX_PANELS
 
         out = Path(out)
         for role, frame in (("figures", self.figures), ("targets", self.targets)):

@@ -178,8 +178,8 @@ class CircleResult(Result):
         import pandas as pd
 
         from features.readings.fileio import atomic_path
-        from pipeline.circle_chart import plot_circle
-        from pipeline.report_page import write_page
+        from pipeline.reports.circle_chart import plot_circle
+        from pipeline.reports.report_page import write_page
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)

@@ -69,7 +69,7 @@ class CompareResult(Result):
         ``models/NAME``."""
         from features.readings.fileio import atomic_path
         from pipeline import model_tracking
-        from pipeline.model_report import write_figures
+        from pipeline.reports.model_report import write_figures
 
         out = Path(out)
         files = {}
@@ -274,7 +274,7 @@ def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:
 
 def plot_wear_map(wear: pd.DataFrame, path) -> Path:
     """Wear rate along the screw [um per 1000 h] with its 95 % band."""
-    from pipeline.report_page import new_figure, save_figure
+    from pipeline.reports.report_page import new_figure, save_figure
 
     fig = new_figure(6.5, 3.2)
     ax = fig.subplots()

@@ -74,8 +74,8 @@ class DriftResult(Result):
         return axis_alerts(self.series)
 
     def write(self, out) -> dict[str, Path]:
-        """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.drift_report``)."""
-        from pipeline.drift_report import write_drift_report
+        """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.reports.drift_report``)."""
+        from pipeline.reports.drift_report import write_drift_report
 
         self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes,
                                         as_of=self.parameters.get("as_of"))

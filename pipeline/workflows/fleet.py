@@ -242,9 +242,9 @@ class FleetResult(Result):
         return axis_alerts(self.axes)
 
     def write(self, out) -> dict[str, Path]:
-        """The static site (``pipeline.fleet_report``): ``index.html``, ``fleet.json`` and
+        """The static site (``pipeline.reports.fleet_report``): ``index.html``, ``fleet.json`` and
         one page per axis, written together (all or nothing)."""
-        from pipeline.fleet_report import write_site
+        from pipeline.reports.fleet_report import write_site
 
         self.files = write_site(self, out)
         return self.files

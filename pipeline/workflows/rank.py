@@ -91,8 +91,8 @@ class RankResult(Result):
         return self.explanation.drivers()
 
     def write(self, out) -> dict[str, Path]:
-        """The report files of ``pipeline.rank_report`` (HTML, figures, CSV, JSON)."""
-        from pipeline.rank_report import write_rank_report
+        """The report files of ``pipeline.reports.rank_report`` (HTML, figures, CSV, JSON)."""
+        from pipeline.reports.rank_report import write_rank_report
 
         self.files = write_rank_report(self.explanation, out, source=self.source,
                                        target_kind=self.target_kind, unit=self.unit)

@@ -5,7 +5,7 @@
 >>> result.write("report/")         # iso_report.html, iso_report.pdf              # doctest: +SKIP
 
 The figures are ``iso``'s (the same standard, outlier rule and uncertainty budget); the
-pages are drawn by ``pipeline.iso_report``.
+pages are drawn by ``pipeline.reports.iso_report``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ class ReportResult(Result):
 
     def write(self, out) -> dict[str, Path]:
         """Write ``iso_report.pdf`` and ``iso_report.html`` into the folder ``out``."""
-        from pipeline.iso_report import write_report
+        from pipeline.reports.iso_report import write_report
 
         self.files = write_report(self.iso, out)
         return self.files

@@ -78,7 +78,7 @@ class TrainResult(Result):
         """The second half of ``write``: the figures of the fit in the saved model directory's
         ``figures`` folder."""
         from pipeline import model_tracking
-        from pipeline.model_report import write_figures
+        from pipeline.reports.model_report import write_figures
 
         return self.drawn(write_figures(self.fit, self.files["model"] / model_tracking.FIGURES,
                                         U_um=self.metrics.get("U_B_um")))

@@ -4,7 +4,7 @@ Each page names the standard, gives the test conditions the readings file holds,
 figures (with their expanded uncertainty when a budget was given), the per-target table
 (means, s, B_i, R_i) and the chart with every reading and the flagged outliers marked. The PDF
 is matplotlib's PDF backend (``PdfPages``), one A4 page per test; the HTML is the one page
-shell of ``pipeline.report_page`` with the same charts embedded.
+shell of ``pipeline.reports.report_page`` with the same charts embedded.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import pandas as pd
 from features.iso230 import ENVIRONMENT, TEST_COLUMNS
 from features.readings import schema
 from features.readings.fileio import atomic_path
-from pipeline.iso_chart import draw_readings, draw_test
-from pipeline.report_page import new_figure, write_page
+from pipeline.reports.iso_chart import draw_readings, draw_test
+from pipeline.reports.report_page import new_figure, write_page
 
 FILES = {"html": "iso_report.html", "pdf": "iso_report.pdf"}
 TARGET_COLUMNS = ("target", "n_up", "n_down", "mean_up", "mean_down", "s_up", "s_down", "B_i",

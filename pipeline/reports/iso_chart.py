@@ -6,7 +6,7 @@ from __future__ import annotations
 import pandas as pd
 
 from features.readings import schema
-from pipeline.report_page import new_figure, save_figure
+from pipeline.reports.report_page import new_figure, save_figure
 
 MAX_PANELS = 12
 UP, DOWN = "#1f77b4", "#d62728"
