@@ -98,7 +98,7 @@ def _hybrid(seed: int):
 
 
 def _wear_map(seed: int = 0):
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
 
     return WearMap()
 

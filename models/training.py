@@ -151,7 +151,7 @@ def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None,
     ('searched' or why not), ``rows_used`` and ``rows``. ``stats``: the readings'
     ``features.iso230.per_target`` when already computed.
     """
-    from models.wear_map import found_adjustments, wear_epochs
+    from models.wear.wear_map import found_adjustments, wear_epochs
 
     series, why_not = (visit_series(readings, stats) if readings is not None
                        else (None, "no change-point search (no readings)"))
@@ -172,7 +172,7 @@ def earlier_epoch(table: FeatureTable, mask: np.ndarray, notes: list[dict],
     """The wear epoch just before the last adjustment of each machine axis whose hour counter
     ran on through it (a wear map may keep those visits for the wear rate, with a level of
     their own), or None. ``mask``, ``notes``: ``wear_epochs`` of the table."""
-    from models.wear_map import wear_epochs
+    from models.wear.wear_map import wear_epochs
 
     if "machine_id" not in table.meta or "axis" not in table.meta:
         return None

@@ -286,7 +286,7 @@ def test_fleet_adjustments_are_found_in_the_lost_motion_series():
     series steps down at the true adjustment on every axis and nowhere else (the diluted
     |B_mean| series, half as high with the same scatter, found none of them)."""
     from models.physics.campaign import simulate
-    from models.wear_clock import found_adjustments
+    from models.wear.wear_clock import found_adjustments
 
     sim = simulate("fleet", seed=0)
     found = found_adjustments(visit_backlash(sim.readings))

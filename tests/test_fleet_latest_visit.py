@@ -22,7 +22,7 @@ from features.readings.errors import BacklashWarning
 from features.readings.fileio import clean_nan
 from features.visits import visit_backlash
 from models import drift
-from models.wear_map import found_adjustments
+from models.wear.wear_map import found_adjustments
 from pipeline.workflows.fleet import fleet
 
 ADJUSTED = {"M2", "M4"}

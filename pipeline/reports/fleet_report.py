@@ -346,7 +346,7 @@ def _wear(view) -> str:
     return (f"{chart}<p>Wear rate w(x) [{_unit(view)} per 1000 operating hours] with its 95 % "
             "interval, "
             f"from {w['n_points']} interior backlash points of visits "
-            f"{_esc(', '.join(w['visits']))} (models.wear_map.WearMap, "
+            f"{_esc(', '.join(w['visits']))} (models.wear.wear_map.WearMap, "
             f"{_esc(w['n_control'])} control points).</p>")
 
 

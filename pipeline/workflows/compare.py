@@ -262,7 +262,7 @@ def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:
     ``features.iso230.per_target`` when already computed."""
     from models.registry import with_axes
     from models.training import hours_origins, since_adjustment
-    from models.wear_map import WearMap, epoch_lines
+    from models.wear.wear_map import WearMap, epoch_lines
 
     kept, clock = since_adjustment(table, readings, stats)
     for line in epoch_lines(clock["series"]):

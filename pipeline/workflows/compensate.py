@@ -421,7 +421,7 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
 def _predicted(model, conditions, spacing, at_hours, at_date, machine, axis) -> list:
     """One profile from a predictor; from a wear map, one per machine axis it knows (those
     selected), each forecast for its operating hours (``pipeline.compensation.ahead``)."""
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
     from pipeline.compensation.ahead import forecast_hours, known_axes, wear_map_of
     from pipeline.compensation.profile import predicted_profile
 

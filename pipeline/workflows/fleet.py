@@ -9,7 +9,7 @@ Per machine axis (``AxisView``): the visit series (``features.visits.visit_backl
 axis's backlash ``backlash_um`` by its measuring system, docs/backlash.md), its drift
 (``models.drift.analyse_series``: change points, Theil-Sen trend since the last one, the date
 the threshold is crossed with its interval, alerts), the date the next visit is due, the
-forecast band, the wear-rate map since the last change point (``models.wear_map.WearMap``) and
+forecast band, the wear-rate map since the last change point (``models.wear.wear_map.WearMap``) and
 the ISO 230-2 chart of the last visit (``features.iso230``).
 
 Rules (docs/fleet.md):
@@ -405,7 +405,7 @@ def axis_views(series: list, readings, parts: _Parts, interval_days: float,
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``parts``
     the readings' statistics, points and figures (``fleet_parts``), ``records`` what
     ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
-    from models.wear_clock import usage_rates
+    from models.wear.wear_clock import usage_rates
 
     rates = fleet_wear_rates(series, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
@@ -660,7 +660,7 @@ def _take(frame, rows: dict, key: tuple):
 
 
 def wear_map(s, parts: _Parts) -> tuple[dict | None, str]:
-    """The wear-rate map w(x) [um per 1000 h] of the axis, fitted by ``models.wear_map.WearMap``
+    """The wear-rate map w(x) [um per 1000 h] of the axis, fitted by ``models.wear.wear_map.WearMap``
     on its interior backlash points since the last change point (position, operating hours and,
     when it varies, feed); (None, why) when that cannot be done."""
     import numpy as np
@@ -687,7 +687,7 @@ def wear_map(s, parts: _Parts) -> tuple[dict | None, str]:
 
 
 def _fit_wear(X, y, visits: list[str]) -> dict:
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
 
     model = WearMap().fit(X, y)
     rate = model.wear_rate_map()

@@ -181,8 +181,8 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     table, clock, origins, usage = loaded.table, None, {}, []
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
         from models.training import hours_origins
-        from models.wear_clock import usage_rates
-        from models.wear_map import epoch_lines
+        from models.wear.wear_clock import usage_rates
+        from models.wear.wear_map import epoch_lines
 
         usage = usage_rates(loaded.readings)  # turns a date into hour-counter readings
 
