@@ -25,7 +25,7 @@ from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import check_params, readings_of
+from pipeline.workflows import Constraints, check_params, readings_of
 
 # Keys of each test's object in the JSON form (``backlash iso --json``): a public contract.
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
@@ -53,6 +53,9 @@ def _parameters() -> dict:
         "standard": [StrOptions(set(standards.NAMES))],
     }
 
+
+
+PARAMETERS = Constraints(_parameters)  # the iso job's table (pipeline.workflows.iso)
 
 
 @dataclass

@@ -8,10 +8,10 @@
 
 from __future__ import annotations
 
-from pipeline.steps.iso import _parameters, iso
-from pipeline.workflows import Constraints, Workflow
+from pipeline.steps.iso import PARAMETERS, iso
+from pipeline.workflows import Workflow
 
-PARAMETERS = Constraints(_parameters)
+__all__ = ["PARAMETERS", "WORKFLOW", "iso"]
 
 WORKFLOW = Workflow(
     name="iso", function=iso,
