@@ -38,7 +38,7 @@ def main() -> None:
         predicted, _, _ = model.predict_interval(table.X.iloc[test])
         fit_s += time.perf_counter() - start
         errors.append(predicted - truth[test])
-    # the same axes in one pooled fit (models.pooling): every axis its own map, sharing
+    # the same axes in one pooled fit (models.wear.pooling): every axis its own map, sharing
     # strength across the fleet
     X = with_axes(table.X, table.meta)
     train = np.concatenate([rows[rank[rows] < rank[rows].max()] for rows in groups.values()])

@@ -90,7 +90,7 @@ def help_text() -> str:
     return f"standard whose figures to compute: {listed} (default {DEFAULT})"
 
 
-def markdown_table() -> str:
+def standards_table() -> str:
     """The docs' table of standards (``docs/iso.md`` holds it verbatim; a test compares)."""
     rows = ["| `--standard` | standard | supported | figures or reason |", "|---|---|---|---|"]
     for s in STANDARDS:

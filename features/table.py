@@ -87,7 +87,8 @@ def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:
 
 
 def feature_table(readings: pd.DataFrame, target: str = "auto",
-                  features: list[str] | None = None) -> FeatureTable:
+                  features: list[str] | None = None,
+                  stats: pd.DataFrame | None = None) -> FeatureTable:
     """Build the model table from a validated readings frame.
 
     Parameters
@@ -100,12 +101,14 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
         per machine axis like 'auto'.
     features : list of str, optional
         Input columns; default ``default_features(readings)``. Unknown names are an error.
+    stats : DataFrame, optional
+        ``features.iso230.per_target(readings)`` when already computed.
     """
     from features.targets import MIXED, backlash_targets
 
     source = readings.attrs.get("source", "readings")
     readings = with_pair_keys(readings)
-    points = backlash_targets(readings, kind="auto" if target == MIXED else target)
+    points = backlash_targets(readings, kind="auto" if target == MIXED else target, stats=stats)
     kind = points.attrs["target_kind"]
     names = list(features) if features else default_features(readings, kind)
     table = with_inputs(points, readings)

@@ -17,8 +17,8 @@ Two definitions, one row per backlash point (``PAIR_KEYS`` + ``target``):
 ``auto`` decides from the evidence, per machine axis (a fleet file mixes machines with a linear
 scale and machines with a rotary encoder): when an axis's linear tests show almost no reversal at
 interior targets while its pendulum tests do, its measuring system is direct and ``paper``
-applies; otherwise ``iso`` (``choose_kind``). A visit of a direct axis that has only linear or
-only pendulum tests falls back to ``iso`` (``choose_kind``'s rule for one test method). Every
+applies; otherwise ``iso`` (``axis_kinds``). A visit of a direct axis that has only linear or
+only pendulum tests falls back to ``iso`` (the same rule for one test method). Every
 point carries its ``target_kind``; ``frame.attrs["target_kind"]`` is ``"paper"`` or ``"iso"``
 when all points agree and ``"mixed"`` otherwise, ``frame.attrs["target_reason"]`` says why.
 ``backlash_u_um`` is the standard uncertainty of each point from the tests' repeatability.
@@ -50,7 +50,8 @@ NAMED_AXES = 4
 BUDGET_PARTS = ("backlash_u_setup_um", "backlash_u_env_um")
 
 
-def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) -> pd.DataFrame:
+def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None,
+                     stats: pd.DataFrame | None = None) -> pd.DataFrame:
     """Backlash per point of a readings table.
 
     Parameters
@@ -63,6 +64,9 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) ->
         An ISO/TR 230-9 budget (``features.uncertainty``; e.g.
         ``experiments/data/paper_uncertainty.toml``): adds ``backlash_U_um``
         (``point_uncertainty``). Linear axes only.
+    stats : DataFrame, optional
+        ``features.iso230.per_target(readings)`` when already computed (a job computes it once
+        and passes it down).
 
     Returns
     -------
@@ -81,8 +85,8 @@ def backlash_targets(readings: pd.DataFrame, kind: str = "auto", budget=None) ->
         An unknown ``kind``, unpaired tests for ``paper``, an unreadable or non-physical
         budget, a budget for a rotary axis.
     """
-    return targets_of(iso230.per_target(readings), kind,
-                      readings.attrs.get("source", "readings"), budget)
+    stats = iso230.per_target(readings) if stats is None else stats
+    return targets_of(stats, kind, readings.attrs.get("source", "readings"), budget)
 
 
 def targets_of(stats: pd.DataFrame, kind: str = "auto", source: str = "readings", budget=None,
@@ -224,24 +228,6 @@ _KIND_TEXT = {
 }
 
 
-def choose_kind(linear: pd.DataFrame, pendulum: pd.DataFrame) -> tuple[str, str]:
-    """``paper`` for a direct measuring system, ``iso`` otherwise, with the evidence.
-
-    Parameters
-    ----------
-    linear, pendulum : DataFrame
-        Per-target statistics (``B_i`` [um], ``interior``) of the linear and the pendulum tests
-        of one machine axis (or of whatever should share one decision).
-
-    Returns
-    -------
-    (kind, reason) : the definition and the evidence for it, in words.
-    """
-    b_linear = float(linear.loc[linear["interior"], "B_i"].abs().median())
-    b_pendulum = float(pendulum.loc[pendulum["interior"], "B_i"].abs().median())
-    return _decide(b_linear, b_pendulum, not linear.empty, not pendulum.empty)
-
-
 def _decide(b_linear: float, b_pendulum: float, has_linear: bool,
             has_pendulum: bool) -> tuple[str, str]:
     """The evidence rule: direct when |B_i| of linear tests < DIRECT_RATIO x pendulum's."""
@@ -258,7 +244,7 @@ def _decide(b_linear: float, b_pendulum: float, has_linear: bool,
 
 
 def axis_kinds(stats: pd.DataFrame) -> pd.DataFrame:
-    """The definition of every machine axis by ``choose_kind``'s evidence rule.
+    """The definition of every machine axis by the evidence rule (``_decide``).
 
     Parameters
     ----------
@@ -288,7 +274,7 @@ def auto_points(stats: pd.DataFrame, source: str = "readings") -> tuple[pd.DataF
     """Points of every machine axis by its own definition (``axis_kinds``), and the reason.
 
     A visit of a ``paper`` axis without a linear or without a pendulum test has no pair: its
-    points fall back to ``iso``, as ``choose_kind`` does for one test method.
+    points fall back to ``iso``, as the evidence rule does for one test method.
     """
     keys, visit_keys = list(AXIS_KEYS), [*AXIS_KEYS, "visit"]
     kinds = axis_kinds(stats)

@@ -728,6 +728,40 @@ def per_test_um(stats, budget: UncertaintyBudget):
         {c: float for c in (*TEST_UNCERTAINTY_KEYS, *REVERSAL_PARTS)})
 
 
+def with_uncertainty(figures, stats, budget: UncertaintyBudget):
+    """``figures`` with the ``TEST_UNCERTAINTY_KEYS`` columns [um] of every test: the budget at
+    its own measuring length and runs per direction (``per_test_um``).
+
+    Parameters
+    ----------
+    figures : DataFrame
+        One row per test (``features.iso230.axis_figures``).
+    stats : DataFrame
+        The per-target statistics the figures came from (``features.iso230.per_target``).
+    budget : UncertaintyBudget
+        The contributors and k.
+
+    Raises
+    ------
+    InputError
+        A test on a rotary axis (the budget's contributors are lengths, not angles), or on
+        another axis than the one the budget states (its misalignment, Abbe offset and
+        temperatures are that axis's).
+    """
+    from features.readings import schema
+
+    keys = list(schema.TEST_KEYS)
+    per_test = per_test_um(stats, budget)  # refuses a rotary axis first
+    if budget.axis:
+        other = figures.loc[figures["axis"].astype(str).str.upper() != budget.axis.upper()]
+        if len(other):
+            row = other.iloc[0]
+            raise InputError(f"the budget is written for axis {budget.axis}; test "
+                             f"{row['test_id']} is of axis {row['axis']}: give that axis's "
+                             "budget", parameter="uncertainty")
+    return figures.merge(per_test[keys + list(TEST_UNCERTAINTY_KEYS)], on=keys, how="left")
+
+
 def _at_test(budget: UncertaintyBudget, length_mm: float, cycles: int) -> dict:
     """``TEST_UNCERTAINTY_KEYS`` and ``REVERSAL_PARTS`` [um] of one test of (L, n)."""
     values = _test_values(budget, length_mm, cycles)

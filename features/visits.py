@@ -41,7 +41,7 @@ BUDGET_COLUMNS = ("backlash_U_um", "backlash_u_visit_um")
 
 
 def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
-                  budget=None) -> pd.DataFrame:
+                  budget=None, points: pd.DataFrame | None = None) -> pd.DataFrame:
     """The axis's backlash at each visit, with its standard uncertainty.
 
     b = (1/n) Σ_i b_i,   u(b) = sqrt(Σ_i u_i²) / n
@@ -76,6 +76,9 @@ def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
     budget : str, path-like, dict or UncertaintyBudget, optional
         An ISO/TR 230-9 budget (``features.uncertainty``): adds ``BUDGET_COLUMNS``. Linear
         axes only.
+    points : DataFrame, optional
+        ``features.targets.targets_of(stats, "auto", source, budget, parts=True)`` when
+        already computed.
 
     Returns
     -------
@@ -100,9 +103,10 @@ def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
     from features import iso230
     from features.targets import BUDGET_PARTS, targets_of
 
-    stats = iso230.per_target(readings) if stats is None else stats
-    points = targets_of(stats, "auto", readings.attrs.get("source", "readings"), budget,
-                        parts=True)
+    if points is None:
+        stats = iso230.per_target(readings) if stats is None else stats
+        points = targets_of(stats, "auto", readings.attrs.get("source", "readings"), budget,
+                            parts=True)
     keys = list(VISIT_KEYS)
     group = points.groupby(keys, sort=False, dropna=False, observed=True)
     points = points[points["interior"] | ~group["interior"].transform("any")]
@@ -127,7 +131,8 @@ def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
 
 
 def visit_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
-                   budget=None) -> pd.DataFrame:
+                   budget=None, points: pd.DataFrame | None = None,
+                   figures: pd.DataFrame | None = None) -> pd.DataFrame:
     """The visit series of every machine axis: its backlash (``axis_backlash``) per visit,
     dated, with the ISO reversal figures under their own names.
 
@@ -139,6 +144,9 @@ def visit_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
         ``features.iso230.per_target(readings)`` when already computed.
     budget : str, path-like, dict or UncertaintyBudget, optional
         An ISO/TR 230-9 budget: the visits also get ``BUDGET_COLUMNS`` (``axis_backlash``).
+    points, figures : DataFrame, optional
+        The points of ``axis_backlash`` and ``features.iso230.axis_figures(readings, stats)``
+        when already computed.
 
     Returns
     -------
@@ -162,9 +170,10 @@ def visit_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
     source = readings.attrs.get("source", "readings")
     check_dates(readings, source)
     keys = list(VISIT_KEYS)
-    stats = iso230.per_target(readings) if stats is None else stats
-    figures = iso230.axis_figures(readings, stats)
-    backlash = axis_backlash(readings, stats, budget)
+    if stats is None and (points is None or figures is None):
+        stats = iso230.per_target(readings)
+    figures = iso230.axis_figures(readings, stats) if figures is None else figures
+    backlash = axis_backlash(readings, stats, budget, points)
     dates = readings.groupby(keys, sort=False, observed=True)["started_at"].min()
     reversal = figures.groupby(keys, sort=False).agg(
         n_tests=("test_id", "size"), reversal_mean_um=("B_mean", "mean"),

@@ -5,7 +5,7 @@ Every predictor is scored on the points of the forecast visit against what was m
 and, on twin data, against the true backlash; beside them stands *persistence*, the forecast
 that the next visit measures what the last one did (the same point's value at visit k, else that
 target's mean at visit k). An adjustment restarts the wear clock: training keeps the visits since
-the last adjustment before the origin (``models.wear_map.latest_epoch``: a drop in operating
+the last adjustment before the origin (``models.wear.wear_map.latest_epoch``: a drop in operating
 hours, an ``event``, or, given the per-visit backlash series, a downward change point that the
 drift statistics find in the visits up to the origin, so nothing is learned from the future),
 and an origin whose next visit is itself a known adjustment (hours or event) is skipped
@@ -21,7 +21,7 @@ import pandas as pd
 from features.readings.errors import InputError, Progress, report
 from features.table import FeatureTable
 from models import evaluation, registry
-from models.wear_map import found_adjustments, latest_epoch
+from models.wear.wear_map import found_adjustments, latest_epoch
 
 PERSISTENCE = "persistence"
 SAME_POINT = ("machine_id", "axis", "feed_mm_min", "dwell_s", "repeat", "target")

@@ -69,7 +69,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between, visit_backlash
+from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between
 
 MIN_VISITS_FOR_SCATTER = 7
 # Residuals' worth of weight the fleet's pooled scatter has in each series' own.
@@ -636,12 +636,6 @@ def _last_within(s: DriftSeries) -> bool:
 
 def _alert(kind: str, message: str) -> dict:
     return {"kind": kind, "message": message}
-
-
-def analyse(readings: pd.DataFrame, *, threshold_um: float | None = None,
-            **options) -> list[DriftSeries]:
-    """Drift of every machine axis with two or more visits (see ``analyse_series``)."""
-    return analyse_visits(visit_backlash(readings), threshold_um=threshold_um, **options)
 
 
 def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,

@@ -46,7 +46,7 @@ import numpy as np
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path, write_json
 
-FORMATS = ("self", "json", "skops")
+SAVE_FORMATS = ("self", "json", "skops")
 JSON_SUFFIX = ".json"
 SKOPS_SUFFIX = ".skops"
 
@@ -237,9 +237,9 @@ def check_spec(spec, where) -> dict:
     for key in ("format", "class", "path", "sha256"):
         if not isinstance(spec.get(key), str):
             raise InputError(f"part description lacks the text key {key!r}", file=where)
-    if spec["format"] not in FORMATS:
+    if spec["format"] not in SAVE_FORMATS:
         raise InputError(f"unknown part format {spec['format']!r}; expected one of "
-                         f"{', '.join(FORMATS)}", file=where)
+                         f"{', '.join(SAVE_FORMATS)}", file=where)
     if not _SHA256.fullmatch(spec["sha256"]):
         raise InputError("part sha256 is not 64 hexadecimal digits", file=where)
     return spec

@@ -23,7 +23,6 @@ from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import InputError
-from models.persistence import load_estimator, save_estimator
 
 MODEL_FILE = "model.json"
 TRAINING_INPUTS = "training_inputs.csv"
@@ -99,7 +98,7 @@ def _hybrid(seed: int):
 
 
 def _wear_map(seed: int = 0):
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
 
     return WearMap()
 
@@ -301,7 +300,7 @@ class TrainedModel:
 def save_model(model: TrainedModel, directory) -> Path:
     """Write a trained model directory (see module docstring)."""
     from features.readings.fileio import atomic_path, write_json
-    from models.persistence import digest
+    from models.persistence import digest, save_estimator
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -328,6 +327,8 @@ def load_model(directory) -> TrainedModel:
     registry builds the template whose exact classes the saved parts must have), each part's
     path (inside the directory) and sha256.
     """
+    from models.persistence import load_estimator
+
     directory = Path(directory)
     meta_path = directory / MODEL_FILE
     if not meta_path.is_file():

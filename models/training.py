@@ -126,30 +126,34 @@ def model_inputs(table: FeatureTable, name: str, hours_origin: dict | None = Non
     return registry.with_axes(table.X, table.meta), {"hours_origin": hours_origin or {}}
 
 
-def visit_series(readings: pd.DataFrame) -> tuple[pd.DataFrame | None, str]:
+def visit_series(readings: pd.DataFrame,
+                 stats: pd.DataFrame | None = None) -> tuple[pd.DataFrame | None, str]:
     """Per-visit backlash of every machine axis (``features.visits.visit_backlash``) for the
-    change-point search of ``since_adjustment``, or None and why it cannot be had."""
+    change-point search of ``since_adjustment``, or None and why it cannot be had; ``stats``
+    the readings' ``features.iso230.per_target`` when already computed."""
     from features.readings.errors import InputError
     from features.visits import visit_backlash
 
     try:
-        return visit_backlash(readings), ""
+        return visit_backlash(readings, stats), ""
     except InputError as err:
         return None, f"no change-point search ({err.message})"
 
 
-def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None):
+def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None,
+                     stats: pd.DataFrame | None = None):
     """The rows since the last mechanical adjustment of each machine axis, and a note.
 
     An adjustment is a drop in operating hours, an ``event`` 'adjustment', or a downward level
     change point of the per-visit backlash found by the drift statistics (when ``readings``
     with dates are given). Returns the reduced table and a note for the model's meta:
     ``series`` (per machine axis: visits kept, visits dropped, reason), ``change_points``
-    ('searched' or why not), ``rows_used`` and ``rows``.
+    ('searched' or why not), ``rows_used`` and ``rows``. ``stats``: the readings'
+    ``features.iso230.per_target`` when already computed.
     """
-    from models.wear_map import found_adjustments, wear_epochs
+    from models.wear.wear_map import found_adjustments, wear_epochs
 
-    series, why_not = (visit_series(readings) if readings is not None
+    series, why_not = (visit_series(readings, stats) if readings is not None
                        else (None, "no change-point search (no readings)"))
     adjustments = found_adjustments(series) if series is not None else None
     mask, notes = wear_epochs(table.meta, table.X.get("operating_hours"),
@@ -168,7 +172,7 @@ def earlier_epoch(table: FeatureTable, mask: np.ndarray, notes: list[dict],
     """The wear epoch just before the last adjustment of each machine axis whose hour counter
     ran on through it (a wear map may keep those visits for the wear rate, with a level of
     their own), or None. ``mask``, ``notes``: ``wear_epochs`` of the table."""
-    from models.wear_map import wear_epochs
+    from models.wear.wear_map import wear_epochs
 
     if "machine_id" not in table.meta or "axis" not in table.meta:
         return None

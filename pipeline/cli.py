@@ -38,8 +38,13 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command. Given the command line ``argv``, only the command it names
+    is built in full (the others are bare names), so that a command, and its ``--help``,
+    imports its own modules only; ``backlash --help`` builds every one for their help."""
     from pipeline.commands.options import checked_types
+
+    chosen = argv[0] if argv and argv[0] in COMMANDS else None
 
     parser = Parser(
         prog="backlash",
@@ -49,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.commands = {}
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
+        if chosen is not None and name != chosen:
+            sub.add_parser(name)
+            continue
         module = importlib.import_module(f"pipeline.commands.{name.replace('-', '_')}")
         cmd = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(cmd)
@@ -90,7 +98,7 @@ def common_settings(args: argparse.Namespace):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(sys.argv[1:] if argv is None else argv)
     try:  # argparse exits on a bad option (one line, code 2) and after --help (code 0)
         args, unknown = parser.parse_known_args(argv)
         if unknown:  # named by the subcommand, like its other option errors

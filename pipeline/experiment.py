@@ -43,11 +43,10 @@ from pathlib import Path
 
 from features.readings.config import read_config
 from features.readings.errors import InputError, Progress, report
-from pipeline.results import Result
+from pipeline.results import ALERT_EXIT, Result
 from pipeline.store import is_url
 
 SQLITE = "sqlite:///"
-ALERT_EXIT = 3  # an alert (drift monitoring) is a result, not a failure
 
 
 # --------------------------------------------------------------------------- the file

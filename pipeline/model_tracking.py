@@ -53,7 +53,7 @@ def model_record(fit, model_dir: Path) -> dict:
         the signature lists, ``split`` orient), ``backtest`` (``forecast_skill``) and ``tags``.
     """
     from models.serving import input_columns, output_columns
-    from pipeline.model_report import training_history
+    from pipeline.reports.model_report import training_history
 
     inputs = input_columns(fit.estimator, list(fit.table.X.columns))
     info = training_history(fit.estimator)

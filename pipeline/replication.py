@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings.fileio import clean_nan, write_json, write_text
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 PAPER = {"best_epoch": 27, "epochs": 33, "knn_accuracy": 0.988}
 PAPER_TABLE5 = {

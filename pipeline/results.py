@@ -10,6 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+# Exit code of a run whose result carries alerts (drift, fleet): a result, not a failure.
+ALERT_EXIT = 3
+
 
 @dataclass
 class TrackingRecord:

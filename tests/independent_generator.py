@@ -2,7 +2,7 @@
 ``models.physics``): its own ISO 230-2 cycles, measuring systems, noise and its own functional
 form for every effect, so the discovery benchmark is not graded on the twin's own equations.
 
-It reads the same scenario dicts (``models.discovery_benchmark.expand``): the design's
+It reads the same scenario dicts (``models.discovery.benchmark.expand``): the design's
 targets, feeds, dwells, methods, measuring system and noise, and which effects are hidden. The
 amplitudes and shapes are its own:
 

@@ -270,7 +270,7 @@ def test_twin_direct_series_is_the_true_lost_motion_and_not_half_of_it(direct_tw
 
 
 def test_twin_drift_follows_the_lost_motion(direct_twin):
-    (series,) = drift.analyse(direct_twin.readings)
+    (series,) = drift.analyse_visits(visit_backlash(direct_twin.readings))
     j = series.to_json()
     assert j["change_points"] == ["06"]                 # the adjustment
     truth = twin_truth(direct_twin).loc["06":]
@@ -286,7 +286,7 @@ def test_fleet_adjustments_are_found_in_the_lost_motion_series():
     series steps down at the true adjustment on every axis and nowhere else (the diluted
     |B_mean| series, half as high with the same scatter, found none of them)."""
     from models.physics.campaign import simulate
-    from models.wear_clock import found_adjustments
+    from models.wear.wear_clock import found_adjustments
 
     sim = simulate("fleet", seed=0)
     found = found_adjustments(visit_backlash(sim.readings))

@@ -206,7 +206,7 @@ def test_command_help_is_the_workflow_summary():
     ("baselines = ['backlash']\n[designs.A]\n", "baselines", "unknown key"),
 ])
 def test_bad_scenario_files_name_the_file_and_the_key(tmp_path, text, column, words):
-    from models.discovery_benchmark import read_scenarios
+    from models.discovery.benchmark import read_scenarios
 
     path = tmp_path / "scenarios.toml"
     path.write_text(text)
@@ -218,7 +218,7 @@ def test_bad_scenario_files_name_the_file_and_the_key(tmp_path, text, column, wo
 def test_shipped_scenarios_read_into_dataclasses():
     from pathlib import Path
 
-    from models import discovery_benchmark as bench
+    from models.discovery import benchmark as bench
 
     path = Path(__file__).resolve().parents[1] / "experiments" / "hidden_effect_scenarios.toml"
     spec = bench.read_scenarios(path)

@@ -10,7 +10,7 @@ import pytest
 
 from features.readings.errors import InputError
 from models.physics import controller as model
-from pipeline.compensation import CONTROLLERS, markdown_table, resolve
+from pipeline.compensation import CONTROLLERS, controllers_table, resolve
 from pipeline.compensation.common import Options
 from pipeline.compensation.profile import AxisProfile
 
@@ -57,9 +57,9 @@ def test_the_cli_offers_the_records():
 
 
 def test_the_docs_table_is_the_records():
-    table = markdown_table()
+    table = controllers_table()
     assert table in DOCS.read_text(encoding="utf-8"), (
-        "docs/controllers.md: paste pipeline.compensation.markdown_table()")
+        "docs/controllers.md: paste pipeline.compensation.controllers_table()")
     rows = table.splitlines()[2:]
     assert [re.match(r"\| `(\w+)`", row)[1] for row in rows] == list(CONTROLLERS)
 

@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 from independent_generator import generate as independent
 
-from models import discovery_benchmark as bench
+from models.discovery import benchmark as bench
 from models.discovery import discover
-from models.discovery_benchmark import read_scenarios
+from models.discovery.benchmark import read_scenarios
 from pipeline.cli import main
 from pipeline.workflows.hidden_effects import SCENARIOS
 

@@ -393,7 +393,7 @@ def test_input_outside_training_range_and_ks_drift(tmp_path):
     assert mon["drifted"].iloc[2] == ["target"]
     assert mon["drifted"].iloc[0] == []
 
-    series = drift.analyse(readings)
+    series = drift.analyse_visits(visits.visit_backlash(readings))
     drift.attach_model(series, mon)
     kinds = [a["kind"] for a in series[0].alerts]
     assert "input_out_of_range" in kinds and "input_drift" in kinds

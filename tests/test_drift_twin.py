@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from features.visits import DAYS_PER_MONTH
+from features.visits import DAYS_PER_MONTH, visit_backlash
 from models import drift
 from models.physics.campaign import simulate
 
@@ -16,7 +16,7 @@ THRESHOLD_UM = 8.0
 @pytest.fixture(scope="module")
 def fleet():
     sim = simulate("drift", seed=1)
-    return sim, drift.analyse(sim.readings, threshold_um=THRESHOLD_UM)
+    return sim, drift.analyse_visits(visit_backlash(sim.readings), threshold_um=THRESHOLD_UM)
 
 
 def true_series(sim, machine_id):
@@ -54,5 +54,5 @@ def test_stable_axis_raises_no_alert():
     stable = simulate({"system": "indirect", "plan": {"feeds_mm_min": [500.0], "dwells_s": [5.0],
                                                       "repeats": 1},
                        "fleet": {"visits": 10, "wear_um_per_1000h": 0.0}}, seed=2)
-    (series,) = drift.analyse(stable.readings, threshold_um=THRESHOLD_UM)
+    (series,) = drift.analyse_visits(visit_backlash(stable.readings), threshold_um=THRESHOLD_UM)
     assert series.change_points == [] and series.alerts == []

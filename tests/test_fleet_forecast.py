@@ -13,10 +13,10 @@ from independent_fleet import MACHINES, fleet, plan_and_truth
 import backlash as bl
 from features.readings.errors import BacklashWarning
 from features.table import feature_table
-from models.pooling import VisitBlocks, pool
-from models.wear_basis import AXIS_INDEX, HOURS
-from models.wear_fleet import forecast_folds
-from models.wear_map import WearMap
+from models.wear.pooling import VisitBlocks, pool
+from models.wear.wear_basis import AXIS_INDEX, HOURS
+from models.wear.wear_fleet import forecast_folds
+from models.wear.wear_map import WearMap
 from pipeline.cli import main
 
 SEEDS = (0, 1, 2)

@@ -22,7 +22,7 @@ from features.readings.errors import BacklashWarning
 from features.readings.fileio import clean_nan
 from features.visits import visit_backlash
 from models import drift
-from models.wear_map import found_adjustments
+from models.wear.wear_map import found_adjustments
 from pipeline.workflows.fleet import fleet
 
 ADJUSTED = {"M2", "M4"}
@@ -127,7 +127,7 @@ def test_the_issue_series_in_drift():
     series): a change point at visit 5, its alert, no trend, no crossing, no crossing_soon."""
     b = [1.40, 2.49, 3.43, 4.74, 1.41]
     readings = bl.validate(visit_readings(b, months=np.arange(5) * 3.0, noise_um=0.05))
-    (s,) = drift.analyse(readings, threshold_um=5.0)
+    (s,) = drift.analyse_visits(visit_backlash(readings), threshold_um=5.0)
     j = clean_nan(s.to_json())
     assert j["change_points"] == ["v05"]
     assert [a["kind"] for a in s.alerts] == ["last_visit_drop"]

@@ -19,7 +19,7 @@ from features.readings.schema import deviation_unit
 from models.evaluation import target_noise_floor
 from models.serving import served_inputs
 from models.training import earlier_inputs, with_earlier
-from models.wear_map import WearMap
+from models.wear.wear_map import WearMap
 from pipeline.cli import main
 
 SEEDS = (0, 1, 2)

@@ -268,7 +268,7 @@ def test_writing_into_an_existing_folder_keeps_other_files(twin, tmp_path):
 
 
 def test_a_failure_while_writing_leaves_nothing(twin, tmp_path, monkeypatch):
-    from pipeline import fleet_charts
+    from pipeline.reports import fleet_charts
 
     result = fleet(twin.readings, threshold_um=QUIET_UM)
 

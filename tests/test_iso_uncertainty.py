@@ -16,8 +16,8 @@ import backlash as bl
 from features import uncertainty as unc
 from features.readings.errors import InputError
 from pipeline.cli import main
-from pipeline.iso_chart import _box_line
-from pipeline.workflows.iso import JSON_KEYS
+from pipeline.reports.iso_chart import _box_line
+from pipeline.steps.iso import JSON_KEYS
 
 ROOT = Path(__file__).resolve().parents[1]
 BUDGET = ROOT / "experiments" / "data" / "paper_uncertainty.toml"

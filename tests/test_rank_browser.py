@@ -21,7 +21,7 @@ def report(tmp_path_factory) -> Path:
         print(f"\nbrowser test skipped: {reason}")
         pytest.skip(reason)
     from models.influence import explain
-    from pipeline.rank_report import write_rank_report
+    from pipeline.reports.rank_report import write_rank_report
 
     rng = np.random.default_rng(0)
     n = 160

@@ -24,7 +24,7 @@ def drift_page(tmp_path_factory) -> Path:
 
     from features.visits import DAYS_PER_MONTH
     from models.drift import analyse_series
-    from pipeline.drift_report import write_drift_report
+    from pipeline.reports.drift_report import write_drift_report
 
     months = np.arange(12.0)
     visits = pd.DataFrame({

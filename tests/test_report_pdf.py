@@ -14,10 +14,10 @@ import pytest
 
 from features import iso230
 from features.readings import read_readings
-from pipeline import iso_report
 from pipeline.cli import main
-from pipeline.iso_chart import DOWN, OUTLIER_LABEL, UP, draw_readings
-from pipeline.report_page import new_figure
+from pipeline.reports import iso_report
+from pipeline.reports.iso_chart import DOWN, OUTLIER_LABEL, UP, draw_readings
+from pipeline.reports.report_page import new_figure
 from pipeline.workflows.report import report
 from tests.test_iso230 import hand_calculation, synthetic
 

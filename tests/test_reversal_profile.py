@@ -14,7 +14,7 @@ from independent_pairs import PAIRS
 from independent_pairs import generate as pair_readings
 from reversal_cases import indirect_stage, iso_test, sign_changing
 
-from models import discovery_benchmark as bench
+from models.discovery import benchmark as bench
 from models.discovery import discover
 from models.discovery.design import Design, lstsq_fit, stack
 from models.discovery.system import measuring_system

@@ -60,7 +60,7 @@ def test_an_unknown_standard_is_one_line(ess_file, capsys):
 
 
 def test_docs_table_and_help_come_from_the_records(capsys):
-    assert standards.markdown_table() in DOCS.read_text(encoding="utf-8")
+    assert standards.standards_table() in DOCS.read_text(encoding="utf-8")
     assert main(["iso", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "vdi3441 (not supported)" in text and "default iso230-2" in text

@@ -95,8 +95,9 @@ def test_varies_only_between_uses_the_one_threshold():
 
 def test_one_definition_per_idea():
     from features import ranking
-    from models import discovery, influence, wear_map
+    from models import discovery, influence
     from models.physics import effects
+    from models.wear import wear_map
 
     assert effects.bspline_basis is st.bspline_basis
     assert ranking.PROXY_WITHIN_SHARE == influence.MIN_SHARE == st.MIN_LEVEL_SHARE

@@ -19,7 +19,7 @@ from models.backtest import backtest
 from models.evaluation import target_noise_floor, true_backlash
 from models.physics.campaign import simulate
 from models.training import since_adjustment, visit_series
-from models.wear_map import WearMap, found_adjustments
+from models.wear.wear_map import WearMap, found_adjustments
 
 HOURS_PER_VISIT = 392.0  # the drift preset: 28 days x 14 h
 

@@ -11,7 +11,7 @@ from features.table import feature_table
 from models.backtest import backtest, summary
 from models.evaluation import target_noise_floor, true_backlash, visit_order
 from models.physics.campaign import load_config, simulate, wear_rate_um_per_1000h
-from models.wear_map import WearMap, latest_epoch
+from models.wear.wear_map import WearMap, latest_epoch
 
 
 def last_visit_split(table):

@@ -112,6 +112,25 @@ def temp_folder(beside: str | os.PathLike) -> Path:
     return Path(tmp)
 
 
+def write_files(out: str | os.PathLike, contents: dict[str, bytes]) -> dict[str, Path]:
+    """Files (name -> bytes) into folder ``out`` together: written into a ``temp_folder``
+    beside it, then each renamed into place (an error or a kill leaves none of them half
+    written). Returns the paths by name."""
+    out = Path(out)
+    tmp = temp_folder(out)
+    try:
+        for name, content in contents.items():
+            (tmp / name).write_bytes(content)
+        out.mkdir(exist_ok=True)
+        for name in contents:
+            os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        with _lock:
+            _open_temps.discard(str(tmp))
+    return {name: out / name for name in contents}
+
+
 def check_output(path: str | os.PathLike, kind: str, option: str = "--out") -> Path | None:
     """Refuse an output path that cannot be written, before any work is done.
 

@@ -178,9 +178,6 @@ class Campaign:
         _check(self, file)
 
 
-DEFAULT_PRESET = "paper"
-
-
 @dataclass
 class Simulation:
     readings: pd.DataFrame
@@ -232,9 +229,9 @@ def _check(config: Campaign, where) -> None:
 
     plan, fleet, env = config.plan, config.fleet, config.environment
     for name, params in config.effects.items():
-        if name not in effects.EFFECTS:
+        if name not in effects.RECORDS:
             bad(f"effects.{name}", f"unknown effect {name!r}; expected one of "
-                                   f"{', '.join(effects.EFFECTS)}")
+                                   f"{', '.join(effects.RECORDS)}")
         unknown = set(params) - set(effects.DEFAULTS[name])
         if unknown:
             bad(f"effects.{name}", f"unknown parameter {min(unknown)!r} of {name}; expected "

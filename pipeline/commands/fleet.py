@@ -6,11 +6,11 @@ import argparse
 
 from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
 from pipeline.commands.data import add_readings_argument
+from pipeline.results import ALERT_EXIT
 from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
 
 HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
-ALERT_EXIT = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -7,12 +7,13 @@ import os
 import sys
 from pathlib import Path
 
+from pipeline.results import ALERT_EXIT
+
 HELP = ("Run an experiment file (TOML steps: a job and its parameters each) and log it to "
         "MLflow.")
 # The output folder is checked by the runner (it may come from the file): a failing step
 # removes only what that step wrote, never the finished steps' files.
 OUTPUTS: dict = {}
-ALERT_EXIT = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

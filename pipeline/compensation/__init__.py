@@ -217,7 +217,7 @@ def help_text() -> str:
     return "; ".join(f"{c.name} ({c.description})" for c in CONTROLLERS.values())
 
 
-def markdown_table() -> str:
+def controllers_table() -> str:
     """The docs' table of controllers (``docs/controllers.md`` holds it verbatim)."""
     rows = [("| name | controller | aliases | writes | values in | table sign (`--sign`) | "
             "axes | compensates |"),

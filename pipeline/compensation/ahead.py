@@ -6,7 +6,7 @@ Over an interval of I hours in which backlash grows at w(x), a table for the hou
 |w(x)| |h - h_c| at hours h; averaged over the interval this is smallest for h_c in its middle
 (w I / 4 against w I / 2 for the table frozen at the visit). The default point is therefore the
 middle of the next maintenance interval: the axis's last visit plus half its mean interval
-between visits, both in operating hours (``models.wear_map.WearMap.visit_hours``).
+between visits, both in operating hours (``models.wear.wear_map.WearMap.visit_hours``).
 
 A date becomes operating hours through the axis's usage rate when the model records it: its
 ``model.json`` key ``usage``, per machine axis ``{"machine_id", "axis", "last_date",
@@ -25,7 +25,7 @@ from features.readings.errors import InputError
 def wear_map_of(model, why: str):
     """The wear map inside the trained ``model`` (``models.registry.TrainedModel``) when it can
     forecast, else an ``InputError`` naming ``why`` (the parameter that needs it)."""
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
 
     estimator = model.estimator
     if not isinstance(estimator, WearMap):

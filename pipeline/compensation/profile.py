@@ -121,12 +121,12 @@ def measured_profiles(readings: pd.DataFrame) -> list[AxisProfile]:
         if part["visit"].nunique() > 1:
             notes.append(f"latest visit {visit} used (of {part['visit'].nunique()})")
         part = part[part["visit"] == visit]
-        lost = axis_backlash(part)["backlash_um"]
+        per = iso230.per_target(part)  # once: the lost motion and the profile read it
+        lost = axis_backlash(part, per)["backlash_um"]
         methods = set(part["method"])
         if "linear" in methods and len(methods) > 1:
-            part = part[part["method"] == "linear"]
+            per = per[per["method"] == "linear"].reset_index(drop=True)
             notes.append("linear tests used (the ISO 230-2 cycle); pendulum tests left out")
-        per = iso230.per_target(part)
         profiles.append(_pool(per, str(machine), str(axis), notes))
         profiles[-1].lost_motion_um = float(lost.iloc[0]) if len(lost) else None
     return profiles

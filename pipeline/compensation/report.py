@@ -6,7 +6,7 @@ import html
 from pathlib import Path
 
 from pipeline.compensation.verify import FIGURES
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 UP, DOWN = "#1f77b4", "#d62728"
 

@@ -19,10 +19,6 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pandas as pd
-
-from features import circle as fc
-from models import circle as mc
 from pipeline.results import Result
 from pipeline.workflows import Constraints, Workflow, check_params
 
@@ -30,6 +26,8 @@ from pipeline.workflows import Constraints, Workflow, check_params
 def _parameters() -> dict:
     """The constraints of ``circle``'s parameters, built on first use."""
     from numbers import Real
+
+    import pandas as pd
 
     from pipeline.workflows.constraints import Interval
 
@@ -64,10 +62,10 @@ class CircleFigures:
         The effects fitted; None without both directions.
     """
 
-    circle: fc.Circle
+    circle: object  # features.circle.Circle
     G_um: dict
     H_um: float | None
-    diagnosis: mc.Diagnosis | None
+    diagnosis: object  # models.circle.Diagnosis or None
 
     def diagnosis_json(self) -> dict | None:
         """The diagnosis as SCHEMA.md section 11 names it, keys by the plane's axes, with
@@ -100,6 +98,8 @@ class CircleFigures:
 
     def summary(self) -> dict:
         """One row of ``circles.csv``."""
+        from features import circle as fc
+
         c = self.circle
         row = {"machine_id": c.machine_id, "plane": c.plane, "visit": c.visit,
                "radius_mm": c.radius_mm, "feed_mm_min": c.feed_mm_min,
@@ -179,9 +179,11 @@ class CircleResult(Result):
     def write(self, out) -> dict[str, Path]:
         """Under ``out``: a polar plot per circle (``circle_<machine>_<plane>_<visit>.png``),
         ``circles.csv`` (one row per circle) and ``circles.html`` (the table and the plots)."""
+        import pandas as pd
+
         from features.readings.fileio import atomic_path
-        from pipeline.circle_chart import plot_circle
-        from pipeline.report_page import write_page
+        from pipeline.reports.circle_chart import plot_circle
+        from pipeline.reports.report_page import write_page
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -198,6 +200,8 @@ class CircleResult(Result):
 
     def _html(self, pngs: list[Path]) -> str:
         import html
+
+        from features import circle as fc
 
         rows = []
         for item, png in zip(self.circles, pngs):
@@ -238,8 +242,11 @@ def plot_names(items: list[CircleFigures]) -> list[str]:
     return names
 
 
-def evaluate(circle: fc.Circle) -> CircleFigures:
+def evaluate(circle) -> CircleFigures:
     """G of each run; H and the diagnosis when both directions were run."""
+    from features import circle as fc
+    from models import circle as mc
+
     g = {d: (fc.circular_deviation(circle.runs[d].angle_deg, circle.runs[d].deviation_um)
              if d in circle.runs else None) for d in fc.DIRECTIONS}
     if len(circle.runs) < 2:
@@ -284,6 +291,8 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     ----------
     ISO 230-4:2022, Circular tests for numerically controlled machine tools.
     """
+    from features import circle as fc
+
     check_params(_parameters(), {"data": data, "tolerance_um": tolerance_um, "store": store},
                  "circle")
     if store is not None:  # before any work: a store that cannot take the records
@@ -306,9 +315,11 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     return result
 
 
-def circle_days(frame: pd.DataFrame, source: str) -> dict:
+def circle_days(frame, source: str) -> dict:
     """The day (ISO, UTC) of each circle, (machine, plane, visit, radius, feed) -> the
-    earliest ``started_at`` of its runs: what dates its backlash in a fleet store."""
+    earliest ``started_at`` of its runs (``frame``: the circle readings, a DataFrame): what
+    dates its backlash in a fleet store."""
+    from features import circle as fc
     from features.readings.errors import InputError
 
     if "started_at" not in frame or frame["started_at"].isna().any():

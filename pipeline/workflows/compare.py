@@ -15,9 +15,9 @@ import pandas as pd
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
+from pipeline.steps.model_data import DATA_PARAMETERS, SPLITS, model_data
 from pipeline.workflows import Workflow, check_params, each_once
 from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.train import DATA_PARAMETERS, SPLITS, model_data
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
 BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "coverage_pct",
@@ -69,7 +69,7 @@ class CompareResult(Result):
         ``models/NAME``."""
         from features.readings.fileio import atomic_path
         from pipeline import model_tracking
-        from pipeline.model_report import write_figures
+        from pipeline.reports.model_report import write_figures
 
         out = Path(out)
         files = {}
@@ -240,7 +240,7 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
                               "seed": seed}, "backtest")
     names = model_names(models)
     loaded = model_data(data, format, target, features, truth)
-    visits, why_not = visit_series(loaded.readings)
+    visits, why_not = visit_series(loaded.readings, loaded.stats)
     if visits is None:
         note(f"adjustments from operating hours and events only; {why_not}")
     origins = rolling.backtest(loaded.table, names, loaded.truth, seed, progress=progress,
@@ -248,21 +248,23 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
     params = {"data": loaded.source, "data_sha256": loaded.digest, "split": "backtest",
               "target_kind": loaded.table.target_kind, "seed": seed, "models": ",".join(names),
               "noise_floor_um": loaded.noise_floor_um}
-    wear = wear_rates(loaded.table, loaded.readings) if "wear-map" in names else None
+    wear = (wear_rates(loaded.table, loaded.readings, loaded.stats) if "wear-map" in names
+            else None)
     return BacktestResult(origins=origins, summary=rolling.summary(origins), wear_map=wear,
                           noise_floor_um=loaded.noise_floor_um,
                           target_kind=loaded.table.target_kind, n_points=len(loaded.table.y),
                           params=params)
 
 
-def wear_rates(table, readings=None) -> pd.DataFrame | None:
+def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:
     """The wear map fitted on the visits since the last adjustment: w(x) with its interval;
-    None when the data cannot give a wear rate (one visit)."""
+    None when the data cannot give a wear rate (one visit). ``stats``: the readings'
+    ``features.iso230.per_target`` when already computed."""
     from models.registry import with_axes
     from models.training import hours_origins, since_adjustment
-    from models.wear_map import WearMap, epoch_lines
+    from models.wear.wear_map import WearMap, epoch_lines
 
-    kept, clock = since_adjustment(table, readings)
+    kept, clock = since_adjustment(table, readings, stats)
     for line in epoch_lines(clock["series"]):
         note(line)
     model = WearMap().fit(with_axes(kept.X, kept.meta), kept.y,
@@ -272,7 +274,7 @@ def wear_rates(table, readings=None) -> pd.DataFrame | None:
 
 def plot_wear_map(wear: pd.DataFrame, path) -> Path:
     """Wear rate along the screw [um per 1000 h] with its 95 % band."""
-    from pipeline.report_page import new_figure, save_figure
+    from pipeline.reports.report_page import new_figure, save_figure
 
     fig = new_figure(6.5, 3.2)
     ax = fig.subplots()

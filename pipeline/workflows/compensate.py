@@ -113,21 +113,12 @@ class CompensationResult(Result):
     def write(self, out: str | Path) -> dict[str, Path]:
         """Write every controller file into ``out`` (all or none), then the closed-loop
         reports (``verify/<controller>/verify.html``); return the paths by file name."""
+        from features.readings.fileio import write_files
         from pipeline.compensation.report import write_report
 
         out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-        try:
-            for name, content in self.contents.items():
-                (tmp / name).write_bytes(content)
-            out.mkdir(exist_ok=True)
-            for name in self.contents:
-                os.replace(tmp / name, out / name)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+        self.files = write_files(out, self.contents)
         self.out = out
-        self.files = {name: out / name for name in self.contents}
         for controller, results in self.verification.items():
             self.reports[controller] = write_report(results, controller,
                                                     out / "verify" / controller)
@@ -290,6 +281,7 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
                               "reference_mm": reference_mm, "fanuc_unit_um": fanuc_unit_um,
                               "active": active, "sign": sign, "verify": verify,
                               "uncertainty": uncertainty, "progress": progress}, "compensate")
+    from features.readings.fileio import temp_folder
     from pipeline.compensation.common import Options
     from pipeline.compensation.profile import parse_conditions
 
@@ -323,12 +315,18 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     reversal = [p.reversal_variation() for p in profiles]
     notes = [f"{p.machine_id} {p.axis}: {n}" for p in profiles for n in p.notes]
     notes += _reversal_notes(profiles, reversal, names)
-    with tempfile.TemporaryDirectory(prefix="backlash-compensation-") as folder:
-        written = _write_all(profiles, names, Path(folder), options)
-        _read_back(written, profiles, Path(folder), sign, comps)
-        verification = _verify(data, profiles, names, written, Path(folder), progress,
+    # The files are read back as each controller applies them (and verified on the twin)
+    # before anything reaches ``out``: written once into a scratch folder that a kill sweeps,
+    # their bytes kept for ``write``.
+    folder = temp_folder(Path(tempfile.gettempdir()) / "backlash-compensation")
+    try:
+        written = _write_all(profiles, names, folder, options)
+        _read_back(written, profiles, folder, sign, comps)
+        verification = _verify(data, profiles, names, written, folder, progress,
                                sign, comps) if verify else {}
-        contents = {p.name: p.read_bytes() for p in sorted(Path(folder).iterdir())}
+        contents = {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
     if budget is not None:
         notes += _resolution(written, profiles, verification, budget)
     return CompensationResult(profiles, names, written, verification, contents, reversal,
@@ -423,7 +421,7 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
 def _predicted(model, conditions, spacing, at_hours, at_date, machine, axis) -> list:
     """One profile from a predictor; from a wear map, one per machine axis it knows (those
     selected), each forecast for its operating hours (``pipeline.compensation.ahead``)."""
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
     from pipeline.compensation.ahead import forecast_hours, known_axes, wear_map_of
     from pipeline.compensation.profile import predicted_profile
 

@@ -99,8 +99,8 @@ class DiscoveryResult(Result):
         return self.discovery.unexplained
 
     def write(self, out) -> dict[str, Path]:
-        """``discovery.html`` and ``discovery.png`` (``pipeline.discovery_report``)."""
-        from pipeline import discovery_report
+        """``discovery.html`` and ``discovery.png`` (``pipeline.reports.discovery_report``)."""
+        from pipeline.reports import discovery_report
 
         self.files = discovery_report.write(self.discovery, self.readings, out, self.source)
         return self.files

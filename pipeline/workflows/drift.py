@@ -81,8 +81,8 @@ class DriftResult(Result):
         return axis_alerts(self.series)
 
     def write(self, out) -> dict[str, Path]:
-        """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.drift_report``)."""
-        from pipeline.drift_report import write_drift_report
+        """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.reports.drift_report``)."""
+        from pipeline.reports.drift_report import write_drift_report
 
         self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes,
                                         as_of=self.parameters.get("as_of"))
@@ -222,9 +222,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
     per_axis = None if limits is None else read_limits(limits)
-    from pipeline.workflows.iso import _budget
-
-    budget = None if uncertainty is None else _budget(uncertainty)
+    budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     from features.visits import SERIES_KEYS, visit_backlash
     from models import drift as drift_model
     from models import monitoring
@@ -295,22 +293,6 @@ def _evidence_records(store, sources: tuple) -> dict | None:
         raise InputError("trace and ballbar evidence is read from a fleet store; give the "
                          "store as data or store", parameter="evidence")
     return read_evidence(store)
-
-
-def figures_with_uncertainty(readings, budget: unc.UncertaintyBudget):
-    """The ISO 230-2 figures of every test with the budget's expanded uncertainties ``U_*_um``
-    [um] at its own measuring length (``pipeline.workflows.iso.with_uncertainty``).
-
-    Raises
-    ------
-    InputError
-        Readings of a rotary axis: a budget holds lengths, not angles.
-    """
-    from features import iso230
-    from pipeline.workflows.iso import with_uncertainty
-
-    stats = iso230.per_target(readings)
-    return with_uncertainty(iso230.axis_figures(readings, stats), stats, budget)
 
 
 WORKFLOW = Workflow(

@@ -9,7 +9,7 @@ Per machine axis (``AxisView``): the visit series (``features.visits.visit_backl
 axis's backlash ``backlash_um`` by its measuring system, docs/backlash.md), its drift
 (``models.drift.analyse_series``: change points, Theil-Sen trend since the last one, the date
 the threshold is crossed with its interval, alerts), the date the next visit is due, the
-forecast band, the wear-rate map since the last change point (``models.wear_map.WearMap``) and
+forecast band, the wear-rate map since the last change point (``models.wear.wear_map.WearMap``) and
 the ISO 230-2 chart of the last visit (``features.iso230``).
 
 Rules (docs/fleet.md):
@@ -48,7 +48,6 @@ DEFAULT_INTERVAL_DAYS = 90.0
 FORECAST_CAP_MONTHS = 24.0
 FORECAST_STEPS = 40
 MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
-NEXT_VISIT_REASONS = ("above_threshold", "crossing", "fleet_rate", "interval")
 # The fleet's wear rate an axis without a trend of its own is planned with: a high quantile of
 # the rates of the fleet's axes, as the axis may wear as fast as most of them.
 FLEET_RATE_QUANTILE = 0.9
@@ -274,9 +273,9 @@ class FleetResult(Result):
         return axis_alerts(self.axes)
 
     def write(self, out) -> dict[str, Path]:
-        """The static site (``pipeline.fleet_report``): ``index.html``, ``fleet.json`` and
+        """The static site (``pipeline.reports.fleet_report``): ``index.html``, ``fleet.json`` and
         one page per axis, written together (all or nothing)."""
-        from pipeline.fleet_report import write_site
+        from pipeline.reports.fleet_report import write_site
 
         self.files = write_site(self, out)
         return self.files
@@ -386,8 +385,9 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from models.drift import analyse_visits, two_visit_notes
 
     readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
-    stats = iso230.per_target(readings)  # once, for the series and the pages alike
-    visits = visit_backlash(readings, stats)
+    # once, for the series and the pages alike
+    parts = fleet_parts(readings, iso230.per_target(readings))
+    visits = visit_backlash(readings, parts.stats, points=parts.points, figures=parts.figures)
     series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
                             threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
                             min_jump_sigma=min_jump_sigma, warn_months=warn_months)
@@ -396,7 +396,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     notes += two_visit_notes(series)
     for text in notes:
         note(text)
-    views = axis_views(series, readings, stats, interval_days,
+    views = axis_views(series, readings, parts, interval_days,
                        store_records(data if store is None else store), as_of=day)
     for text in (n for v in views for n in v.evidence_notes):
         notes.append(text)
@@ -428,17 +428,23 @@ def store_records(data) -> dict:
     return records
 
 
-def axis_views(series: list, readings, stats, interval_days: float,
-               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
-    """One ``AxisView`` per analysed series, worst first, each with its page name; ``stats``
-    the readings' per-target ISO statistics (``features.iso230.per_target``), ``records``
-    what ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
+def fleet_parts(readings, stats) -> _Parts:
+    """The readings' per-target ISO statistics ``stats`` (``features.iso230.per_target``),
+    their backlash points and per-test figures, computed once for the series and the pages."""
     from features import iso230
     from features.targets import targets_of
-    from models.wear_clock import usage_rates
 
-    parts = _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
-                   iso230.axis_figures(readings, stats))
+    return _Parts(stats, targets_of(stats, "auto", readings.attrs.get("source", "readings")),
+                  iso230.axis_figures(readings, stats))
+
+
+def axis_views(series: list, readings, parts: _Parts, interval_days: float,
+               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
+    """One ``AxisView`` per analysed series, worst first, each with its page name; ``parts``
+    the readings' statistics, points and figures (``fleet_parts``), ``records`` what
+    ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
+    from models.wear.wear_clock import usage_rates
+
     rates = fleet_wear_rates(series, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
     views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage), as_of)
@@ -698,7 +704,7 @@ def _take(frame, rows: dict, key: tuple):
 
 
 def wear_map(s, parts: _Parts) -> tuple[dict | None, str]:
-    """The wear-rate map w(x) [um per 1000 h] of the axis, fitted by ``models.wear_map.WearMap``
+    """The wear-rate map w(x) [um per 1000 h] of the axis, fitted by ``models.wear.wear_map.WearMap``
     on its interior backlash points since the last change point (position, operating hours and,
     when it varies, feed); (None, why) when that cannot be done."""
     import numpy as np
@@ -725,7 +731,7 @@ def wear_map(s, parts: _Parts) -> tuple[dict | None, str]:
 
 
 def _fit_wear(X, y, visits: list[str]) -> dict:
-    from models.wear_map import WearMap
+    from models.wear.wear_map import WearMap
 
     model = WearMap().fit(X, y)
     rate = model.wear_rate_map()

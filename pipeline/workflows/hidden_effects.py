@@ -1,5 +1,5 @@
 """The missing-effect workflow's benchmark: twin data in which effects were hidden from the
-baseline, nulls, confounded and aliased designs (``models.discovery_benchmark``). Scenarios are
+baseline, nulls, confounded and aliased designs (``models.discovery.benchmark``). Scenarios are
 data: a TOML file (default ``experiments/hidden_effect_scenarios.toml``).
 
 >>> import backlash as bl
@@ -88,7 +88,7 @@ def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
     ----------
     scenarios : str, path, dict or Scenarios, default experiments/hidden_effect_scenarios.toml
         Scenario file (TOML), or its specification as a dict of the same shape or a
-        ``models.discovery_benchmark.Scenarios``.
+        ``models.discovery.benchmark.Scenarios``.
     seeds : int, optional
         Seeds per design (1 to ``seeds``); default the scenario file's seeds.
     progress : callable, optional
@@ -99,7 +99,7 @@ def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
     HiddenEffectsResult
     """
     check_params(_parameters(), {"scenarios": scenarios, "seeds": seeds}, "hidden_effects")
-    from models import discovery_benchmark as bench
+    from models.discovery import benchmark as bench
 
     given_as_file = isinstance(scenarios, (str, os.PathLike))
     try:

@@ -114,7 +114,7 @@ class MonitorResult(Result):
         """``monitor.json``, ``daily.csv`` and the report page ``monitor.html`` (with its
         chart ``monitor.png``) under ``out``."""
         from features.readings.fileio import atomic_path, write_json
-        from pipeline.monitor_report import write_monitor_report
+        from pipeline.reports.monitor_report import write_monitor_report
 
         out = Path(out)
         files = {"json": write_json(out / "monitor.json", self.to_json())}

@@ -91,8 +91,8 @@ class RankResult(Result):
         return self.explanation.drivers()
 
     def write(self, out) -> dict[str, Path]:
-        """The report files of ``pipeline.rank_report`` (HTML, figures, CSV, JSON)."""
-        from pipeline.rank_report import write_rank_report
+        """The report files of ``pipeline.reports.rank_report`` (HTML, figures, CSV, JSON)."""
+        from pipeline.reports.rank_report import write_rank_report
 
         self.files = write_rank_report(self.explanation, out, source=self.source,
                                        target_kind=self.target_kind, unit=self.unit)
@@ -177,7 +177,7 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     check_params(_parameters(), values, "rank")
     from features.table import feature_table
     from models.influence import explain
-    from pipeline.workflows.train import check_feature_names
+    from pipeline.steps.model_data import check_feature_names
 
     classes = parse_bins(bins)
     names = check_feature_names(features)

@@ -5,7 +5,7 @@
 >>> result.write("report/")         # iso_report.html, iso_report.pdf              # doctest: +SKIP
 
 The figures are ``iso``'s (the same standard, outlier rule and uncertainty budget); the
-pages are drawn by ``pipeline.iso_report``. A meta file (``pipeline.report_meta``) names the
+pages are drawn by ``pipeline.reports.iso_report``. A meta file (``pipeline.reports.report_meta``) names the
 operator, the instrument and its calibration and the environment sensors on every page:
 
 >>> result = bl.report("ess_mcu1025_ISO230.dat", uncertainty="paper_uncertainty.toml",
@@ -20,10 +20,10 @@ from pathlib import Path
 
 from features import standards
 from features import uncertainty as unc
-from pipeline.report_meta import ReportMeta, read_meta
+from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
+from pipeline.steps import iso as iso_workflow
 from pipeline.workflows import Constraints, Workflow, check_params
-from pipeline.workflows import iso as iso_workflow
 
 
 def _parameters() -> dict:
@@ -42,7 +42,7 @@ class ReportResult(Result):
     ----------
     iso : pipeline.workflows.iso.IsoResult
         Figures, readings, outliers, standard and budget of every test (one page each).
-    meta : pipeline.report_meta.ReportMeta or None
+    meta : pipeline.reports.report_meta.ReportMeta or None
         Operator, instrument and its calibration, sensors and remarks, printed on every page.
     """
 
@@ -51,7 +51,7 @@ class ReportResult(Result):
 
     def write(self, out) -> dict[str, Path]:
         """Write ``iso_report.pdf`` and ``iso_report.html`` into the folder ``out``."""
-        from pipeline.iso_report import write_report
+        from pipeline.reports.iso_report import write_report
 
         self.files = write_report(self.iso, out, self.meta)
         return self.files
@@ -80,7 +80,7 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
     standard : str
         The standard whose figures the pages print (``features.standards``).
     meta : str, path-like, dict or ReportMeta, optional
-        A meta file's ``[report]`` table (``pipeline.report_meta``): operator, organisation,
+        A meta file's ``[report]`` table (``pipeline.reports.report_meta``): operator, organisation,
         instrument, its serial and calibration date, environment sensors, remarks.
 
     Returns

@@ -11,80 +11,19 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from numbers import Integral
 from pathlib import Path
 
-import pandas as pd
-
 from features.readings.errors import InputError, note
-from features.readings.schema import FORMATS
 from features.uncertainty import UncertaintyBudget
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, each_once, readings_of, source_of
-from pipeline.workflows.constraints import Interval, StrOptions
+from pipeline.steps.model_data import DATA_PARAMETERS, SPLITS, model_data
+from pipeline.workflows import Workflow, check_params
+from pipeline.workflows.constraints import StrOptions
 
-MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
-TARGETS = ("auto", "paper", "iso")
-SPLITS = ("random", "forward")
-PATH_OR_FRAME = [str, os.PathLike, pd.DataFrame]
-# The parameters every model job shares (train, compare, backtest, tune).
-DATA_PARAMETERS = {
-    "data": PATH_OR_FRAME,
-    "format": [StrOptions(set(FORMATS))],
-    "target": [StrOptions(set(TARGETS))],
-    "features": [list, tuple, None],
-    "truth": [*PATH_OR_FRAME, None],
-    "seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
-}
 PARAMETERS = {**DATA_PARAMETERS, "model": [str, None],  # names checked by the registry
               "split": [StrOptions(set(SPLITS))],
               "uncertainty": [str, os.PathLike, dict, UncertaintyBudget, None]}
-
-
-@dataclass
-class ModelData:
-    """What a model job works on: the readings, their feature table, the noise floor of one
-    measured backlash point [um], the twin's truth table (or None) and the data's name."""
-
-    readings: pd.DataFrame
-    table: object  # features.table.FeatureTable
-    noise_floor_um: float
-    truth: pd.DataFrame | None
-    source: str
-
-    @property
-    def digest(self) -> str:
-        from pipeline.tracking import data_hash
-
-        return data_hash(self.readings)
-
-
-def model_data(data, format: str = "auto", target: str = "auto", features=None,
-               truth=None) -> ModelData:
-    """Readings -> feature table (checked), noise floor and truth table (see ``train``)."""
-    from features.table import check_features, feature_table
-    from models.evaluation import read_truth, target_noise_floor
-
-    readings = readings_of(data, format)
-    source = source_of(data, readings)
-    table = feature_table(readings, target=target, features=check_feature_names(features))
-    check_features(table.X, source)
-    if truth is not None and not isinstance(truth, pd.DataFrame):
-        truth = read_truth(truth)
-    return ModelData(readings, table, target_noise_floor(readings, table.target_kind), truth,
-                     source)
-
-
-def check_feature_names(features) -> list[str] | None:
-    """``features`` as a list of distinct column names, or None for the default inputs."""
-    if features is None:
-        return None
-    names = list(features)
-    if not names or not all(isinstance(n, str) and n.strip() for n in names):
-        raise InputError("expected a non-empty list of feature-table column names",
-                         parameter="features")
-    return each_once(names, "features")
 
 
 @dataclass
@@ -139,7 +78,7 @@ class TrainResult(Result):
         """The second half of ``write``: the figures of the fit in the saved model directory's
         ``figures`` folder."""
         from pipeline import model_tracking
-        from pipeline.model_report import write_figures
+        from pipeline.reports.model_report import write_figures
 
         return self.drawn(write_figures(self.fit, self.files["model"] / model_tracking.FIGURES,
                                         U_um=self.metrics.get("U_B_um")))
@@ -228,26 +167,26 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
         Bad data or parameters, an unreadable or non-physical budget, a budget for a rotary
         axis's data.
     """
+    from features.uncertainty import checked_budget
     from models.training import fit_model, since_adjustment
-    from pipeline.workflows.iso import _budget
 
     check_params(PARAMETERS, {"data": data, "model": model, "format": format, "target": target,
                               "features": features, "split": split, "truth": truth,
                               "seed": seed, "uncertainty": uncertainty}, "train")
     name = model or registry.RECOMMENDED
     registry.check_name(name)
-    budget = None if uncertainty is None else _budget(uncertainty)
+    budget = None if uncertainty is None else checked_budget(uncertainty)
     loaded = model_data(data, format, target, features, truth)
-    U_B = None if budget is None else measurement_U_B_um(loaded.readings, budget)
+    U_B = None if budget is None else measurement_U_B_um(loaded.stats, budget)
     table, clock, origins, usage = loaded.table, None, {}, []
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
         from models.training import hours_origins
-        from models.wear_clock import usage_rates
-        from models.wear_map import epoch_lines
+        from models.wear.wear_clock import usage_rates
+        from models.wear.wear_map import epoch_lines
 
         usage = usage_rates(loaded.readings)  # turns a date into hour-counter readings
 
-        table, clock = since_adjustment(table, loaded.readings)
+        table, clock = since_adjustment(table, loaded.readings, loaded.stats)
         origins = hours_origins(table, clock["series"])
         for line in [*epoch_lines(clock["series"]), clock["change_points"]]:
             if line and line != "searched":
@@ -280,10 +219,11 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
                        target_kind=table.target_kind, target_reason=table.reason)
 
 
-def measurement_U_B_um(readings, budget) -> float:
+def measurement_U_B_um(stats, budget) -> float:
     """U(B) [um] of the data's backlash measurement: the median over its tests of the budget's
     expanded uncertainty of B at each test's measuring length and runs per direction
-    (``pipeline.workflows.drift.figures_with_uncertainty``).
+    (``features.uncertainty.per_test_um``); ``stats`` the readings' per-target statistics
+    (``features.iso230.per_target``).
 
     Raises
     ------
@@ -292,9 +232,9 @@ def measurement_U_B_um(readings, budget) -> float:
     """
     import numpy as np
 
-    from pipeline.workflows.drift import figures_with_uncertainty
+    from features.uncertainty import per_test_um
 
-    U = figures_with_uncertainty(readings, budget)["U_B_um"].to_numpy(float)
+    U = per_test_um(stats, budget)["U_B_um"].to_numpy(float)
     if not np.isfinite(U).any():
         raise InputError("no test has two targets: the budget has no measuring length to be "
                          "evaluated at", parameter="uncertainty")

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.model_data import DATA_PARAMETERS, model_data
 from pipeline.workflows import Workflow, check_params
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.train import DATA_PARAMETERS, model_data
 
 PARAMETERS = {
     **{k: v for k, v in DATA_PARAMETERS.items() if k != "truth"},

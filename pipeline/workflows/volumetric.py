@@ -18,8 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pandas as pd
-
 from pipeline.results import Result
 from pipeline.workflows import Constraints, Workflow, check_params
 
@@ -83,8 +81,8 @@ class VolumetricResult(Result):
     diagonals: dict
     axes: dict
     identification: dict
-    readings: pd.DataFrame
-    circles: pd.DataFrame
+    readings: object  # pandas.DataFrame
+    circles: object  # pandas.DataFrame
     seed: int = 0
     parameters: dict = field(default_factory=dict)
 
@@ -141,6 +139,8 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0
     """
     check_params(_parameters(), {"seed": seed, "targets": targets, "radius_mm": radius_mm},
                  "volumetric")
+    import pandas as pd
+
     from models import volumetric as vol
     from models.physics import machine as twin
 

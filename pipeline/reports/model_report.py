@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.report_page import new_figure, save_figure
+from pipeline.reports.report_page import new_figure, save_figure
 
 
 def training_history(estimator) -> dict | None:

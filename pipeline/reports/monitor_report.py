@@ -6,7 +6,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 
 def write_monitor_report(result, out) -> dict[str, Path]:

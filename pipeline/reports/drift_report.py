@@ -19,8 +19,8 @@ import pandas as pd
 from features.readings import fileio
 from features.visits import DAYS_PER_MONTH
 from models.drift import WITHIN_KINDS, prediction_band
-from pipeline.fleet_charts import unit_label
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.fleet_charts import unit_label
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
 

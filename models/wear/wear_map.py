@@ -22,12 +22,12 @@ that varies along the axis (DESIGN.md, wear). The model, linear in its coefficie
 On a fleet (inputs with ``machine_id`` and ``axis`` columns naming more than one machine axis)
 every machine axis gets its own maps and condition terms, over its own travel (the position
 mapped to 0..1 between its end targets) and its own wear clock, and the axes share strength by
-partial pooling (``models.pooling``): an axis with few visits borrows from the fleet's
+partial pooling (``models.wear.pooling``): an axis with few visits borrows from the fleet's
 distribution of maps, an axis with many visits follows its own data. A plan for an axis the model
 does not know is forecast from that fleet distribution, with its wider interval. Every axis keeps
 its units (``features.readings.schema.deviation_unit``: backlash in arcsec and positions in deg
 for a rotary axis, um and mm for a linear one; the names say um and mm): a fleet with both is
-pooled unit by unit (``models.wear_fleet.UnitGroups``), one model per unit inside the one
+pooled unit by unit (``models.wear.wear_fleet.UnitGroups``), one model per unit inside the one
 estimator, and ``axis_units_`` says each axis's unit.
 
 A condition the caller cannot give (a plan without machine temperature) may be NaN: the term
@@ -54,7 +54,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.schema import deviation_unit
 from features.statistics import grouped_cv_sse, varies_only_between
-from models.wear_basis import (
+from models.wear.wear_basis import (
     CONDITIONS,
     GROUPS,
     HOURS,
@@ -63,10 +63,10 @@ from models.wear_basis import (
     split_groups,
     target_basis,
 )
-from models.wear_clock import epoch_lines, found_adjustments, latest_epoch, wear_epochs
-from models.wear_fleet import FLEET_ARRAYS, FLEET_STATE, UNIT_STATE, FleetWearMap, UnitGroups
+from models.wear.wear_clock import epoch_lines, found_adjustments, latest_epoch, wear_epochs
+from models.wear.wear_fleet import FLEET_ARRAYS, FLEET_STATE, UNIT_STATE, FleetWearMap, UnitGroups
 
-# the wear clock (``models.wear_clock``) is importable from here too
+# the wear clock (``models.wear.wear_clock``) is importable from here too
 __all__ = ["CONDITIONS", "FILE_NAME", "HOURS", "POSITION", "WearMap", "epoch_lines",
            "found_adjustments", "latest_epoch", "spline_basis", "target_basis", "wear_epochs"]
 
@@ -115,10 +115,6 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
             return list(self.features)
         return [f"x{i}" for i in range(n_columns)]
 
-    def _frame(self, X) -> pd.DataFrame:
-        names = self._names(X, np.shape(X)[1])
-        return pd.DataFrame(np.asarray(X, float), columns=names)
-
     # ---- design -------------------------------------------------------------------------
     def _basis(self, x: np.ndarray, choice) -> np.ndarray:
         if choice == "targets":
@@ -160,7 +156,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
         epoch: a fleet keeps them for the wear rate, with a level of their own, when
         cross-validation prefers it (one axis alone leaves them out). ``y`` is in each axis's
         unit (arcsec for a rotary axis); rotary and linear axes are pooled apart
-        (``models.wear_fleet.UnitGroups``).
+        (``models.wear.wear_fleet.UnitGroups``).
         """
         labels, X = split_groups(X)
         names = (self._names(X, X.shape[1])

@@ -4,7 +4,7 @@ Each page names the standard, gives the test conditions the readings file holds,
 figures (with their expanded uncertainty when a budget was given), the per-target table
 (means, s, B_i, R_i) and the chart with every reading and the flagged outliers marked. The PDF
 is matplotlib's PDF backend (``PdfPages``), one A4 page per test; the HTML is the one page
-shell of ``pipeline.report_page`` with the same charts embedded.
+shell of ``pipeline.reports.report_page`` with the same charts embedded.
 """
 
 from __future__ import annotations
@@ -21,8 +21,14 @@ from features import iso230
 from features.iso230 import ENVIRONMENT, TEST_COLUMNS
 from features.readings import schema
 from features.readings.fileio import atomic_path
-from pipeline.iso_chart import SYMBOLS, below_uncertainty, display_unit, draw_readings, draw_test
-from pipeline.report_page import new_figure, write_page
+from pipeline.reports.iso_chart import (
+    SYMBOLS,
+    below_uncertainty,
+    display_unit,
+    draw_readings,
+    draw_test,
+)
+from pipeline.reports.report_page import new_figure, write_page
 
 FILES = {"html": "iso_report.html", "pdf": "iso_report.pdf"}
 TARGET_COLUMNS = ("target", "n_up", "n_down", "mean_up", "mean_down", "s_up", "s_down", "B_i",
@@ -66,7 +72,7 @@ def conditions(row: pd.Series, source: str) -> list[tuple[str, str]]:
 
 
 def signing(meta) -> list[tuple[str, str]]:
-    """(label, value) of who tested with what (``pipeline.report_meta``), or the lines a
+    """(label, value) of who tested with what (``pipeline.reports.report_meta``), or the lines a
     page without ``--meta`` leaves to be filled in by hand."""
     if meta is None:
         return [("operator", "not given (--meta)"), ("instrument", "not given (--meta)")]
@@ -258,11 +264,11 @@ def write_report(result, out, meta=None) -> dict[str, Path]:
 
     Parameters
     ----------
-    result : pipeline.workflows.iso.IsoResult
+    result : pipeline.steps.iso.IsoResult
         The figures, readings and outliers of the tests.
     out : str or path-like
         The folder (created if needed); both files are written atomically.
-    meta : pipeline.report_meta.ReportMeta, optional
+    meta : pipeline.reports.report_meta.ReportMeta, optional
         Who tested with what, printed on every page.
     """
     from matplotlib.backends.backend_pdf import PdfPages

@@ -3,7 +3,7 @@ the charts of an axis page (history with forecast band and the last recorded for
 230-2 chart, wear-rate map, compensation history).
 
 The fleet site draws up to a few dozen charts per run; matplotlib costs about a quarter of a
-second per figure (``pipeline.report_page.new_figure`` and ``savefig``), which alone would
+second per figure (``pipeline.reports.report_page.new_figure`` and ``savefig``), which alone would
 exceed the command's time budget on a fleet of twelve axes, so these charts are written as SVG
 text directly: a few hundred bytes each, vector, embedded in the page (nothing to fetch, no
 script). The markup carries no ``xmlns`` (an inline ``<svg>`` in HTML does not need one), so a

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 
 def plot(result, readings, path: Path) -> Path:

@@ -8,7 +8,7 @@ import unicodedata
 import pandas as pd
 
 from features.readings import schema
-from pipeline.report_page import new_figure, save_figure
+from pipeline.reports.report_page import new_figure, save_figure
 
 MAX_PANELS = 12
 # The product's outlier rule (``features.iso230.outliers``), not one of ISO 230-2's.

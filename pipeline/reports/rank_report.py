@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from features.readings.fileio import atomic_path, clean_nan, write_json
-from pipeline.report_page import new_figure, save_figure, write_page
+from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 # Seed 004, Table 5: ANOVA scores -log(p) on the FM38 X axis, for comparison only.
 PAPER_TABLE5 = {

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from features.circle import centred
-from pipeline.report_page import new_figure, save_figure
+from pipeline.reports.report_page import new_figure, save_figure
 
 COLOURS = {"CCW": "#1f77b4", "CW": "#d62728"}
 

@@ -1,7 +1,7 @@
 """The wear map on a fleet: one level and wear-rate map per machine axis, pooled.
 
 Trained on inputs whose ``machine_id`` and ``axis`` columns name more than one machine axis,
-the wear map (``models.wear_map``) fits every axis its own maps and condition terms:
+the wear map (``models.wear.wear_map``) fits every axis its own maps and condition terms:
 
 - over its own travel: the position mapped to 0..1 between the axis's end targets, so axes of
   different lengths share one B-spline basis;
@@ -14,7 +14,7 @@ the wear map (``models.wear_map``) fits every axis its own maps and condition te
   the rate restarts with the level and those visits are left out;
 - with its own per-target wear-rate deviations (hat functions on its own targets), since a
   screw wears where that machine works, in a shape no common basis follows;
-- sharing strength by partial pooling (``models.pooling``): an axis with few visits borrows
+- sharing strength by partial pooling (``models.wear.pooling``): an axis with few visits borrows
   from the fleet's distribution of maps, an axis with many visits follows its own data.
 
 The number of control points is chosen by rolling-origin cross-validation over the fleet
@@ -39,7 +39,7 @@ import pandas as pd
 from scipy.special import stdtrit
 
 from features.readings.schema import deviation_unit
-from models.wear_basis import (
+from models.wear.wear_basis import (
     AXIS_INDEX,
     CONDITIONS,
     GROUPS,
@@ -62,7 +62,7 @@ EPOCH = "__epoch__"
 
 
 class FleetWearMap:
-    """The fleet half of ``models.wear_map.WearMap`` (module docstring): its fit, local
+    """The fleet half of ``models.wear.wear_map.WearMap`` (module docstring): its fit, local
     frames, design, pooled fit, cross-validation and the fleet's wear-rate maps. Uses the
     single-axis design (``_design``, ``_solve``, ``_learn_inputs``) of the estimator."""
 
@@ -239,10 +239,10 @@ class FleetWearMap:
         return hats * local[HOURS].to_numpy(float)[:, None] / 1000.0
 
     def _deviations(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame):
-        """The axes' own coefficients for ``models.pooling.pool``: which columns each axis
+        """The axes' own coefficients for ``models.wear.pooling.pool``: which columns each axis
         has and the starting variance (a twentieth of the backlash spread, per the hours
         span for a rate)."""
-        from models.pooling import Deviations
+        from models.wear.pooling import Deviations
 
         if not self.use_position_:
             return None
@@ -260,7 +260,7 @@ class FleetWearMap:
                           np.array([start, (0.3 * max(float(np.std(y)), 1e-6)) ** 2]))
 
     def _blocks(self, A: np.ndarray, y: np.ndarray, axis: np.ndarray, local: pd.DataFrame):
-        from models.pooling import VisitBlocks
+        from models.wear.pooling import VisitBlocks
 
         visit = local[HOURS].to_numpy(float) if HOURS in local else np.zeros(len(y))
         return VisitBlocks.of(A, y, axis, visit, len(self.axes_))
@@ -268,7 +268,7 @@ class FleetWearMap:
     def _pool(self, A: np.ndarray, y: np.ndarray, local: pd.DataFrame, blocks, warm=None):
         """The pooled fit of the rows ``A``, ``y`` (``blocks`` their statistics); ``warm``: a
         fit to start from (a cross-validation fold starts from the fit on all the data)."""
-        from models.pooling import FOLD_ITERATIONS, MAX_ITERATIONS, pool
+        from models.wear.pooling import FOLD_ITERATIONS, MAX_ITERATIONS, pool
 
         deviations = self._deviations(A, y, local)
         shared = A.shape[1] - (deviations.size if deviations else 0)

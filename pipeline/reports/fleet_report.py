@@ -12,8 +12,8 @@ Files written into the output folder (``write_site``), all or nothing:
   (every recorded correction table against the target, the latest highlighted);
 - ``fleet.json``: what ``backlash fleet --json`` prints.
 
-Pages use the product's one page shell (``pipeline.report_page.page``); charts are inline SVG
-(``pipeline.fleet_charts``). The pages are built in memory, written into a temporary folder
+Pages use the product's one page shell (``pipeline.reports.report_page.page``); charts are inline SVG
+(``pipeline.reports.fleet_charts``). The pages are built in memory, written into a temporary folder
 beside the output folder (``features.readings.fileio.temp_folder``) and renamed into place: a
 new folder appears whole, files of an existing one are replaced one by one only after every
 file was written.
@@ -28,8 +28,8 @@ import shutil
 from pathlib import Path
 
 from features.readings.errors import InputError
-from pipeline import fleet_charts
-from pipeline.report_page import page
+from pipeline.reports import fleet_charts
+from pipeline.reports.report_page import page
 
 INDEX, JSON = "index.html", "fleet.json"
 TITLE = "Fleet backlash"
@@ -394,7 +394,7 @@ def _wear(view) -> str:
     return (f"{chart}<p>Wear rate w(x) [{_unit(view)} per 1000 operating hours] with its 95 % "
             "interval, "
             f"from {w['n_points']} interior backlash points of visits "
-            f"{_esc(', '.join(w['visits']))} (models.wear_map.WearMap, "
+            f"{_esc(', '.join(w['visits']))} (models.wear.wear_map.WearMap, "
             f"{_esc(w['n_control'])} control points).</p>")
 
 
