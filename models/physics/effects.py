@@ -590,3 +590,12 @@ def contribution(name: str, position_mm, direction, conditions, **params) -> np.
     record = RECORDS[name]
     return np.asarray(record.function(position_mm, direction, conditions,
                                       **{**record.defaults, **params}), float)
+
+
+def lost_motion_um(enabled: dict, position_mm, conditions) -> np.ndarray:
+    """Play width b [um]: the sum of the enabled lost-motion effects, never negative."""
+    b = np.zeros(np.shape(position_mm))
+    for name, params in enabled.items():
+        if name in LOST_MOTION:
+            b = b + contribution(name, position_mm, 0, conditions, **params)
+    return np.maximum(b, 0.0)
