@@ -72,6 +72,7 @@ def test_halsampler_output_gives_the_same_lost_motion(tmp_path):
     (["--channels", f"commanded={SET},motor={MOTOR},load={SCALE},spindle=MC:S"],
      "--channels: unknown channel 'spindle'"),
     ([], "--channels: a camonitor log needs its channels"),
+    (["--channels", CHANNELS, "--axis", "Q"], "--axis: unknown axis 'Q'"),
 ])
 def test_bad_channels_are_refused(log, capsys, options, expected):
     line = refused(capsys, ["monitor", str(log), "--format", "camonitor", *options])

@@ -19,6 +19,7 @@ from pathlib import Path
 import pandas as pd
 
 from features.readings.errors import InputError
+from features.readings.schema import LINEAR_AXES, ROTARY_AXES
 from features.traces import contract as c
 from features.traces.validation import check_trace
 
@@ -26,6 +27,7 @@ FORMATS = ("camonitor", "halsampler")
 # Channel name -> trace column: the contract's channels without their unit suffix.
 COLUMNS = {name.rsplit("_", 1)[0]: name for name in c.CHANNELS}
 REQUIRED = ("commanded", "motor")
+AXES = (*LINEAR_AXES, *ROTARY_AXES)
 
 
 def read_log_trace(path, format: str, channels, machine: str | None = None,
@@ -83,6 +85,9 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
         named_machine = named_axis = None
     machine = machine or named_machine
     axis = axis or named_axis
+    if axis and axis.upper() not in AXES:  # refused here: a frame row would name no file line
+        raise InputError(f"unknown axis {axis!r}; expected one of {', '.join(AXES)}",
+                         parameter="axis")
     for what, value in (("machine", machine), ("axis", axis)):
         if not value:
             raise InputError(f"the log's channel names state no {what}; expected --{what} "

@@ -181,7 +181,9 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     ------
     InputError
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
-        engine, a ``store`` that does not exist or cannot be written (nothing recorded).
+        engine, a ``store`` that does not exist or cannot be written (nothing recorded); a
+        raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
+        axis neither named nor given (``features.traces.logs``), ``channels`` on a trace.
     """
     check_params(_parameters(), {"traces": traces, "engine": engine, "address": address,
                                  "threshold_um": threshold_um, "take_up_mm": take_up_mm,
