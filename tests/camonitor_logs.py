@@ -127,3 +127,18 @@ def run_readings(targets: dict, cycles: int, backlash_mm: float, seed: int = 0) 
     return {(way, i, j): x + (-0.5 if way == "FWD" else 0.5) * backlash_mm
             + rng.normal(0, 2e-4)
             for i, x in targets.items() for j in range(1, cycles + 1) for way in ("FWD", "BWD")}
+
+
+def write_trace_log(path, t_s, values: dict, digits: int = 5) -> Path:
+    """A camonitor log of an axis's trace: ``values`` maps PV names to their samples at times
+    ``t_s`` [s after ``START``]; each PV is logged, rounded to ``digits`` decimals, only when
+    its logged value changes (a set point at rest is silent), PVs interleaved by time."""
+    log = _Log()
+    for pv, samples in values.items():
+        text = np.char.mod(f"%.{digits}f", np.asarray(samples, float))
+        changed = np.r_[True, text[1:] != text[:-1]]
+        for k in np.flatnonzero(changed):
+            log.add(pv, float(t_s[k]), str(text[k]))
+    path = Path(path)
+    path.write_text(log.text())
+    return path

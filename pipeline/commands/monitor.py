@@ -31,6 +31,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fleet store (folder or postgresql:// URL) to record the daily lost motion "
                              "in (docs/fleet.md)")
     parser.add_argument("--json", action="store_true", help="print the axes as JSON")
+    raw = parser.add_argument_group("raw controller logs (--format camonitor or halsampler)")
+    raw.add_argument("--format", choices=("trace", "camonitor", "halsampler"), default="trace",
+                     help="what TRACE is: trace tables (default) or a raw log per machine axis")
+    raw.add_argument("--channels", metavar="MAP",
+                     help="commanded=PV,motor=PV,load=PV (halsampler: field numbers or pins)")
+    raw.add_argument("--machine", help="the log's machine (default: the commanded PV's IOC)")
+    raw.add_argument("--axis", help="the log's axis (default: the commanded PV's axis letter)")
+    raw.add_argument("--period-s", type=float, metavar="S",
+                     help="halsampler output's sample period [s]")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
 
     result = monitor(args.traces, engine=args.engine, address=args.address,
                      threshold_um=args.threshold_um, take_up_mm=args.take_up_mm,
-                     store=args.store)
+                     store=args.store, format=args.format, channels=args.channels,
+                     machine=args.machine, axis=args.axis, period_s=args.period_s)
     if args.out:
         result.write(args.out)
     print_summary(result, file=sys.stderr)

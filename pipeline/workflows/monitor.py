@@ -42,6 +42,11 @@ def _parameters() -> dict:
         "take_up_mm": [Interval(Real, 0, None, closed="neither")],
         "settle_s": [Interval(Real, 0, None, closed="left")],
         "store": [str, os.PathLike, None],
+        "format": [StrOptions({"trace", "camonitor", "halsampler"})],
+        "channels": [str, dict, None],
+        "machine": [str, None],
+        "axis": [str, None],
+        "period_s": [Interval(Real, 0, None, closed="neither"), None],
     }
 
 
@@ -128,7 +133,9 @@ class MonitorResult(Result):
 
 def monitor(traces, *, engine: str = "local", address: str | None = None,
             threshold_um: float | None = None, take_up_mm: float = 0.05,
-            settle_s: float = 0.1, progress=None, store=None) -> MonitorResult:
+            settle_s: float = 0.1, progress=None, store=None, format: str = "trace",
+            channels=None, machine: str | None = None, axis: str | None = None,
+            period_s: float | None = None) -> MonitorResult:
     """Lost motion per machine axis and day from dual-feedback traces, with change points.
 
     Parameters
@@ -154,6 +161,17 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         A fleet store (folder or ``postgresql://`` URL) to record the daily lost motion in:
         one ``trace`` record per machine axis and day with a value
         (``pipeline.store.records.trace_records``); the same days again add nothing.
+    format : {'trace', 'camonitor', 'halsampler'}
+        ``trace``: trace tables and datasets. ``camonitor`` (an EPICS camonitor log) or
+        ``halsampler`` (LinuxCNC halsampler output or a halscope export): each file a raw log
+        of one machine axis, read into a trace (``features.traces.logs.read_log_trace``).
+    channels : str or dict, optional
+        A raw log's channels: ``"commanded=PV,motor=PV,load=PV"`` or a dict (halsampler:
+        0-based field numbers or pin names). Required with a raw log, refused without one.
+    machine, axis : str, optional
+        A raw log's machine and axis; default what the commanded PV's name states.
+    period_s : float, optional
+        Sample period of halsampler output [s].
 
     Returns
     -------
@@ -163,11 +181,16 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     ------
     InputError
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
-        engine, a ``store`` that does not exist or cannot be written (nothing recorded).
+        engine, a ``store`` that does not exist or cannot be written (nothing recorded); a
+        raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
+        axis neither named nor given (``features.traces.logs``), ``channels`` on a trace.
     """
     check_params(_parameters(), {"traces": traces, "engine": engine, "address": address,
                                  "threshold_um": threshold_um, "take_up_mm": take_up_mm,
-                                 "settle_s": settle_s, "store": store}, "monitor")
+                                 "settle_s": settle_s, "store": store, "format": format,
+                                 "channels": channels, "machine": machine, "axis": axis,
+                                 "period_s": period_s}, "monitor")
+    log = _log_options(format, channels, machine, axis, period_s)
     if store is not None:  # before any work: a store that cannot take the records
         from pipeline.store.records import open_for_records
 
@@ -178,7 +201,7 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     from pipeline.engines import map_partitions
 
     options = {"take_up": float(take_up_mm), "settle_s": float(settle_s)}
-    tasks = [(item, options) for item in _partitions(traces)]
+    tasks = [(item, options) for item in _partitions(traces, log)]
     frames = map_partitions(partition_days, tasks, engine=engine, address=address,
                             progress=progress)
     daily = (pd.concat(frames, ignore_index=True) if frames
@@ -202,19 +225,49 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     return result
 
 
-def _partitions(traces) -> list:
-    """The work items: a dataset's partitions (read by the task), or a table's machine axes
-    (read here, whole: a single file fits one machine)."""
+def _log_options(format, channels, machine, axis, period_s) -> dict | None:
+    """A raw log's reading options (``features.traces.logs``), or None for trace tables,
+    which state their channels, machine and axis themselves."""
+    given = {"channels": channels, "machine": machine, "axis": axis, "period_s": period_s}
+    if format == "trace":
+        name = next((k for k, v in given.items() if v is not None), None)
+        if name is not None:
+            raise InputError("applies to a raw log (--format camonitor or halsampler) only; a "
+                             "trace table names its own columns", parameter=name)
+        return None
+    if channels is None:
+        raise InputError(f"a {format} log needs its channels; expected "
+                         "commanded=PV,motor=PV,load=PV", parameter="channels")
+    if isinstance(channels, str):
+        from features.readings.camonitor import parse_channels
+
+        channels = parse_channels(channels)
+    if "load" not in channels:
+        raise InputError(LOAD_NEEDED.replace("column load_mm", "channel load=PV"),
+                         parameter="channels")
+    return {"format": format, **given, "channels": channels}
+
+
+def _partitions(traces, log: dict | None = None) -> list:
+    """The work items: a dataset's partitions (read by the task), or a table's or raw log's
+    machine axes (read here, whole: a single file fits one machine)."""
     import pandas as pd
 
     from features.traces.io import is_dataset, partitions, read_trace
     from features.traces.validation import check_trace
 
     if isinstance(traces, pd.DataFrame):
+        if log is not None:
+            raise InputError(f"format {log['format']!r} reads a log file, not a frame",
+                             parameter="format")
         return _axes_of(check_trace(traces, "traces"), "traces")
     items = []
     for path in ([traces] if isinstance(traces, (str, os.PathLike)) else list(traces)):
-        if is_dataset(path):
+        if log is not None:
+            from features.traces.logs import read_log_trace
+
+            items.extend(_axes_of(read_log_trace(path, **log), path))
+        elif is_dataset(path):
             items.extend(partitions(path))
         else:
             items.extend(_axes_of(read_trace(path), path))

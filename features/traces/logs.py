@@ -1,0 +1,130 @@
+"""Traces from a controller's raw log: an EPICS ``camonitor`` log or a LinuxCNC
+``halsampler``/``halscope`` export, read into the trace contract (``features.traces.contract``).
+
+The raw readers (``features.readings.camonitor.read_camonitor``,
+``features.readings.halsampler.read_halsampler``) give ``time`` and one column per channel;
+``channels`` maps the trace's channel names (``commanded``, ``motor``, ``load`` and the
+optional ``motor_current``, ``following_error``, ``machine_temp``) to a log's PVs (camonitor)
+or fields/pins (halsampler; ``sample`` marks a ``halsampler -t`` sample number), e.g. ``{"commanded": "MC:X-PosSet", "motor": "MC:X-PosAct",
+"load": "MC:ec0-s4-EL5101-Enc-PosAct"}``. Values are taken as logged, in the contract's units
+(mm or deg; no conversion). The machine and axis come from the commanded (set-point) PV's name
+when it states them (its IOC prefix; ``features.readings.formats.axis_from_pv`` for the axis),
+else from ``machine``/``axis``, which also override the name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from features.readings.errors import InputError
+from features.readings.schema import LINEAR_AXES, ROTARY_AXES
+from features.traces import contract as c
+from features.traces.validation import check_trace
+
+FORMATS = ("camonitor", "halsampler")
+# Channel name -> trace column: the contract's channels without their unit suffix.
+COLUMNS = {name.rsplit("_", 1)[0]: name for name in c.CHANNELS}
+REQUIRED = ("commanded", "motor")
+AXES = (*LINEAR_AXES, *ROTARY_AXES)
+
+
+def read_log_trace(path, format: str, channels, machine: str | None = None,
+                   axis: str | None = None, period_s: float | None = None,
+                   start=None) -> pd.DataFrame:
+    """A raw controller log as a validated trace frame (one machine axis).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The log.
+    format : {'camonitor', 'halsampler'}
+        Its layout.
+    channels : dict or str
+        Trace channel -> PV (camonitor) or 0-based field number / pin name (halsampler), or
+        ``"commanded=PV,motor=PV,load=PV"``. ``commanded`` and ``motor`` are required.
+    machine, axis : str, optional
+        The machine and axis; default what the commanded PV's name states.
+    period_s : float, optional
+        Sample period [s] of halsampler output (``read_halsampler``).
+    start : datetime or str, optional
+        Time of a halsampler file's first sample (``read_halsampler``).
+
+    Returns
+    -------
+    DataFrame
+        A trace as ``features.traces.io.read_trace`` returns it.
+
+    Raises
+    ------
+    InputError
+        An unknown format or channel, a required channel missing, a PV or field the log does
+        not have, a machine or axis neither named nor given.
+    """
+    path = Path(path)
+    if format not in FORMATS:
+        raise InputError(f"unknown log format {format!r}; expected {' or '.join(FORMATS)}",
+                         parameter="format")
+    channels = _channels(channels, format)
+    if format == "camonitor":
+        from features.readings.camonitor import read_camonitor
+
+        # one PV may feed two channels (a stepper's step counter as commanded and motor)
+        first = {}
+        for name, pv in channels.items():
+            first.setdefault(pv, name)
+        logged = read_camonitor(path, {name: pv for pv, name in first.items()})
+        samples = pd.DataFrame({"time": logged["time"],
+                                **{n: logged[first[pv]] for n, pv in channels.items()}})
+        named_machine, named_axis = _names(channels["commanded"])
+    else:
+        from features.readings.halsampler import read_halsampler
+
+        samples = read_halsampler(path, channels, period_s=period_s, start=start)
+        named_machine = named_axis = None
+    machine = machine or named_machine
+    axis = axis or named_axis
+    if axis and axis.upper() not in AXES:  # refused here: a frame row would name no file line
+        raise InputError(f"unknown axis {axis!r}; expected one of {', '.join(AXES)}",
+                         parameter="axis")
+    for what, value in (("machine", machine), ("axis", axis)):
+        if not value:
+            raise InputError(f"the log's channel names state no {what}; expected --{what} "
+                             f"(Python {what}=)", file=path, parameter=what)
+    frame = pd.DataFrame({"time": samples["time"], "machine_id": machine, "axis": axis})
+    for name in channels.keys() & COLUMNS.keys():
+        frame[COLUMNS[name]] = samples[name].to_numpy(dtype=float)
+    return check_trace(frame, path)
+
+
+def _channels(channels, format: str) -> dict:
+    """A checked mapping; halsampler field numbers given as text become ints."""
+    if isinstance(channels, str):
+        from features.readings.camonitor import parse_channels
+
+        channels = parse_channels(channels)
+    if not channels:
+        raise InputError("no channels; expected commanded=PV,motor=PV,load=PV",
+                         parameter="channels")
+    known = (*COLUMNS, "sample") if format == "halsampler" else tuple(COLUMNS)
+    unknown = [name for name in channels if name not in known]
+    if unknown:
+        raise InputError(f"unknown channel {unknown[0]!r}; expected "
+                         f"{', '.join(COLUMNS)}", parameter="channels")
+    missing = [name for name in REQUIRED if name not in channels]
+    if missing:
+        raise InputError(f"channel {missing[0]!r} is missing; expected "
+                         "commanded=PV,motor=PV,load=PV", parameter="channels")
+    if format == "halsampler":
+        return {n: int(k) if str(k).isdigit() else k for n, k in channels.items()}
+    return dict(channels)
+
+
+def _names(pv: str) -> tuple[str | None, str | None]:
+    """(machine, axis) an ecmc PV's name states: its IOC prefix and the axis letter of its
+    record (``axis_from_pv``); None for what it does not state."""
+    from features.readings.formats import axis_from_pv
+
+    ioc = pv.split(":", 1)[0] if ":" in pv else None
+    return ioc, axis_from_pv(pv)
