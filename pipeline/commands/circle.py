@@ -26,11 +26,9 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.workflows.circle import circle
+    from pipeline.commands.data import run_job
 
-    result = circle(args.file, tolerance_um=args.tolerance)
-    if args.out:
-        result.write(args.out)
+    result = run_job("circle", args, data=args.file, tolerance_um=args.tolerance, out=args.out)
     print(result.table(), file=sys.stderr)
     if args.out:
         print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)

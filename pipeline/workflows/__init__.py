@@ -194,12 +194,16 @@ class Workflow:
     inputs : tuple of str
         Parameters that name files or folders to read (an experiment resolves them against
         its own folder and checks they exist).
+    tracked : bool
+        The result is logged to MLflow (``tracking_record``) when the runner tracks
+        (``pipeline.runner``).
     """
 
     name: str
     function: object
     summary: str
     inputs: tuple[str, ...] = ()
+    tracked: bool = False
 
 
 def workflow(name: str) -> Workflow:

@@ -161,4 +161,4 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
 WORKFLOW = Workflow(
     name="discover", function=discover, inputs=("data",),
     summary=("Find where simulation and measurement disagree, name the missing physical "
-             "effect, add it and show the gap shrink."))
+             "effect, add it and show the gap shrink."), tracked=True)

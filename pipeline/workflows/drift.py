@@ -252,4 +252,4 @@ WORKFLOW = Workflow(
     name="drift", function=drift, inputs=("data", "model", "uncertainty"),
     summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
              "it crosses a threshold, and (with --model) residual and input drift of a trained "
-             "model. Exit 3 when an alert fires."))
+             "model. Exit 3 when an alert fires."), tracked=True)

@@ -714,4 +714,4 @@ WORKFLOW = Workflow(
     name="fleet", function=fleet, inputs=("data",),
     summary=("One view of the fleet: every machine axis's backlash now, trend, change points, "
              "threshold crossing and next visit due, worst first, with a static site (--out). "
-             "Exit 3 when an alert fires."))
+             "Exit 3 when an alert fires."), tracked=True)

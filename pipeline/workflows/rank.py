@@ -254,4 +254,4 @@ WORKFLOW = Workflow(
     name="rank", function=rank, inputs=("data", "model"),
     summary=("Which inputs drive backlash given the others (driver with its effect in um, "
              "proxy, none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
-             "permutation importance, mutual information); writes an HTML report."))
+             "permutation importance, mutual information); writes an HTML report."), tracked=True)
