@@ -44,6 +44,7 @@ from pathlib import Path
 
 from features.readings.config import read_config
 from features.readings.errors import InputError, Progress, report
+from features.readings.selection import NAMES as SELECTION
 from pipeline.results import Result
 from pipeline.store import is_url
 
@@ -175,7 +176,8 @@ def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
     signature = inspect.signature(record.function)
     accepted = [n for n, p in signature.parameters.items()
                 if n != "progress" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-    allowed = accepted + ([] if "out" in accepted else ["out"])
+    # the runner's own: where the result goes, the test selection, tracking (pipeline.runner)
+    allowed = accepted + [n for n in ("out", *SELECTION, "track") if n not in accepted]
     given = raw.parameters
     unknown = [k for k in given if k not in allowed]
     if unknown:
@@ -201,7 +203,7 @@ def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
         _check_storage(step, Path(values["out"]), path, where)
     if "out" in step.params and "out" not in accepted:
         step.out = Path(step.params.pop("out"))
-    _check_values(record, step.params, path, where)
+    _check_values(record, {k: v for k, v in step.params.items() if k in accepted}, path, where)
     return step
 
 

@@ -172,3 +172,17 @@ def test_every_job_is_a_python_name_running_through_the_runner():
         name = "check_store" if job == "store" else job.replace("-", "_")
         function = getattr(bl, name)
         assert function.__wrapped__.__name__ == name
+
+
+def test_an_experiment_step_selects_and_gives_what_python_gives(two_axes, tmp_path):
+    """An experiment step runs through the runner too: the same selection parameters, the
+    same result."""
+    from pipeline import experiment
+
+    spec = tmp_path / "exp.toml"
+    spec.write_text(f'out = "out"\n[[steps]]\njob = "iso"\n[steps.with]\ndata = "{two_axes}"\n'
+                    'axis = "Y"\nout = "{out}/iso"\n')
+    done = experiment.execute(experiment.load(spec, str(tmp_path / "out")))
+    from_file = json.loads(dumps(done.steps[0].result.to_json()))
+    assert from_file == py_json("iso", str(two_axes), axis="Y")
+    assert (tmp_path / "out" / "iso" / "iso_figures.csv").is_file()

@@ -60,7 +60,10 @@ def _parameters() -> dict:
     from pipeline.workflows.constraints import Interval, StrOptions
 
     positive = Interval(Real, 0, None, closed="neither")
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
+
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [positive, None],
         "threshold_arcsec": [positive, None],
