@@ -149,8 +149,12 @@ def _select(data, format: str, chosen: dict, raw: dict):
     import os
 
     if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import is_store
         from pipeline.workflows.convert import read
 
+        if os.path.isdir(data) and not is_store(data):  # a model directory (compensate's)
+            raise InputError(f"selects tests of readings; {data} is a folder, not a fleet "
+                             "store", parameter=next(iter(chosen)))
         return read(data, format, **chosen, **raw)
     from features.readings.selection import selection
     from pipeline.workflows import readings_of

@@ -414,8 +414,8 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
         return _predicted(data, conditions, spacing, **ahead)
     given = [k for k in ("at_hours", "at_date") if ahead[k] is not None]
     if conditions or given:
-        raise InputError("applies to a model directory, not to measured tests",
-                         parameter=given[0] if given else "conditions")
+        raise InputError(f"applies to a {'wear-map ' if given else ''}model directory, not to "
+                         "measured tests", parameter=given[0] if given else "conditions")
     if verify and not is_path:
         raise InputError("needs the twin's readings file (parameters.json beside it), not a "
                          "frame", parameter="verify")
