@@ -4,8 +4,8 @@ CLI's commands, experiment files, ``bl.<job>(...)``).
 The job itself is a pure workflow function (``pipeline.workflows``); what happens around it is
 done here, the same way for every entry point (kedro's runner and hooks):
 
-1. **parameters**: bound to the workflow's signature (exact names: an unknown one is an
-   error naming it, never skipped);
+1. **parameters**: bound to the workflow's signature and checked against its table
+   (``PARAMETERS``; exact names: an unknown one is an error naming it, never skipped);
 2. **data selection**: ``machine``, ``axis``, ``since``, ``until`` select the tests of the
    job's readings (``data``; ingest's ``files``) in every job (a workflow that declares one of them itself, as ``void`` and
    ``compensate`` do, applies it itself);
@@ -95,6 +95,7 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
     if "track" in declared:  # a workflow that logs while it runs (tune): not inside a run
         params["track"] = track and not nested
     bound = _bound(record, declared, args, params)
+    _checked(record, bound)
     bound = _selected(job, declared, bound)
     opened = _opened(job, declared, store)
     with _tracking(record, track and not params.get("track"), nested) as tracking:
@@ -123,6 +124,17 @@ def _bound(record, declared, args: tuple, params: dict) -> dict:
         raise InputError(f"{record.name}: {err}") from None
     chosen = {k: v for k, v in params.items() if k not in declared and v is not None}
     return {**bound.arguments, **chosen}
+
+
+def _checked(record, bound: dict) -> None:
+    """Every parameter given, checked against the job's table (``PARAMETERS``) before any
+    work: the signature bound, no name skipped (the selection is checked as it is read)."""
+    from pipeline.workflows import check_params
+
+    table = sys.modules[record.function.__module__].PARAMETERS
+    check_params(table, {k: v for k, v in bound.items()
+                         if k != "progress" and not (k in SELECTION and k not in table)},
+                 record.name)
 
 
 def _selected(job: str, declared, params: dict) -> dict:

@@ -94,10 +94,13 @@ def test_compensate_selects_the_machine_and_axis_from_python_as_from_the_cli(two
     ("fleet", ["{twin}", "--as-of", "2026-06-30"], {"data": "{twin}", "as_of": "2026-06-30"}, 0),
     ("circle", ["{circle}"], {"data": "{circle}"}, 0),
     ("uncertainty", ["{budget}"], {"budget": "{budget}"}, 0),
+    ("volumetric", ["--targets", "5", "--seed", "3"], {"targets": 5, "seed": 3}, 0),
+    ("simulate", ["--preset", "compensation", "--out", "{tmp}/sim"],
+     {"preset": "compensation", "out": "{tmp}/sim-py"}, 0),
 ])
 def test_every_job_gives_the_cli_and_python_the_same_result(job, cli, python, code, two_axes,
-                                                            capsys):
-    where = {"two": str(two_axes), "twin": str(TWIN),
+                                                            tmp_path, capsys):
+    where = {"two": str(two_axes), "twin": str(TWIN), "tmp": str(tmp_path),
              "circle": str(ROOT / "experiments/data/circle/ballbar_xy.csv"),
              "budget": str(ROOT / "experiments/data/paper_uncertainty.toml")}
     args = [a.format(**where) for a in cli]
