@@ -225,7 +225,7 @@ def _check_values(record, params: dict, path: Path, where: str) -> None:
     """The workflow's own constraints (``PARAMETERS``), before anything runs."""
     from pipeline.workflows import check_params
 
-    module = sys.modules[record.function.__module__]
+    module = sys.modules[f"pipeline.workflows.{record.name.replace('-', '_')}"]  # the job's
     try:
         check_params(getattr(module, "PARAMETERS", {}), params, record.name)
     except InputError as err:
