@@ -4,13 +4,17 @@
 >>> readings = bl.read("test.dat")            # doctest: +SKIP
 >>> figures = bl.iso(readings).figures        # doctest: +SKIP
 
-Each function is the workflow the CLI and experiment files call (``pipeline.workflows``):
-keyword parameters checked on entry, a result object out (frames, figures, notes), nothing
-printed. See ``docs/api.md``.
+Each job runs through the one runner the CLI and experiment files use (``pipeline.runner``):
+the same parameters with the same meaning (``machine``, ``axis``, ``since``, ``until`` select
+the tests of the data in every job), ``out=`` writes the result, ``store=`` records it where
+``--store`` does, ``track`` (default True, as in the CLI) logs a tracked job to MLflow; a
+result object out (frames, figures, notes), nothing printed. The other names (``read``,
+``load_model``, ``backtest``...) are plain functions. See ``docs/api.md``.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 
 from features.readings.errors import BacklashWarning, InputError
@@ -36,12 +40,32 @@ __all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
 ]
 
 
+_JOBS = {"check_store": "store"}  # a job whose function is named otherwise
+
+
 def __getattr__(name: str):
     if name in _WHERE:
+        from pipeline.workflows import NAMES
+
         module = importlib.import_module(f"pipeline.workflows.{_WHERE[name]}")
-        return getattr(module, name)
+        job = _JOBS.get(name, name.replace("_", "-"))
+        function = getattr(module, name)
+        return _through_runner(job, function) if job in NAMES else function
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
     return __all__
+
+
+@functools.cache
+def _through_runner(job: str, function):
+    """``function``'s name, signature and docstring, run by ``pipeline.runner.run(job)``."""
+
+    @functools.wraps(function)
+    def call(*args, **params):
+        from pipeline.runner import run
+
+        return run(job, *args, **params)
+
+    return call

@@ -75,6 +75,9 @@ def add_common_arguments(cmd: argparse.ArgumentParser) -> None:
                      help="folder of the MLflow database (mlflow.db), its artifacts "
                           "(mlartifacts/) and the Optuna studies (optuna.db); default "
                           "$BACKLASH_TRACKING_DIR, else the working directory")
+    cmd.add_argument("--no-track", action="store_true",
+                     help="log nothing to MLflow (a tracked job logs its run by default, from "
+                          "the CLI as from Python: pipeline.runner)")
 
 
 @contextlib.contextmanager

@@ -24,9 +24,10 @@ resolved relative to the experiment file and must exist, unless an earlier step 
 inside the output folder (then they are checked when their step starts). ``out`` is resolved
 relative to the output folder and must lie inside it, as must a SQLite ``storage``.
 
-Each step calls ``workflow(job).function(**parameters)``, then ``result.write(out)`` (a workflow
-that takes ``out`` itself writes it) and logs the result to MLflow (``tracking.log_result``,
-nested). The whole experiment is one MLflow run; its artifacts are the experiment file and the
+Each step runs through the one runner, as the CLI and ``bl.<job>`` do
+(``pipeline.runner.run(job, **parameters, out=out)``): it writes the result (a workflow that
+takes ``out`` itself writes it) and logs a tracked job's result to MLflow, nested in the
+experiment's run. The whole experiment is one MLflow run; its artifacts are the experiment file and the
 files the steps wrote (files already in the output folder are left out). A failing step stops
 the experiment: what it half wrote is removed, and so are folders left empty; the steps before
 it keep their files.
@@ -43,6 +44,7 @@ from pathlib import Path
 
 from features.readings.config import read_config
 from features.readings.errors import InputError, Progress, report
+from features.readings.selection import NAMES as SELECTION
 from pipeline.results import ALERT_EXIT, Result
 from pipeline.store import is_url
 
@@ -173,7 +175,8 @@ def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
     signature = inspect.signature(record.function)
     accepted = [n for n, p in signature.parameters.items()
                 if n != "progress" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-    allowed = accepted + ([] if "out" in accepted else ["out"])
+    # the runner's own: where the result goes, the test selection, tracking (pipeline.runner)
+    allowed = accepted + [n for n in ("out", *SELECTION, "track") if n not in accepted]
     given = raw.parameters
     unknown = [k for k in given if k not in allowed]
     if unknown:
@@ -199,7 +202,7 @@ def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
         _check_storage(step, Path(values["out"]), path, where)
     if "out" in step.params and "out" not in accepted:
         step.out = Path(step.params.pop("out"))
-    _check_values(record, step.params, path, where)
+    _check_values(record, {k: v for k, v in step.params.items() if k in accepted}, path, where)
     return step
 
 
@@ -221,7 +224,7 @@ def _check_values(record, params: dict, path: Path, where: str) -> None:
     """The workflow's own constraints (``PARAMETERS``), before anything runs."""
     from pipeline.workflows import check_params
 
-    module = sys.modules[record.function.__module__]
+    module = sys.modules[f"pipeline.workflows.{record.name.replace('-', '_')}"]  # the job's
     constraints = getattr(module, "PARAMETERS", {})
     for name in record.inputs:  # a table where only paths are read: nothing would judge it
         if isinstance(params.get(name), dict) and name not in constraints:
@@ -367,7 +370,7 @@ def _run_step(step: Step, experiment: Experiment) -> StepResult:
     """Call the step's workflow, write its result and log it; a failure removes what the
     step wrote and is re-raised as one line naming the step."""
     from pipeline import tracking
-    from pipeline.workflows import workflow
+    from pipeline.runner import run
 
     mlflow = tracking.mlflow_module()
     where = f"step {step.index} ({step.job})"
@@ -377,17 +380,15 @@ def _run_step(step: Step, experiment: Experiment) -> StepResult:
         if missing:
             raise InputError(f"no such file or folder {str(missing[0])!r} (no earlier step "
                              "wrote it)")
-        result = workflow(step.job).function(**step.params)
-        files = dict(result.write(step.out)) if step.out is not None else dict(result.files)
+        out = {} if step.out is None else {"out": step.out}
+        result = run(step.job, **step.params, **out)  # logged nested in the experiment's run
+        files = dict(result.files)
     except (InputError, ValueError) as err:
         mlflow.log_metric(f"step_{step.index}_exit_code", 2)
         for f in _files_below(experiment.out) - before:  # nothing half-written stays
             f.unlink(missing_ok=True)
         line = err.line() if isinstance(err, InputError) else str(err)
         raise InputError(f"{where}: {' '.join(line.split())}") from None
-    log_result = getattr(tracking, "log_result", None)
-    if log_result is not None:
-        log_result(result, nested=True)
     code = ALERT_EXIT if getattr(result, "alerts", None) else 0
     mlflow.log_metric(f"step_{step.index}_exit_code", code)
     return StepResult(step, result, files, code)

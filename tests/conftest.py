@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Jobs track by default (pipeline.runner.TRACK): what a module-scoped fixture logs, before
+# the per-test store below exists, goes to a store of the session, never into the checkout.
+_SESSION = tempfile.mkdtemp(prefix="backlash-tests-tracking-")
+os.environ.setdefault("MLFLOW_TRACKING_URI", f"sqlite:///{_SESSION}/mlflow.db")
+os.environ.setdefault("BACKLASH_ARTIFACTS", f"{_SESSION}/artifacts")
 
 REPO = Path(__file__).resolve().parents[1]
 REAL_DATA = REPO.parent / "shared" / "data" / "real"

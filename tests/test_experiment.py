@@ -126,17 +126,23 @@ plan = { repeats = 1, feeds_mm_min = [500.0], dwells_s = [3.0] }
                                                      "parameters"}
 
 
-def test_a_result_is_logged_when_the_tracking_adapter_exists(tmp_path, monkeypatch, psi_file):
+def test_a_tracked_job_is_logged_nested_in_the_experiments_run(tmp_path, monkeypatch,
+                                                                 psi_file):
+    """A step runs through the runner: a tracked job's result is logged as a run nested in
+    the experiment's; an untracked job's is not logged."""
+    import dataclasses
+
     from pipeline import tracking
+    from pipeline.workflows import convert
 
     logged = []
-    monkeypatch.setattr(tracking, "log_result", lambda result, **kw: logged.append(kw) or {},
-                        raising=False)
+    monkeypatch.setattr(tracking, "log_result", lambda result, **kw: logged.append(kw) or {})
     spec = write_spec(tmp_path, convert_step(psi_file, "{out}/a.csv"))
     assert experiment.execute(experiment.load(spec)).code == 0
-    assert logged == [{"nested": True}]
-    monkeypatch.delattr(tracking, "log_result")  # and the runner works without it
+    assert logged == []  # convert is not a tracked job
+    monkeypatch.setattr(convert, "WORKFLOW", dataclasses.replace(convert.WORKFLOW, tracked=True))
     assert experiment.execute(experiment.load(spec)).code == 0
+    assert logged == [{"nested": True}]
 
 
 @pytest.mark.parametrize("library_error", [False, True])

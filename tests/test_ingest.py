@@ -314,7 +314,7 @@ def test_compensate_reads_a_store_and_keeps_axis_for_a_model(store, tmp_path, ca
     model.mkdir()
     line = refused(capsys, ["compensate", model, "--since", "2026-01-01", "--controller",
                             "csv", "--out", tmp_path / "comp2"])
-    assert "--since selects tests of readings" in line
+    assert "--since: selects tests of readings" in line
 
 
 # --------------------------------------------------------------------- Python

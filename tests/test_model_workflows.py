@@ -28,7 +28,7 @@ def trained(tmp_path_factory):
     """The recommended wear map trained from Python and written as a model directory."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
-        result = bl.train(READINGS, truth=TWIN / "truth.csv", split="forward")
+        result = bl.train(READINGS, truth=TWIN / "truth.csv", split="forward", track=False)
     result.write(tmp_path_factory.mktemp("model") / "wear-map")
     return result
 
@@ -100,7 +100,7 @@ def test_compare_and_backtest_from_python():
 
 
 def test_log_result_logs_a_compare_with_nested_runs_and_a_champion(tmp_path):
-    result = bl.compare(READINGS, models=["constant", "bspline"])
+    result = bl.compare(READINGS, models=["constant", "bspline"], track=False)  # logged below
     result.write(tmp_path / "cmp")
     logged = tracking.log_result(result)
     assert set(logged["children"]) == {"constant", "bspline"} and logged["champion"]
@@ -203,7 +203,8 @@ def test_tune_from_python_then_logged_by_the_adapter(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
         result = bl.tune(data, trials=2, folds=2, storage=f"sqlite:///{tmp_path / 'o.db'}",
-                         progress=lambda done, total, what: steps.append(done))
+                         progress=lambda done, total, what: steps.append(done),
+                         track=False)  # logged below
     assert result.trials == {"complete": 2} and steps == [1, 2]
     assert result.to_json()["best_cv_rmse_um"] == result.best_cv_rmse_um > 0
     logged = tracking.log_result(result)

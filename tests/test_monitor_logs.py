@@ -1,4 +1,4 @@
-"""``monitor --format camonitor|halsampler``: lost motion from a controller's raw log, checked
+"""``monitor --log-format camonitor|halsampler``: lost motion from a controller's raw log, checked
 on camonitor logs written from an independent generator's known trace
 (tests/independent_traces.py), on a real ecmc log, and every bad input refused."""
 
@@ -43,7 +43,7 @@ def test_lost_motion_of_a_camonitor_log_within_its_uncertainty(log):
 
 
 def test_cli_reads_a_log_and_options_name_machine_and_axis(log, capsys):
-    code = main(["monitor", str(log), "--format", "camonitor", "--channels", CHANNELS,
+    code = main(["monitor", str(log), "--log-format", "camonitor", "--channels", CHANNELS,
                  "--machine", "M9", "--axis", "y", "--json"])
     assert code == 0
     (axis,) = json.loads(capsys.readouterr().out)["axes"]
@@ -75,7 +75,7 @@ def test_halsampler_output_gives_the_same_lost_motion(tmp_path):
     (["--channels", CHANNELS, "--axis", "Q"], "--axis: unknown axis 'Q'"),
 ])
 def test_bad_channels_are_refused(log, capsys, options, expected):
-    line = refused(capsys, ["monitor", str(log), "--format", "camonitor", *options])
+    line = refused(capsys, ["monitor", str(log), "--log-format", "camonitor", *options])
     assert expected in line
 
 
@@ -83,7 +83,7 @@ def test_an_unnamed_axis_needs_the_option(tmp_path, capsys):
     t, cmd, motor, load = axis_day(np.random.default_rng(1), 6.0, seconds=5, rate_hz=100)
     path = write_trace_log(tmp_path / "a.log", t, {"IOC:Axis1-PosSet": cmd,
                                                    "IOC:Axis1-PosAct": motor, SCALE: load})
-    line = refused(capsys, ["monitor", str(path), "--format", "camonitor", "--channels",
+    line = refused(capsys, ["monitor", str(path), "--log-format", "camonitor", "--channels",
                             f"commanded=IOC:Axis1-PosSet,motor=IOC:Axis1-PosAct,load={SCALE}"])
     assert "--axis: the log's channel names state no axis" in line
 

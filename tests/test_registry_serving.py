@@ -54,7 +54,7 @@ def fleet(tmp_path_factory):
 @pytest.fixture(scope="module")
 def wear_map(fleet, tmp_path_factory):
     """The recommended predictor trained on the fleet and written to a model directory."""
-    result = quiet(bl.train, fleet[0])
+    result = quiet(bl.train, fleet[0], track=False)  # logged by each test
     result.write(tmp_path_factory.mktemp("fleet-model") / "wear-map")
     return result
 
@@ -84,10 +84,10 @@ def test_fleet_version_carries_axes_predictor_target_data_and_skill(wear_map):
 
 def test_skill_is_na_with_its_reason(fleet):
     readings = fleet[0]
-    constant = quiet(bl.train, readings, model="constant")
+    constant = quiet(bl.train, readings, model="constant", track=False)
     assert logged_version(constant)[1].tags["backtest_skill"] == (
         "n/a: constant does not forecast a plan")
-    two_visits = quiet(bl.train, readings[readings["visit"] <= "02"])
+    two_visits = quiet(bl.train, readings[readings["visit"] <= "02"], track=False)
     assert logged_version(two_visits)[1].tags["backtest_skill"] == (
         "n/a: 2 visit(s) in the training data; the backtest needs at least 3")
 
@@ -115,7 +115,7 @@ def test_signature_lists_the_plan_columns_the_wear_map_uses(wear_map):
 
 
 def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
-    result = quiet(bl.train, fleet[0], model="ridge")
+    result = quiet(bl.train, fleet[0], model="ridge", track=False)
     result.write(tmp_path / "ridge")
     spec = model_tracking.model_record(result.fit, result.files["model"])["signature"]
     names = [c["name"] for c in spec["inputs"]]
@@ -176,12 +176,12 @@ def test_a_version_without_skill_never_displaces_one_with_skill():
 
 def test_trainings_promote_by_skill_and_never_across_data_sets(fleet, wear_map):
     readings = fleet[0]
-    constant = quiet(bl.train, readings, model="constant")
+    constant = quiet(bl.train, readings, model="constant", track=False)
     logged, _ = logged_version(constant)
     assert logged["champion"]
     logged, forecaster = logged_version(wear_map)  # same data, with a skill
     assert logged["champion"] and champion(tracking.client()) == forecaster.version
-    fewer = quiet(bl.train, readings[readings["visit"] <= "04"])  # other data
+    fewer = quiet(bl.train, readings[readings["visit"] <= "04"], track=False)  # other data
     logged, _ = logged_version(fewer)
     assert not logged["champion"] and champion(tracking.client()) == forecaster.version
 

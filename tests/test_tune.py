@@ -41,7 +41,8 @@ def test_local_study_logs_every_trial(readings_csv, tmp_path, capsys, monkeypatc
     assert main(["tune", str(readings_csv), "--trials", "3", "--folds", "3", "--json"]) == 0
     best = json.loads(capsys.readouterr().out)
     assert best["best_cv_rmse_um"] > 0 and "activation" in best["best_params"]
-    study = optuna.load_study(study_name="backlash-network", storage="sqlite:///optuna.db")
+    assert best["study"].startswith("backlash-network-")  # one study per data
+    study = optuna.load_study(study_name=best["study"], storage="sqlite:///optuna.db")
     assert len(study.trials) == 3 and len(nested_trial_runs()) == 3
 
 
@@ -212,14 +213,14 @@ def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
     for name, where in (("a", "child"), ("b", "here")):
         storage = f"sqlite:///{tmp_path / name}.db"
         args = ["tune", str(readings_csv), "--trials", "2", "--folds", "2", "--seed", "7",
-                "--storage", storage]
+                "--storage", storage, "--study", "seeded"]
         if where == "child":
             proc = backlash(*args, cwd=tmp_path)
             _, err = proc.communicate(timeout=300)  # drains the pipes while it waits
             assert proc.returncode == 0, err[-2000:]
         else:
             assert main(args) == 0
-        study = optuna.load_study(study_name="backlash-network", storage=storage)
+        study = optuna.load_study(study_name="seeded", storage=storage)
         runs[name] = [(t.params, t.value) for t in study.trials]
     assert [p for p, _ in runs["a"]] == [p for p, _ in runs["b"]]
     assert [v for _, v in runs["a"]] == pytest.approx([v for _, v in runs["b"]], rel=1e-6)
@@ -307,3 +308,28 @@ def test_terminated_tune_fails_its_running_trial_at_once(readings_csv, tmp_path,
     assert proc.returncode == 130, err[-2000:]
     after = states(storage)
     assert after[-1] == "FAIL" and "RUNNING" not in after
+
+
+def test_each_data_has_its_own_study_and_a_resumed_one_says_so(readings_csv, tmp_path):
+    """The default study carries the data's digest: a second data set starts its own study
+    (its trials are never ranked with the first's); the first data's study, asked again,
+    is resumed and says with how many trials."""
+    import pandas as pd
+
+    import backlash as bl
+
+    other = tmp_path / "other.csv"
+    frame = pd.read_csv(readings_csv)
+    frame["deviation_um"] += 1.0  # other data: another digest
+    frame.to_csv(other, index=False)
+    common = {"trials": 1, "folds": 2, "storage": f"sqlite:///{tmp_path / 'studies.db'}",
+              "track": False}
+    first, second = bl.tune(readings_csv, **common), bl.tune(other, **common)
+    assert first.to_json()["study"] != second.to_json()["study"]
+    assert first.trials == second.trials == {"complete": 1}
+    assert not any("resumed" in n for n in first.notes + second.notes)
+    again = bl.tune(readings_csv, **common)
+    assert again.to_json()["study"] == first.to_json()["study"]
+    assert again.trials == {"complete": 2}
+    assert any("resumed with its 1 earlier trials" in n and "other data" not in n
+               for n in again.notes)

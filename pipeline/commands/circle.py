@@ -29,11 +29,10 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.workflows.circle import circle
+    from pipeline.commands.data import run_job
 
-    result = circle(args.file, tolerance_um=args.tolerance, store=args.store)
-    if args.out:
-        result.write(args.out)
+    result = run_job("circle", args, data=args.file, tolerance_um=args.tolerance, out=args.out,
+                     store=args.store)
     print(result.table(), file=sys.stderr)
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)

@@ -30,27 +30,23 @@ def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.commands.common import parse_list, progress_bar
-    from pipeline.commands.data import data_params, readings_arg
-    from pipeline.workflows.compare import compare
+    from pipeline.commands.common import parse_list
+    from pipeline.commands.data import data_params, run_job
 
-    tracking.check_uri()
     models = parse_list(args.models, "models")  # same list syntax as --features
-    with progress_bar("origins" if args.split == "backtest" else "models") as progress:
-        result = compare(readings_arg(args), models=models, split=args.split, progress=progress,
-                         **data_params(args))
     backtest = args.split == "backtest"
     out = args.out or tempfile.mkdtemp(prefix=f"backlash-{'backtest' if backtest else 'compare'}-")
-    files = result.write(out)
-    logged = tracking.log_result(result)
+    result = run_job("compare", args, "origins" if backtest else "models", data=args.data,
+                     out=out, models=models, split=args.split, **data_params(args))
+    logged = result.tracking
+    run_id = f"; MLflow run {logged['run_id']}" if logged else ""
     (print_backtest if backtest else print_table)(result, file=sys.stderr)
     if backtest:
-        print(f"best forecast: {result.summary.iloc[0]['model']}; MLflow run "
-              f"{logged['run_id']}; tables -> {files['backtest_summary']}", file=sys.stderr)
+        print(f"best forecast: {result.summary.iloc[0]['model']}{run_id}; tables -> "
+              f"{result.files['backtest_summary']}", file=sys.stderr)
     else:
-        print(f"best: {result.best}{' (now champion)' if logged.get('champion') else ''}; "
-              f"MLflow run {logged['run_id']}; table -> {files['comparison']}", file=sys.stderr)
+        print(f"best: {result.best}{' (now champion)' if logged.get('champion') else ''}"
+              f"{run_id}; table -> {result.files['comparison']}", file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return 0

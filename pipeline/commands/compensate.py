@@ -68,51 +68,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline.commands.common import progress_bar
+    from pipeline.commands.data import run_job
 
-    store = None
-    if args.store:  # refused before any work: one line, nothing written
-        from pipeline.store.records import open_for_records
-
-        store = open_for_records(args.store)
-    source, machine = _source(args)
-    with progress_bar("compensate") as progress:
-        result = WORKFLOW.function(
-            source, controller=args.controller, format=args.format,
-            conditions=args.conditions, at_hours=args.at_hours, at_date=args.at_date,
-            machine=machine, axis=args.axis, spacing=args.spacing,
-            reference_mm=args.reference_mm, fanuc_unit_um=args.fanuc_unit_um,
-            active=args.active, sign=args.sign, verify=args.verify,
-            uncertainty=args.uncertainty, progress=progress)
-    result.write(args.out)
+    result = run_job("compensate", args, "compensate", data=args.source,
+                     controller=args.controller, format=args.format,
+                     conditions=args.conditions, at_hours=args.at_hours, at_date=args.at_date,
+                     axis=args.axis, spacing=args.spacing, reference_mm=args.reference_mm,
+                     fanuc_unit_um=args.fanuc_unit_um, active=args.active, sign=args.sign,
+                     verify=args.verify, uncertainty=args.uncertainty, out=args.out,
+                     store=args.store)
     print("\n".join(result.summary()), file=sys.stderr)
-    if store is not None:  # after writing: the record names the files written
-        from pipeline.store.records import record_compensation
-
-        print(record_compensation(store, result).text, file=sys.stderr)
+    if result.recorded is not None:
+        print(result.recorded.text, file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return 0 if result.passed else 3
-
-
-def _source(args):
-    """(DATA, machine): a model directory as given with the machines --machine selects of a
-    wear map (--axis is passed on as it is), else the selected readings and None (--at-hours
-    and --at-date apply to a model only)."""
-    import os
-
-    from features.readings.errors import InputError
-    from pipeline.commands.data import readings_arg, selected
-    from pipeline.store import is_store
-
-    if not os.path.isdir(args.source) or is_store(args.source):
-        for option in ("at_hours", "at_date"):
-            if getattr(args, option) is not None:
-                raise InputError(f"--{option.replace('_', '-')}: applies to a wear-map model "
-                                 f"directory; {args.source} holds readings")
-        return readings_arg(args, "source"), None
-    given = selected(args, skip=("axis", "machine"))
-    if given:
-        raise InputError(f"--{next(iter(given))} selects tests of readings; {args.source} is a "
-                         "model directory")
-    return args.source, selected(args).get("machine")

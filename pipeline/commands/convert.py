@@ -45,18 +45,15 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.errors import InputError
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.convert import convert
+    from pipeline.commands.data import run_job
 
     # realpath, not Path.resolve: a symbolic-link loop is the reader's one-line error
     if os.path.realpath(args.out) == os.path.realpath(args.file):
         raise InputError("--out is the input file; expected a new file name (the original "
                          "is kept)", file=args.out)
-    data = readings_arg(args, "file")
-    # a frame (a store, or a file with filters) was read with the raw log's options already
-    raw = ((args.channels, args.reference_scale, args.unit) if isinstance(data, str)
-           else (None, None, None))
-    result = convert(data, args.out, args.format, *raw)
+    result = run_job("convert", args, data=args.file, out=args.out, format=args.format,
+                     channels=args.channels, reference_scale=args.reference_scale,
+                     unit=args.unit)
     print(f"{len(result.readings)} readings in {result.tests} tests -> {args.out}",
           file=sys.stderr)
     return 0

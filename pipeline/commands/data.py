@@ -1,6 +1,7 @@
 """The DATA of every command that reads readings: a readings file or a fleet store, ``--format``
 and the test filters (one option per record of ``features.readings.selection.FILTERS``),
-declared here once; and the data options of the model commands (train, compare, tune)."""
+declared here once; the data options of the model commands (train, compare, tune); and
+``run_job``, how every command runs its job with them (``pipeline.runner``)."""
 
 from __future__ import annotations
 
@@ -31,31 +32,26 @@ def add_readings_argument(parser: argparse.ArgumentParser, dest: str = "data",
             group.add_argument(f"--{f.name}", metavar=f.metavar, help=f.help)
 
 
-def readings_arg(args, dest: str = "data"):
-    """What a workflow gets as DATA: the path as given for a readings file without filters
-    (the workflow reads it), else the validated frame of the store or file with only the
-    selected tests (a store's URL without its password as ``attrs["source"]``); a list of
-    them when the argument took several inputs."""
-    value = getattr(args, dest)
-    if isinstance(value, list):
-        inputs = [_input(one, args) for one in value]
-        return inputs[0] if len(inputs) == 1 else inputs
-    return _input(value, args)
+def run_job(job: str, args, progress: str | None = None, **params):
+    """Run ``job`` through the one runner (``pipeline.runner.run``) with ``params``, the test
+    selection given on the command line (``--machine``, ``--axis``, ``--since``, ``--until``)
+    and ``--no-track``; ``progress`` names a progress bar to draw."""
+    from pipeline.runner import run
+
+    params = {**selected(args), **params}
+    params["track"] = not getattr(args, "no_track", False)
+    if progress is None:
+        return run(job, **params)
+    from pipeline.commands.common import progress_bar
+
+    with progress_bar(progress) as bar:
+        return run(job, progress=bar, **params)
 
 
-def _input(value: str, args):
-    import os
-
-    from pipeline.store import is_store
-
-    filters = selected(args)
-    if not filters and not (is_store(value) or os.path.isdir(value)):
-        return value
-    from pipeline.workflows.convert import read
-
-    # a raw log's options (``backlash convert --channels``) go to its reader
-    raw = {name: getattr(args, name, None) for name in ("channels", "reference_scale", "unit")}
-    return read(value, args.format, **filters, **raw)
+def one_or_all(inputs: list):
+    """An argument that takes several inputs (``nargs="+"``) as the workflow takes it: the
+    one input, or the list."""
+    return inputs[0] if len(inputs) == 1 else inputs
 
 
 def selected(args, skip: tuple[str, ...] = ()) -> dict:

@@ -25,14 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.discover import discover
+    from pipeline.commands.data import run_job
 
-    tracking.check_uri()
-    result = discover(readings_arg(args), format=args.format, baseline=args.baseline, seed=args.seed)
-    result.write(args.out)
-    tracking.log_result(result)
+    result = run_job("discover", args, data=args.data, out=args.out, format=args.format,
+                     baseline=args.baseline, seed=args.seed)
     unit = result.discovery.unit
     for step in result.steps:
         print(f"named {step.effect} {step.parameters}: gap {step.rmse_before_um:.3f} -> "

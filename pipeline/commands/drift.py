@@ -38,30 +38,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
-
     from features.readings.errors import InputError
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.background_run import BackgroundRun
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.drift import drift
+    from pipeline.commands.data import run_job
 
     if args.out is None and not args.json:  # before any work
         raise InputError("give the report folder (--out) or --json", parameter="out")
-    tracking.check_uri()
-    with BackgroundRun("drift", tracking.log_into) as mlflow_run:
-        result = drift(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
-                       threshold_arcsec=args.threshold_arcsec, limits=args.limits,
-                       as_of=args.as_of,
-                       model=args.model, warn_months=args.warn_months, alpha=args.alpha,
-                       min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty,
-                       evidence=args.evidence, store=args.store)
-        mlflow_run.start(result.run_name)  # the input is valid: the run may start
-        if args.out is not None:
-            result.write(args.out)
-        mlflow_run.log(tracking.record_data(result.tracking_record()))
-        mlflow_run.finish()
+    result = run_job("drift", args, data=args.data, out=args.out, format=args.format,
+                     threshold_um=args.threshold_um, threshold_arcsec=args.threshold_arcsec,
+                     limits=args.limits, as_of=args.as_of, model=args.model,
+                     warn_months=args.warn_months, alpha=args.alpha,
+                     min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty,
+                     evidence=args.evidence, store=args.store)
     print_summary(result.series, result.files.get("html"), file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

@@ -33,31 +33,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
-
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.background_run import BackgroundRun
+    from pipeline.commands.data import run_job
 
-    tracking.check_uri()
-    with BackgroundRun("fleet", tracking.log_into) as mlflow_run:
-        from pipeline.commands.data import readings_arg
-        from pipeline.store import is_store
-        from pipeline.workflows.fleet import fleet
-
-        result = fleet(readings_arg(args), format=args.format, threshold_um=args.threshold_um,
-                       threshold_arcsec=args.threshold_arcsec, limits=args.limits,
-                       as_of=args.as_of,
-                       interval_days=args.interval_days, warn_months=args.warn_months,
-                       alpha=args.alpha, min_jump_sigma=args.min_jump_sigma, out=args.out,
-                       store=args.data if is_store(args.data) else None)
-        record = result.tracking_record()
-        mlflow_run.start(record.run_name)  # the input is valid: the run may start
-        mlflow_run.log(tracking.record_data(record))
-        print_summary(result, file=sys.stderr)
-        if args.json:
-            print(dumps(result.to_json()))
-        mlflow_run.finish()
+    result = run_job("fleet", args, data=args.data, format=args.format,
+                     threshold_um=args.threshold_um, threshold_arcsec=args.threshold_arcsec,
+                     limits=args.limits, as_of=args.as_of, interval_days=args.interval_days,
+                     warn_months=args.warn_months, alpha=args.alpha,
+                     min_jump_sigma=args.min_jump_sigma, out=args.out)
+    print_summary(result, file=sys.stderr)
+    if args.json:
+        print(dumps(result.to_json()))
     return ALERT_EXIT if result.alerts else 0
 
 

@@ -24,15 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.commands.common import progress_bar
-    from pipeline.workflows.hidden_effects import hidden_effects
+    from pipeline.commands.data import run_job
 
-    tracking.check_uri()
-    with progress_bar("scenarios") as progress:
-        result = hidden_effects(args.scenarios, seeds=args.seeds, progress=progress)
-    result.write(args.out)
-    tracking.log_result(result)
+    result = run_job("hidden-effects", args, "scenarios", scenarios=args.scenarios,
+                     seeds=args.seeds, out=args.out)
     score = result.score
     print(result.by_design.to_string(index=False), file=sys.stderr)
     print(f"named correctly {score['named_correctly']}/{score['hidden_scenarios']} "

@@ -23,13 +23,10 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.commands.common import progress_bar
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.ingest import ingest
+    from pipeline.commands.data import one_or_all, run_job
 
-    files = readings_arg(args, "files")  # frames when --machine/--axis/... name or select
-    with progress_bar("ingest") as progress:
-        result = ingest(files, args.store, format=args.format, progress=progress)
+    result = run_job("ingest", args, "ingest", files=one_or_all(args.files), store=args.store,
+                     format=args.format)
     for f in result.inputs:
         print(f"{f['file']}: {f['tests']} tests, {f['readings']} readings: {f['added']} added, "
               f"{f['unchanged']} already stored", file=sys.stderr)

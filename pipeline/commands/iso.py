@@ -37,13 +37,13 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.errors import InputError
     from features.readings.fileio import dumps
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.iso import iso
+    from pipeline.commands.data import one_or_all, run_job
 
     if args.plot and not args.plot.lower().endswith(".png"):  # refused before any reading
         raise InputError("expected a .png file name", file=args.plot, parameter="path")
-    result = iso(readings_arg(args, "file"), args.format, args.drop_outliers, uncertainty=args.uncertainty,
-                 standard=args.standard)
+    result = run_job("iso", args, data=one_or_all(args.file), format=args.format,
+                     drop_outliers=args.drop_outliers, uncertainty=args.uncertainty,
+                     standard=args.standard)
     if args.plot:
         result.plot(args.plot)
     print(result.table(), file=sys.stderr)

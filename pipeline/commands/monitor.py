@@ -8,7 +8,7 @@ from pipeline.workflows.monitor import WORKFLOW
 
 HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
-FLAGS = {"traces": "TRACE"}
+FLAGS = {"traces": "TRACE", "format": "--log-format"}
 ALERT_EXIT = 3
 
 
@@ -31,8 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fleet store (folder or postgresql:// URL) to record the daily lost motion "
                              "in (docs/fleet.md)")
     parser.add_argument("--json", action="store_true", help="print the axes as JSON")
-    raw = parser.add_argument_group("raw controller logs (--format camonitor or halsampler)")
-    raw.add_argument("--format", choices=("trace", "camonitor", "halsampler"), default="trace",
+    raw = parser.add_argument_group("raw controller logs (--log-format camonitor or halsampler)")
+    raw.add_argument("--log-format", choices=("trace", "camonitor", "halsampler"),
+                     default="trace",
                      help="what TRACE is: trace tables (default) or a raw log per machine axis")
     raw.add_argument("--channels", metavar="MAP",
                      help="commanded=PV,motor=PV,load=PV (halsampler: field numbers or pins)")
@@ -46,14 +47,13 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.workflows.monitor import monitor
+    from pipeline.commands.data import run_job
 
-    result = monitor(args.traces, engine=args.engine, address=args.address,
-                     threshold_um=args.threshold_um, take_up_mm=args.take_up_mm,
-                     store=args.store, format=args.format, channels=args.channels,
-                     machine=args.machine, axis=args.axis, period_s=args.period_s)
-    if args.out:
-        result.write(args.out)
+    result = run_job("monitor", args, traces=args.traces, engine=args.engine,
+                     address=args.address, threshold_um=args.threshold_um,
+                     take_up_mm=args.take_up_mm, store=args.store, format=args.log_format,
+                     channels=args.channels, machine=args.machine, axis=args.axis,
+                     period_s=args.period_s, out=args.out)
     print_summary(result, file=sys.stderr)
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)

@@ -27,13 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from features.readings.errors import InputError
     from features.readings.fileio import dumps
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.predict import predict
+    from pipeline.commands.data import run_job
 
     if not str(args.out).lower().endswith(".csv"):  # before any work
         raise InputError("expected a .csv file name", file=args.out, parameter="out")
-    result = predict(args.model, readings_arg(args), format=args.format, store=args.store)
-    result.write(args.out)
+    result = run_job("predict", args, model=args.model, data=args.data, format=args.format,
+                     store=args.store, out=args.out)
     out = result.predictions
     for unit, part in (out.groupby("unit", sort=False) if "unit" in out else [("um", out)]):
         print(f"{len(part)} points, backlash {part['backlash_um'].min():.2f}-"

@@ -47,19 +47,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.commands.common import progress_bar
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.rank import rank
+    from pipeline.commands.data import run_job
 
-    tracking.check_uri()
-    with progress_bar("rank") as progress:
-        result = rank(readings_arg(args), format=args.format, model=args.model, bins=args.bins,
-                      features=parse_features(args.features), target=args.target, k=args.k,
-                      rank_by=args.rank_by, boot=args.boot, dropcolumn=not args.no_dropcolumn,
-                      seed=args.seed, progress=progress)
-    result.write(args.out)
-    tracking.log_result(result)
+    result = run_job("rank", args, "rank", data=args.data, out=args.out, format=args.format,
+                     model=args.model, bins=args.bins, features=parse_features(args.features),
+                     target=args.target, k=args.k, rank_by=args.rank_by, boot=args.boot,
+                     dropcolumn=not args.no_dropcolumn, seed=args.seed)
     print_table(result, result.files["html"], file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

@@ -27,14 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from pipeline.commands.common import progress_bar
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.replicate import replicate
+    from pipeline.commands.data import run_job
 
-    with progress_bar("replicate") as progress:
-        result = replicate(readings_arg(args), format=args.format, truth=args.truth, boot=args.boot,
-                           seed=args.seed, progress=progress)
-    paths = result.write(args.out)
+    result = run_job("replicate", args, "replicate", data=args.data, format=args.format,
+                     truth=args.truth, boot=args.boot, seed=args.seed, out=args.out)
     print(result.markdown(), file=sys.stderr)
-    print(f"report: {paths['html']}", file=sys.stderr)
+    print(f"report: {result.files['html']}", file=sys.stderr)
     return 0

@@ -35,12 +35,12 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.report import report
+    from pipeline.commands.data import one_or_all, run_job
 
-    result = report(readings_arg(args, "files"), args.format, args.drop_outliers,
-                    uncertainty=args.uncertainty, standard=args.standard, meta=args.meta)
-    for role, path in result.write(args.out).items():
+    result = run_job("report", args, data=one_or_all(args.files), format=args.format,
+                     drop_outliers=args.drop_outliers, uncertainty=args.uncertainty,
+                     standard=args.standard, meta=args.meta, out=args.out)
+    for role, path in result.files.items():
         print(f"{role}: {path}", file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

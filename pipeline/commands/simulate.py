@@ -34,8 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.traces:
         return run_traces(args)
-    result = WORKFLOW.function(config=args.config, preset=args.preset, seed=args.seed)
-    result.write(args.out)
+    from pipeline.commands.data import run_job
+
+    result = run_job("simulate", args, config=args.config, preset=args.preset, seed=args.seed,
+                     out=args.out)
     if args.json:
         from features.readings.fileio import dumps
 

@@ -26,9 +26,9 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.workflows.store import check_store
+    from pipeline.commands.data import run_job
 
-    result = check_store(args.store, repair=args.repair)
+    result = run_job("store", args, store=args.store, repair=args.repair)
     if args.json:
         print(dumps(result.to_json()))
     else:

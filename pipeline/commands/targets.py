@@ -26,13 +26,10 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.targets import targets
+    from pipeline.commands.data import run_job
 
-    result = targets(readings_arg(args), format=args.format, target=args.target,
-                     uncertainty=args.uncertainty)
-    if args.out:
-        result.write(args.out)
+    result = run_job("targets", args, data=args.data, format=args.format, target=args.target,
+                     uncertainty=args.uncertainty, out=args.out)
     print(f"{len(result.points)} points in {result.unit}, target {result.target_kind}: "
           f"{result.target_reason}", file=sys.stderr)
     print(result.table(max_rows=TABLE_ROWS), file=sys.stderr)

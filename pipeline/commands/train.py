@@ -7,6 +7,7 @@ import sys
 
 from pipeline.commands.data import add_data_arguments
 
+REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.REGISTERED_NAME
 HELP = ("Train a backlash predictor on paired tests and save it (default: the recommended "
         "model).")
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
@@ -26,33 +27,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
+    from pipeline.commands.data import data_params, run_job
 
-    from pipeline import tracking
-    from pipeline.background_run import BackgroundRun, BackgroundTask
-    from pipeline.commands.data import data_params, readings_arg
-
-    tracking.check_uri()
-    with BackgroundRun("train", tracking.log_into, tracking.prepare_model_logging) as mlflow_run:
-        from pipeline.workflows.train import train
-
-        result = train(readings_arg(args), model=args.model, split=args.split,
-                       uncertainty=args.uncertainty, **data_params(args))
-        mlflow_run.start(f"train {result.model}")  # the input is valid: the run may start
-        print(f"{result.n_points} backlash points, target {result.target_kind}: "
-              f"{result.target_reason}", file=sys.stderr)
-        model_dir = result.save(args.out)
-        # A second child draws the figures while this process scores the backtest for the
-        # model's record and the MLflow child logs and registers the model.
-        with BackgroundTask(lambda: [str(p) for p in result.draw()]) as drawing:
-            mlflow_run.log(tracking.record_data(result.tracking_record()))
-            result.drawn(drawing.result())
-        mlflow_run.log(tracking.record_data(result.figures_record()))
-        logged = mlflow_run.finish()
+    result = run_job("train", args, data=args.data, out=args.out, model=args.model,
+                     split=args.split, uncertainty=args.uncertainty, **data_params(args))
+    print(f"{result.n_points} backlash points, target {result.target_kind}: "
+          f"{result.target_reason}", file=sys.stderr)
     print_metrics(result.model, result.metrics, file=sys.stderr)
-    print(f"model -> {model_dir}/; MLflow run {logged['run_id']}, "
-          f"{tracking.REGISTERED_NAME} v{logged['version']}"
-          f"{' (champion)' if logged['champion'] else ''}", file=sys.stderr)
+    logged = result.tracking
+    tracked = (f"; MLflow run {logged['run_id']}, {REGISTERED_NAME} v{logged['version']}"
+               f"{' (champion)' if logged['champion'] else ''}" if logged else "")
+    print(f"model -> {result.files['model']}/{tracked}", file=sys.stderr)
     return 0
 
 

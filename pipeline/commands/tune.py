@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                 "(default 30)")
     parser.add_argument("--storage", help="Optuna storage URL, e.g. postgresql://user@host/db "
                                           "(default: sqlite:///optuna.db)")
-    parser.add_argument("--study", default="backlash-network", help="study name")
+    parser.add_argument("--study", help="study name (default backlash-network-<the first 12 "
+                                        "hex digits of the data's SHA-256>: one study per data)")
     parser.add_argument("--workers", type=int, default=1,
                         help="worker processes sharing the study (default 1)")
     parser.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
@@ -32,18 +33,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline import tracking
-    from pipeline.commands.common import parse_features, progress_bar
-    from pipeline.commands.data import readings_arg
-    from pipeline.workflows.tune import tune
+    from pipeline.commands.common import parse_features
+    from pipeline.commands.data import run_job
 
-    tracking.check_uri()
-    with progress_bar("trials") as progress:
-        result = tune(readings_arg(args), trials=args.trials, storage=args.storage, study=args.study,
-                      workers=args.workers, folds=args.folds, heartbeat_s=args.heartbeat_s,
-                      format=args.format, target=args.target,
-                      features=parse_features(args.features), seed=args.seed, track=True,
-                      progress=progress)
+    result = run_job("tune", args, "trials", data=args.data, trials=args.trials,
+                     storage=args.storage, study=args.study, workers=args.workers,
+                     folds=args.folds, heartbeat_s=args.heartbeat_s, format=args.format,
+                     target=args.target, features=parse_features(args.features),
+                     seed=args.seed)
     others = ", ".join(f"{n} {state}" for state, n in sorted(result.trials.items())
                        if state != "complete")
     complete = result.trials.get("complete", 0)

@@ -25,9 +25,9 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.workflows.uncertainty import uncertainty
+    from pipeline.commands.data import run_job
 
-    result = uncertainty(args.budget, arithmetic=args.arithmetic)
+    result = run_job("uncertainty", args, budget=args.budget, arithmetic=args.arithmetic)
     if args.json:
         print(dumps(result.to_json()))
     else:

@@ -25,10 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline.workflows.void import void
+    from pipeline.commands.data import run_job
 
-    result = void(args.store, machine=args.machine, axis=args.axis, visit=args.visit,
-                  test_id=args.test_id, reason=args.reason, undo=args.undo)
+    result = run_job("void", args, store=args.store, machine=args.machine, axis=args.axis,
+                     visit=args.visit, test_id=args.test_id, reason=args.reason, undo=args.undo)
     if args.json:
         print(dumps(result.to_json()))
     return 0

@@ -26,11 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
+    from pipeline.commands.data import run_job
     from pipeline.workflows.volumetric import PAPER_TABLE1
 
-    result = WORKFLOW.function(seed=args.seed, targets=args.targets)
-    if args.out:
-        result.write(args.out)
+    result = run_job("volumetric", args, seed=args.seed, targets=args.targets, out=args.out)
     if args.json:
         print(dumps(result.to_json()))
         return 0

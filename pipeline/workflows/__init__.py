@@ -32,13 +32,15 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
     Raises
     ------
     InputError
-        Naming the first parameter that breaks its constraint (``.parameter`` is its name).
+        Naming the first parameter that breaks its constraint, or that has none (no name is
+        skipped); ``.parameter`` is its name.
     """
     from pipeline.workflows import constraints as light
 
     for name, value in values.items():
-        if name not in constraints:
-            continue
+        if name not in constraints:  # never skipped: a parameter without a constraint
+            raise InputError(f"is not a parameter of {caller}; expected one of "
+                             f"{', '.join(constraints)}", parameter=name)
         given = constraints[name]
         if isinstance(value, bool) and not light.takes_bool(given):
             message = light.must_be(given, value, name, caller)
@@ -96,6 +98,16 @@ class Constraints(Mapping):
 
     def __len__(self):
         return len(self._built())
+
+
+def readings_data() -> list:
+    """The constraint of a workflow's readings ``data``: a readings file or a fleet store (a
+    path or a ``postgresql://`` URL), or a readings frame."""
+    import os
+
+    import pandas as pd
+
+    return [str, os.PathLike, pd.DataFrame]
 
 
 def each_once(names: list, parameter: str) -> list:
@@ -196,12 +208,16 @@ class Workflow:
     inputs : tuple of str
         Parameters that name files or folders to read (an experiment resolves them against
         its own folder and checks they exist).
+    tracked : bool
+        The result is logged to MLflow (``tracking_record``) when the runner tracks
+        (``pipeline.runner``).
     """
 
     name: str
     function: object
     summary: str
     inputs: tuple[str, ...] = ()
+    tracked: bool = False
 
 
 def workflow(name: str) -> Workflow:

@@ -292,4 +292,4 @@ WORKFLOW = Workflow(
     name="compare", function=compare,
     summary="Train every predictor (network, physics baselines, comparators) on one split; "
             "compare.",
-    inputs=("data", "truth"))
+    inputs=("data", "truth"), tracked=True)

@@ -237,10 +237,11 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
         operating hours with the axis's usage rate when the model records it (``model.json``
         key ``usage``); otherwise an ``InputError`` asks for ``at_hours``.
     machine : str or list of str, optional
-        A wear map that knows several machine axes: only these machines' axes.
+        Only these machines: their tests of readings, or their axes of a wear map that knows
+        several machine axes.
     axis : str, optional
-        Axis name of a predictor (default "X"); for a wear map that knows its machine axes,
-        only these axes.
+        Only this axis: its tests of readings, or its axes of a wear map that knows its
+        machine axes; the axis a predictor's table is for (default "X").
     spacing : float, optional
         Table spacing of equidistant formats [mm]; default: equidistant targets as they are,
         else a quarter of the smallest target interval rounded down to 1/2/2.5/5 x 10^k.
@@ -395,6 +396,7 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
     ``at_hours``, ``at_date``, ``machine``, ``axis`` of ``compensate``)."""
     import pandas as pd
 
+    from features.readings.selection import selection
     from pipeline.compensation.profile import measured_profiles
     from pipeline.store import is_store
 
@@ -408,14 +410,16 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
 
             data = load_model(data)
         return _predicted(data, conditions, spacing, **ahead)
-    given = [k for k in ("at_hours", "at_date", "machine") if ahead[k] is not None]
+    given = [k for k in ("at_hours", "at_date") if ahead[k] is not None]
     if conditions or given:
-        raise InputError("applies to a model directory, not to measured tests",
-                         parameter=given[0] if given else "conditions")
+        raise InputError(f"applies to a {'wear-map ' if given else ''}model directory, not to "
+                         "measured tests", parameter=given[0] if given else "conditions")
     if verify and not is_path:
         raise InputError("needs the twin's readings file (parameters.json beside it), not a "
                          "frame", parameter="verify")
-    return measured_profiles(readings_of(data, format))
+    # measured tests: machine and axis select them, as in every job
+    chosen = selection(machine=ahead["machine"], axis=ahead["axis"])
+    return measured_profiles(readings_of(data, format, selection=chosen))
 
 
 def _predicted(model, conditions, spacing, at_hours, at_date, machine, axis) -> list:

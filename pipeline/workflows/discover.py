@@ -23,9 +23,11 @@ DEFAULT_BASELINE = "backlash,lead_error_linear"
 def _parameters() -> dict:
     """The constraints of ``discover``'s parameters (scikit-learn's constraint language),
     built on first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
     from pipeline.workflows.constraints import Interval, StrOptions
 
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "baseline": [str, list, tuple],
         "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
@@ -161,4 +163,4 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
 WORKFLOW = Workflow(
     name="discover", function=discover, inputs=("data",),
     summary=("Find where simulation and measurement disagree, name the missing physical "
-             "effect, add it and show the gap shrink."))
+             "effect, add it and show the gap shrink."), tracked=True)

@@ -24,9 +24,11 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of,
 def _parameters() -> dict:
     """The constraints of ``drift``'s parameters (scikit-learn's constraint language, checked
     without importing scikit-learn: drift fits no estimator)."""
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
     from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
         "threshold_arcsec": [Interval(Real, 0, None, closed="neither"), None],
@@ -299,4 +301,4 @@ WORKFLOW = Workflow(
     name="drift", function=drift, inputs=("data", "model", "uncertainty"),
     summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
              "it crosses a threshold, and (with --model) residual and input drift of a trained "
-             "model. Exit 3 when an alert fires."))
+             "model. Exit 3 when an alert fires."), tracked=True)

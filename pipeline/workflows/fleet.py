@@ -59,7 +59,10 @@ def _parameters() -> dict:
     from pipeline.workflows.constraints import Interval, StrOptions
 
     positive = Interval(Real, 0, None, closed="neither")
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
+
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "threshold_um": [positive, None],
         "threshold_arcsec": [positive, None],
@@ -764,4 +767,4 @@ WORKFLOW = Workflow(
     name="fleet", function=fleet, inputs=("data",),
     summary=("One view of the fleet: every machine axis's backlash now, trend, change points, "
              "threshold crossing and next visit due, worst first, with a static site (--out). "
-             "Exit 3 when an alert fires."))
+             "Exit 3 when an alert fires."), tracked=True)

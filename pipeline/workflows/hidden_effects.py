@@ -123,4 +123,4 @@ def _reported(scenarios: list, progress: Progress | None):
 
 WORKFLOW = Workflow(
     name="hidden-effects", function=hidden_effects, inputs=("scenarios",),
-    summary="Benchmark the missing-effect workflow on twin data in which effects were hidden.")
+    summary="Benchmark the missing-effect workflow on twin data in which effects were hidden.", tracked=True)

@@ -23,9 +23,11 @@ from pipeline.workflows import Constraints, Workflow, check_params, readings_of,
 def _parameters() -> dict:
     """The constraints of ``rank``'s parameters (scikit-learn's constraint language), built on
     first use: the CLI reads the workflow records on every start."""
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
     from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "model": [str, os.PathLike, HasMethods(["predict"]), None],
         "bins": [Interval(Integral, 2, None, closed="left"), str, "array-like"],
@@ -254,4 +256,4 @@ WORKFLOW = Workflow(
     name="rank", function=rank, inputs=("data", "model"),
     summary=("Which inputs drive backlash given the others (driver with its effect in um, "
              "proxy, none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
-             "permutation importance, mutual information); writes an HTML report."))
+             "permutation importance, mutual information); writes an HTML report."), tracked=True)

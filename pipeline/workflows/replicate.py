@@ -24,9 +24,11 @@ def _parameters() -> dict:
     built on first use: the CLI reads the workflow records on every start."""
     import pandas as pd
 
+    from pipeline.workflows import readings_data  # the data of every job that reads readings
     from pipeline.workflows.constraints import Interval, StrOptions
 
     return {
+        "data": readings_data(),
         "format": [StrOptions(set(schema.FORMATS))],
         "truth": [str, os.PathLike, pd.DataFrame, None],
         "boot": [Interval(Integral, 0, None, closed="left")],

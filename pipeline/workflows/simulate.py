@@ -29,8 +29,9 @@ def _parameters() -> dict:
 
     seed = Interval(Integral, 0, MAX_SEED, closed="both")
     return {"config": [str, os.PathLike, dict, Campaign, None],
+            "compensation": [dict, None],
             "preset": [str, None],  # checked against the shipped presets by ``load_config``
-            "seed": [seed], "session_seed": [seed, None], "compensation": [dict, None]}
+            "seed": [seed], "session_seed": [seed, None]}
 
 
 PARAMETERS = Constraints(_parameters)

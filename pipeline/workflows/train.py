@@ -258,4 +258,4 @@ WORKFLOW = Workflow(
     name="train", function=train,
     summary="Train a backlash predictor on paired tests and save it (default: the recommended "
             "model).",
-    inputs=("data", "truth", "uncertainty"))
+    inputs=("data", "truth", "uncertainty"), tracked=True)

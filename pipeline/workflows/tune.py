@@ -19,11 +19,12 @@ from pipeline.steps.model_data import DATA_PARAMETERS, model_data
 from pipeline.workflows import Workflow, check_params
 from pipeline.workflows.constraints import Interval
 
+DEFAULT_STUDY = "backlash-network"  # the default study name: this, then the data's digest
 PARAMETERS = {
     **{k: v for k, v in DATA_PARAMETERS.items() if k != "truth"},
     "trials": [Interval(Integral, 1, None, closed="left")],
     "storage": [str, None],
-    "study": [str],
+    "study": [str, None],
     "workers": [Interval(Integral, 1, None, closed="left")],
     "folds": [Interval(Integral, 2, None, closed="left")],
     "heartbeat_s": [Interval(Integral, 1, None, closed="left")],
@@ -63,7 +64,8 @@ class TuneResult(Result):
 
     def to_json(self) -> dict:
         return {"best_params": self.best_params, "best_cv_rmse_um": self.best_cv_rmse_um,
-                "best_trial": self.best_trial, "trials": self.trials,
+                "best_trial": self.best_trial, "study": self.params.get("study"),
+                "trials": self.trials,
                 "completed_this_run": self.completed_this_run,
                 "marked_failed": self.marked_failed}
 
@@ -118,7 +120,7 @@ class TrialLogger:
 
 
 def tune(data, *, trials: int = 30, storage: str | None = None,
-         study: str = "backlash-network", workers: int = 1, folds: int = 5,
+         study: str | None = None, workers: int = 1, folds: int = 5,
          heartbeat_s: int = 10, format: str = "auto", target: str = "auto",
          features: list[str] | None = None, seed: int = 0, track: bool = False,
          progress: Progress | None = None) -> TuneResult:
@@ -134,8 +136,11 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
         Optuna storage URL (``sqlite:///FILE``, ``postgresql://USER@HOST/DB``); default
         ``optuna.db`` in the tracking folder (``pipeline.tracking.study_storage``: the working
         directory unless ``BACKLASH_TRACKING_DIR`` names another).
-    study : str
-        Study name; a study that exists is continued.
+    study : str, optional
+        Study name; a study that exists is continued (a note says so, with its trials).
+        Default ``backlash-network-<digest>``, ``<digest>`` the first 12 hex digits of the
+        data's SHA-256 (``data_sha256``): two data sets never share a study, and a rotary
+        campaign's trials [arcsec] are never ranked with a linear one's [um].
     workers : int
         Worker processes sharing the study.
     folds : int
@@ -167,9 +172,13 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     if len(table.y) < 2 * folds:
         raise InputError(f"{len(table.y)} backlash points are too few for {folds}-fold "
                          "cross-validation", file=loaded.source)
+    study = study or f"{DEFAULT_STUDY}-{loaded.digest[:12]}"
     tag = uuid.uuid4().hex[:12]
     opened = open_study(study, storage, seed, heartbeat_s)
     stale = tuning.fail_stale_trials(opened)
+    first_data = opened.user_attrs.get("data_sha256")
+    if first_data is None:  # the data the study began on: a later call on other data is told
+        opened.set_user_attr("data_sha256", loaded.digest)
     start = len(opened.trials)
     params = {"study": study, "storage": safe_url(storage), "trials": trials, "workers": workers,
               "folds": folds, "seed": seed, "data_sha256": loaded.digest,
@@ -192,6 +201,8 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
             result.logged = True
         if killed:
             notes.append(f"MLflow run(s) {', '.join(killed)} of killed searches ended as KILLED")
+    if start:
+        notes.append(resumed_note(study, start, first_data, loaded.digest))
     if stale:
         notes.append(f"trials {stale} had no heartbeat (their worker was killed): marked failed")
     result.notes = notes
@@ -244,6 +255,15 @@ def check_storage(url: str) -> str:
     return url
 
 
+def resumed_note(study: str, trials: int, first_data: str | None, digest: str) -> str:
+    """The note of a study continued: its trials before this call, and whether they were run
+    on other data (a name given explicitly to two data sets)."""
+    other = first_data is not None and first_data != digest
+    return (f"study {study!r} resumed with its {trials} earlier trials"
+            + (f", run on other data (sha256 {first_data[:12]}): their scores are ranked "
+               "with these" if other else ""))
+
+
 def open_study(name: str, storage: str, seed: int, heartbeat_s: int):
     """The named study; every call on it must use one heartbeat (the grace period is judged by
     the process that looks, so a shorter one would fail trials whose workers are alive)."""
@@ -293,4 +313,4 @@ WORKFLOW = Workflow(
     name="tune", function=tune,
     summary="Tune the network (hidden sizes, activation, trainer, regularisation) by "
             "cross-validation with Optuna.",
-    inputs=("data",))
+    inputs=("data",), tracked=True)

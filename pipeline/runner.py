@@ -1,0 +1,269 @@
+"""The one runner: every job runs through ``run(job, **params)``, whoever asks for it (the
+CLI's commands, experiment files, ``bl.<job>(...)``).
+
+The job itself is a pure workflow function (``pipeline.workflows``); what happens around it is
+done here, the same way for every entry point (kedro's runner and hooks):
+
+1. **parameters**: bound to the workflow's signature and checked against its table
+   (``PARAMETERS``; exact names: an unknown one is an error naming it, never skipped);
+2. **data selection**: ``machine``, ``axis``, ``since``, ``until`` select the tests of the
+   job's readings (``data``; ingest's ``files``) in every job (a workflow that declares one of them itself, as ``void`` and
+   ``compensate`` do, applies it itself);
+3. **tracking** (``track``): a tracked job (``Workflow.tracked``) logs its result's
+   ``tracking_record()`` to MLflow (parameters, metrics, artifacts, a model to register and
+   the champion alias) through ``pipeline.background_run``: from the ``backlash`` program the
+   MLflow child starts while the job computes; inside an active MLflow run (an experiment
+   file's) the record is logged as a nested run;
+4. **output**: ``out`` is written by ``result.write(out)`` (a workflow that takes ``out``
+   itself writes it);
+5. **store recording** (``store``): a job whose result is recorded in a fleet store
+   (``RECORDERS``: compensate) records it there after writing; the store is opened first,
+   so a bad store is refused before any work (a workflow that takes ``store`` itself, as
+   ``predict`` does, records it itself);
+6. **progress**: ``progress(done, total, what)`` goes to workflows that report it.
+
+Tracking default: ``TRACK = True``, for every entry point (the CLI's ``--no-track``,
+``track=False`` in Python and in an experiment step's ``with``): a tracked job logs what it
+did wherever it runs, so a model trained from Python is registered as one trained by the CLI.
+Only tracked jobs (train, compare, tune, rank, drift, fleet, discover, hidden-effects) touch
+MLflow; the others never import it.
+
+What the tracking gave (``run_id``; ``version`` and ``champion`` of a registered model) is
+``result.tracking``; a store's record line is ``result.recorded``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import sys
+
+from features.readings.errors import InputError
+from features.readings.selection import NAMES as SELECTION
+
+TRACK = True  # the one default of every entry point
+READINGS = ("data", "files")  # the parameter of a workflow that takes the readings
+RAW = ("channels", "reference_scale", "unit")  # a raw log's reader options (convert)
+
+
+def _record_compensation(store, result):
+    from pipeline.store.records import record_compensation
+
+    return record_compensation(store, result)
+
+
+# job -> function(store, result) recording the result in an open fleet store
+RECORDERS = {"compensate": _record_compensation}
+
+
+def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=None,
+        **params):
+    """Run job ``job`` with ``params``: the same work, tracking and records from every entry
+    point.
+
+    Parameters
+    ----------
+    job : str
+        A job name (``pipeline.workflows.NAMES``).
+    *args, **params
+        The workflow's parameters, by its Python names; ``machine``, ``axis``, ``since``,
+        ``until`` select the tests of its ``data``.
+    track : bool
+        Log a tracked job's result to MLflow (default ``TRACK``, True).
+    out : str or path-like, optional
+        Where the result writes its files.
+    store : str, path-like or Store, optional
+        Fleet store: the one a workflow takes, else where the result is recorded
+        (``RECORDERS``).
+    progress : callable, optional
+        ``progress(done, total, what)``, for the workflows that report progress.
+
+    Returns
+    -------
+    pipeline.results.Result
+        The workflow's result, with ``tracking`` (dict, empty when not tracked) and
+        ``recorded`` (the store's record, or None).
+    """
+    from pipeline.workflows import workflow
+
+    record = workflow(job)
+    if not isinstance(track, bool):
+        raise InputError(f"must be True or False; got {track!r}", parameter="track")
+    declared = inspect.signature(record.function).parameters
+    extra = {"out": out, "store": store, "progress": progress}
+    params.update({k: v for k, v in extra.items() if k in declared and v is not None})
+    nested = _active_run()
+    if "track" in declared:  # a workflow that logs while it runs (tune): not inside a run
+        params["track"] = track and not nested
+    bound = _bound(record, declared, args, params)
+    _checked(record, bound)
+    bound = _selected(job, declared, bound)
+    opened = _opened(job, declared, store)
+    with _tracking(record, track and not params.get("track"), nested) as tracking:
+        result = record.function(**bound)
+        tracking.write_and_log(result, None if "out" in declared else out)
+    result.tracking = tracking.logged
+    if opened is not None:
+        result.recorded = RECORDERS[job](opened, result)
+    elif not hasattr(result, "recorded"):  # a workflow that records (predict) says it itself
+        result.recorded = None
+    return result
+
+
+def _bound(record, declared, args: tuple, params: dict) -> dict:
+    """The keyword parameters of the call, bound to the workflow's signature: an unknown
+    name is an error naming it (nothing is skipped)."""
+    known = set(declared) | set(SELECTION)
+    for name in params:
+        if name not in known:
+            raise InputError(f"is not a parameter of {record.name}; expected one of "
+                             f"{', '.join(declared)}", parameter=name)
+    own = {k: v for k, v in params.items() if k in declared}
+    try:
+        bound = inspect.signature(record.function).bind(*args, **own)
+    except TypeError as err:
+        raise InputError(f"{record.name}: {err}") from None
+    chosen = {k: v for k, v in params.items() if k not in declared and v is not None}
+    return {**bound.arguments, **chosen}
+
+
+def _checked(record, bound: dict) -> None:
+    """Every parameter given, checked against the job's table (``PARAMETERS``) before any
+    work: the signature bound, no name skipped (the selection is checked as it is read)."""
+    from pipeline.workflows import check_params
+
+    table = sys.modules[f"pipeline.workflows.{record.name.replace('-', '_')}"].PARAMETERS
+    check_params(table, {k: v for k, v in bound.items()
+                         if k != "progress" and not (k in SELECTION and k not in table)},
+                 record.name)
+
+
+def _selected(job: str, declared, params: dict) -> dict:
+    """``machine``, ``axis``, ``since``, ``until`` not taken by the workflow itself: its
+    ``data`` read with only the selected tests (``pipeline.workflows.convert.read``)."""
+    chosen = {k: params.pop(k) for k in SELECTION if k in params and k not in declared}
+    if not chosen:
+        return params
+    name = next((n for n in READINGS if n in declared), None)
+    if name is None or params.get(name) is None:
+        raise InputError(f"selects tests of readings; {job} reads none",
+                         parameter=next(iter(chosen)))
+    data, fmt = params[name], params.get("format", "auto")
+    # a raw log's reader options (convert's) go to the reader: the workflow gets the frame
+    raw = {k: params.pop(k) for k in RAW if params.get(k) is not None}
+    if isinstance(data, (list, tuple)):
+        params[name] = [_select(one, fmt, chosen, raw) for one in data]
+    else:
+        params[name] = _select(data, fmt, chosen, raw)
+    return params
+
+
+def _select(data, format: str, chosen: dict, raw: dict):
+    import os
+
+    if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import is_store
+        from pipeline.workflows.convert import read
+
+        if os.path.isdir(data) and not is_store(data):  # a model directory (compensate's)
+            raise InputError(f"selects tests of readings; {data} is a folder, not a fleet "
+                             "store", parameter=next(iter(chosen)))
+        return read(data, format, **chosen, **raw)
+    from features.readings.selection import selection
+    from pipeline.workflows import readings_of
+
+    return readings_of(data, selection=selection(**chosen))
+
+
+def _opened(job: str, declared, store):
+    """The store a result is recorded in, opened before any work (a bad store is refused
+    first); None when nothing is recorded by the runner."""
+    if store is None or "store" in declared:
+        return None
+    if job not in RECORDERS:
+        raise InputError(f"{job} records nothing in a fleet store", parameter="store")
+    from pipeline.store.records import open_for_records
+
+    return open_for_records(store)
+
+
+class _Untracked:
+    """The tracking hook of a job that logs nothing: it only writes ``out``."""
+
+    def __enter__(self):
+        self.logged = {}
+        return self
+
+    def __exit__(self, *exc_info):
+        return None
+
+    def write_and_log(self, result, out) -> None:
+        if out is not None:
+            result.files = dict(result.write(out) or result.files)
+
+
+class _Tracked(_Untracked):
+    """Logs a result's ``tracking_record()`` into one MLflow run: in a background child from
+    the ``backlash`` program (forked as the job begins, so importing mlflow overlaps the
+    work), nested under an active run (an experiment's), else in this process."""
+
+    def __init__(self, job: str, nested: bool):
+        self.job, self.nested = job, nested
+
+    def __enter__(self):
+        import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
+
+        from pipeline import tracking
+        from pipeline.background_run import BackgroundRun
+
+        self.logged, self._tracking, self._run = {}, tracking, None
+        tracking.check_uri()
+        if not self.nested:
+            self._run = BackgroundRun(self.job, tracking.log_into,
+                                      tracking.prepare_model_logging if self.job == "train"
+                                      else None)
+        return self
+
+    def __exit__(self, *exc_info):
+        if self._run is not None:
+            self._run.close(*exc_info)
+
+    def write_and_log(self, result, out) -> None:
+        tracking = self._tracking
+        if self._run is None:  # inside an experiment's run
+            super().write_and_log(result, out)
+            self.logged = tracking.log_result(result, nested=True)
+            return
+        if out is not None and hasattr(result, "draw"):
+            return self._drawn_beside(result, out)
+        super().write_and_log(result, out)
+        record = result.tracking_record()
+        if record is None:
+            return
+        self._run.start(record.run_name)  # the input is valid: the run may start
+        self._run.log(tracking.record_data(record))
+        self.logged = self._run.finish()
+
+    def _drawn_beside(self, result, out) -> None:
+        """A result that saves and draws (train's): a second child draws the figures while
+        this process scores what the record needs and the MLflow child logs the model."""
+        from pipeline.background_run import BackgroundTask
+
+        tracking = self._tracking
+        result.save(out)
+        with BackgroundTask(lambda: [str(p) for p in result.draw()]) as drawing:
+            record = result.tracking_record()
+            self._run.start(record.run_name)
+            self._run.log(tracking.record_data(record))
+            result.drawn(drawing.result())
+        self._run.log(tracking.record_data(result.figures_record()))
+        self.logged = self._run.finish()
+
+
+def _tracking(record, track: bool, nested: bool):
+    return _Tracked(record.name, nested) if track and record.tracked else _Untracked()
+
+
+def _active_run() -> bool:
+    """An MLflow run is open in this process (an experiment file's): log nested in it."""
+    mlflow = sys.modules.get("mlflow")
+    return mlflow is not None and mlflow.active_run() is not None
