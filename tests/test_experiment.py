@@ -237,7 +237,7 @@ TUNE = pytest.mark.skipif(not _has_workflow("tune"), reason="no tune workflow")
     ('[[steps]]\njob = "rank"\n[steps.with]\ndata = true\n',
      "step 1 (rank): parameter 'data': expected a path (text) or a list of paths, got true"),
     ('[[steps]]\njob = "drift"\n[steps.with]\ndata = {a = 1}\n',
-     "step 1 (drift): parameter 'data': expected a path (text) or a list of paths, got a table"),
+     "step 1 (drift): parameter 'data': must be an instance of 'str', an instance of 'os.PathLike'"),
     (SIM + 'seed = true\n', ("step 1 (simulate): parameter 'seed': must be an int in the range "
      "[0, 4294967295]; got True")),
     (SIM + 'compensation = 5\n', ("step 1 (simulate): parameter 'compensation': must be an "
