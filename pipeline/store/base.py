@@ -149,8 +149,6 @@ class Store:
         InputError
             No stored test matches (none voided, with ``undo``); nothing is written.
         """
-        import getpass
-
         with self.transaction() as tx:
             keys = tx.matching(machine, axis, visit, test_id, voided=undo)
             if not keys:
@@ -163,7 +161,7 @@ class Store:
                                  file=self.location)
             tx.upgrade()
             tables.void_rows(tx.conn, tx.ENGINE, tx.MARK, keys, "undo" if undo else "void",
-                             tables.now(), getpass.getuser(), reason)
+                             tables.now(), _user(), reason)
             tx.commit()
         return keys
 
@@ -231,6 +229,18 @@ class Store:
                              f"{shown} and axes {', '.join(sorted({a for _, a in axes}))}",
                              file=self.location)
         return selection.apply(readings_frame(table, self.location), self.location)
+
+
+def _user() -> str:
+    """The operating-system user, for the audit table (a uid where no name is known, as in
+    some containers)."""
+    import getpass
+    import os
+
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return f"uid {os.getuid()}"
 
 
 def _check_same(digests, stored):
