@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import codecs
 import importlib
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -132,15 +131,12 @@ def _ecmc_signature(probe: Probe) -> bool:
     return probe.text is not None and ("TGT_DATA[" in probe.text or "REF_DATA_" in probe.text)
 
 
-# A camonitor line: PV name, date, time of day (``features.readings.camonitor``).
-_CAMONITOR_LINE = re.compile(r"\S+[ \t]+\d{4}-\d{2}-\d{2}[ \t]+\d{2}:\d{2}:\d{2}(\.\d+)?[ \t]+\S")
-
-
 def _camonitor_signature(probe: Probe) -> bool:
     if probe.text is None:
         return False
-    first = next((line for line in probe.text.splitlines() if line.strip()), "")
-    return bool(_CAMONITOR_LINE.match(first.strip()))
+    from features.readings.camonitor import looks_like_camonitor  # numeric: on use only
+
+    return looks_like_camonitor(probe.text)
 
 
 RECORDS: tuple[Layout, ...] = (

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from pipeline.results import ALERT_EXIT
 from pipeline.workflows.monitor import WORKFLOW
 
 HELP = WORKFLOW.summary
 OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 FLAGS = {"traces": "TRACE", "format": "--log-format"}
-ALERT_EXIT = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

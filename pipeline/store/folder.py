@@ -267,10 +267,7 @@ class FolderStore(Store):
             raise self._error(f"part {part} holds {table.num_rows} readings of its "
                               f"{len(tests)} tests, the manifest {expected}: the store is "
                               "damaged; run backlash store check")
-        machine, axis = tests[0][1], tests[0][2]
-        n = table.num_rows
-        table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
-        return table.append_column("axis", pa.array([axis] * n, pa.string()))
+        return _with_partition(table, tests[0][1], tests[0][2])
 
     def _read_part(self, part: str):
         """One part file as Arrow; a missing or damaged file is one line."""
@@ -445,7 +442,9 @@ class _FolderCheck:
         import pandas as pd
 
         self.store, self.conn, self.repair = store, conn, repair
-        self.parts = dict(conn.execute("SELECT part, readings FROM parts").fetchall())
+        # part -> (machine_id, axis, readings) as the manifest records it
+        self.parts = {p: (m, a, n) for p, m, a, n in conn.execute(
+            "SELECT part, machine_id, axis, readings FROM parts").fetchall()}
         self.tests = pd.DataFrame(conn.execute(
             f"SELECT {', '.join(KEYS)}, sha256, readings, part FROM tests").fetchall(),
             columns=[*KEYS, "sha256", "readings", "part"])
@@ -470,14 +469,10 @@ class _FolderCheck:
 
     def _read_parts(self) -> dict:
         """Part -> digest rows of the tests it holds (parts that cannot be read: problems)."""
-        import pyarrow as pa
-
         from pipeline.store.check import found_digests
 
-        machine_axis = dict(self.conn.execute("SELECT part, machine_id || char(31) || axis "
-                                              "FROM parts").fetchall())
         held = {}
-        for part, readings in self.parts.items():
+        for part, (machine, axis, readings) in self.parts.items():
             try:
                 table = self.store._read_part(part)
             except InputError as err:
@@ -486,11 +481,7 @@ class _FolderCheck:
             if table.num_rows != readings:
                 self._problem(f"part {part} holds {table.num_rows} readings, the manifest "
                               f"records {readings}")
-            machine, axis = machine_axis[part].split("\x1f")
-            n = table.num_rows
-            table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
-            table = table.append_column("axis", pa.array([axis] * n, pa.string()))
-            held[part] = found_digests(table)
+            held[part] = found_digests(_with_partition(table, machine, axis))
         return held
 
     def _unrecorded_files(self) -> None:
@@ -556,6 +547,16 @@ class _FolderCheck:
         self.conn.execute("DELETE FROM parts WHERE part = ?", (part,))
         with contextlib.suppress(FileNotFoundError):
             (self.store.root / DATA / part).unlink()
+
+
+def _with_partition(table, machine: str, axis: str):
+    """A part's table with its partition values (kept in the folder names, not the file) as
+    the ``machine_id`` and ``axis`` columns."""
+    import pyarrow as pa
+
+    n = table.num_rows
+    table = table.append_column("machine_id", pa.array([machine] * n, pa.string()))
+    return table.append_column("axis", pa.array([axis] * n, pa.string()))
 
 
 def _intact_elsewhere(tests, key: tuple, held: dict) -> bool:
