@@ -294,7 +294,7 @@ def test_drift_evidence_refusals(tmp_path, capsys):
 def test_a_day_recorded_twice_counts_once_the_latest_and_as_of_cuts_later_days():
     import datetime as dt
 
-    from pipeline.evidence import evidence_frame
+    from pipeline.steps.evidence import evidence_frame
 
     older = {**GOOD_TRACE, "recorded_at": "2026-03-02T10:00:00.000000Z"}
     newer = {**GOOD_TRACE, "lost_motion_um": 4.4, "source": "again.csv",

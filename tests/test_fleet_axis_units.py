@@ -16,7 +16,7 @@ from independent_fleet import fleet as independent
 import backlash as bl
 from features.readings.errors import BacklashWarning, InputError
 from pipeline.cli import main
-from pipeline.limits import read_limits
+from pipeline.steps.limits import read_limits
 from pipeline.workflows.drift import drift
 from pipeline.workflows.fleet import fleet
 

@@ -165,7 +165,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     threshold_arcsec : float, optional
         Backlash limit of the rotary axes [arcsec].
     limits : str, path or dict, optional
-        Limits per machine and axis, each in its axis's unit (``pipeline.limits``); an axis
+        Limits per machine and axis, each in its axis's unit (``pipeline.steps.limits``); an axis
         without one takes ``threshold_um`` or ``threshold_arcsec``.
     as_of : str, date or None, default today (UTC)
         The day the drift is computed as of (``YYYY-MM-DD``): given, the tests started by
@@ -213,13 +213,13 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
               "uncertainty": uncertainty, "evidence": evidence, "store": store}
     check_params(_parameters(), values, "drift")
-    from pipeline.evidence import sources_of
+    from pipeline.steps.evidence import sources_of
 
     sources = sources_of(evidence)
     values["evidence"] = ",".join(sources)
     records = _evidence_records(data if store is None else store, sources)
-    from pipeline.dated_view import as_of_date, dated_view
-    from pipeline.limits import read_limits
+    from pipeline.steps.dated_view import as_of_date, dated_view
+    from pipeline.steps.limits import read_limits
 
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
@@ -239,7 +239,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     k = None if budget is None else budget.coverage_factor
     offsets = {}
     if records is not None:
-        from pipeline.evidence import with_evidence
+        from pipeline.steps.evidence import with_evidence
 
         visits, offsets, more = with_evidence(visits, records, sources,
                                               None if as_of is None else day, k)
@@ -288,7 +288,7 @@ def _evidence_records(store, sources: tuple) -> dict | None:
     if sources == ("laser",):
         return None
     from features.readings.errors import InputError
-    from pipeline.evidence import read_evidence
+    from pipeline.steps.evidence import read_evidence
     from pipeline.store import is_store
 
     if not isinstance(store, (str, os.PathLike)) or not is_store(store):

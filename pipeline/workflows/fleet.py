@@ -121,7 +121,7 @@ class AxisView:
         the day the axis's hours reach them, ``for_date_estimated``); empty for a file.
     evidence : DataFrame or None
         The trace days and ballbar runs a fleet store recorded for the axis
-        (``pipeline.evidence.evidence_frame``: ``source``, ``date``, ``value_um``, ``u_um``
+        (``pipeline.steps.evidence.evidence_frame``: ``source``, ``date``, ``value_um``, ``u_um``
         [um], ``label``, ``plane``), up to the view's day; None for a file.
     offsets : dict
         Per source with points: its offset to the laser's backlash
@@ -228,7 +228,7 @@ class AxisView:
         file."""
         import pandas as pd
 
-        from pipeline.evidence import EVIDENCE_COLUMNS, evidence_json
+        from pipeline.steps.evidence import EVIDENCE_COLUMNS, evidence_json
 
         frame = (self.evidence if self.evidence is not None
                  else pd.DataFrame(columns=[*EVIDENCE_COLUMNS, "plane"]))
@@ -336,7 +336,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     threshold_arcsec : float, optional
         Backlash limit of the rotary axes [arcsec].
     limits : str, path or dict, optional
-        Limits per machine and axis, each in its axis's unit (``pipeline.limits``: a TOML
+        Limits per machine and axis, each in its axis's unit (``pipeline.steps.limits``: a TOML
         file ``[M01] X_um = 8.0, C_arcsec = 40.0`` or a dict of that shape); an axis without
         one takes ``threshold_um`` or ``threshold_arcsec``.
     as_of : str, date or None, default today (UTC)
@@ -375,8 +375,8 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
               "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
               "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
     check_params(_parameters(), values, "fleet")
-    from pipeline.dated_view import as_of_date, dated_view
-    from pipeline.limits import read_limits
+    from pipeline.steps.dated_view import as_of_date, dated_view
+    from pipeline.steps.limits import read_limits
 
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
@@ -473,7 +473,7 @@ def _view(s, parts: _Parts, interval_days: float, records: dict,
                     compensations=records.get("compensation", {}).get(key, []),
                     fleet_rate=fleet_rate, voided=records.get("voided", {}).get(key, []))
     if records:  # a store: the other evidence of the axis's backlash
-        from pipeline.evidence import axis_offsets, evidence_frame
+        from pipeline.steps.evidence import axis_offsets, evidence_frame
 
         view.evidence = evidence_frame(records, key, as_of)
         view.offsets, view.evidence_notes = axis_offsets(s.visits, view.evidence)
