@@ -142,9 +142,10 @@ def _show(caught: list[warnings.WarningMessage]) -> None:
 
 
 def _flag_namer(command: str):
-    """Python parameter -> the option that sets it: the command's ``FLAGS``, else ``--name``."""
-    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
-    flags = getattr(module, "FLAGS", {})
+    """Python parameter -> the option that sets it (``option_names``), else ``--name``."""
+    from pipeline.commands.common import option_names
+
+    flags = option_names(command)
     return lambda name: flags.get(name, f"--{name.replace('_', '-')}")
 
 

@@ -358,7 +358,7 @@ def test_the_command_module_is_ready_to_register():
 
     assert isinstance(WORKFLOW, Workflow) and WORKFLOW.name == "fleet"
     assert WORKFLOW.function is fleet and WORKFLOW.inputs == ("data",)
-    assert command.HELP == WORKFLOW.summary and command.OUTPUTS == {"out": "folder"}
+    assert command.HELP == WORKFLOW.summary and PARAMETERS["out"].output == "folder"
     assert {"threshold_um", "interval_days", "out"} <= set(PARAMETERS)
     parser = argparse.ArgumentParser()
     command.add_arguments(parser)

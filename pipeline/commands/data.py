@@ -38,7 +38,7 @@ def run_job(job: str, args, progress: str | None = None, **params):
     and ``--no-track``; ``progress`` names a progress bar to draw."""
     from pipeline.runner import run
 
-    params = {**selected(args), **params}
+    params = {**selected(args), **given(job, args), **params}
     params["track"] = not getattr(args, "no_track", False)
     if progress is None:
         return run(job, **params)
@@ -46,6 +46,19 @@ def run_job(job: str, args, progress: str | None = None, **params):
 
     with progress_bar(progress) as bar:
         return run(job, progress=bar, **params)
+
+
+def given(job: str, args) -> dict:
+    """The job's parameters as the command line gave them (``add_parameters`` declared them
+    from its table), by Python name: every one, its default where not given."""
+    from pipeline.workflows import workflow
+
+    params = {}
+    for name, param in workflow(job).parameters.items():
+        if getattr(param, "on_cli", False) and hasattr(args, name):
+            value = getattr(args, name)
+            params[name] = one_or_all(value) if param.nargs and value is not None else value
+    return params
 
 
 def one_or_all(inputs: list):

@@ -41,7 +41,7 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
         if name not in constraints:  # never skipped: a parameter without a constraint
             raise InputError(f"is not a parameter of {caller}; expected one of "
                              f"{', '.join(constraints)}", parameter=name)
-        given = constraints[name]
+        given = list(getattr(constraints[name], "accepts", constraints[name]))  # a Param's
         if isinstance(value, bool) and not light.takes_bool(given):
             message = light.must_be(given, value, name, caller)
         elif light.understood(given):
@@ -218,6 +218,14 @@ class Workflow:
     summary: str
     inputs: tuple[str, ...] = ()
     tracked: bool = False
+
+    @property
+    def parameters(self) -> Mapping:
+        """The job's parameter table (``PARAMETERS`` of its module:
+        ``pipeline.workflows.parameters``): the runner checks calls against it, the CLI
+        generates its options from it."""
+        return importlib.import_module(f"pipeline.workflows.{self.name.replace('-', '_')}"
+                                       ).PARAMETERS
 
 
 def workflow(name: str) -> Workflow:
