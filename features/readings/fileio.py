@@ -23,6 +23,7 @@ import signal
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from features.readings.errors import InputError
@@ -129,6 +130,50 @@ def write_files(out: str | os.PathLike, contents: dict[str, bytes]) -> dict[str,
         with _lock:
             _open_temps.discard(str(tmp))
     return {name: out / name for name in contents}
+
+
+class MemoryFolder:
+    """A folder of files made in memory (name -> bytes), for ``write_files`` to write
+    together: files that must be read back and checked before any reaches the disk (the
+    compensation files) are made here, and written once.
+
+    ``folder / name`` is a ``MemoryFile``; ``contents`` holds the bytes by name, in the order
+    they were made.
+    """
+
+    def __init__(self):
+        self.contents: dict[str, bytes] = {}
+
+    def __truediv__(self, name: str) -> MemoryFile:
+        return MemoryFile(self, str(name))
+
+
+@dataclass(frozen=True)
+class MemoryFile:
+    """A file of a ``MemoryFolder``: the few ``pathlib.Path`` methods writers and readers use
+    (``name``, ``stem``, ``write_text``, ``write_bytes``, ``read_bytes``)."""
+
+    folder: MemoryFolder
+    name: str
+
+    @property
+    def stem(self) -> str:
+        return Path(self.name).stem
+
+    def write_bytes(self, data: bytes) -> None:
+        self.folder.contents[self.name] = bytes(data)
+
+    def write_text(self, text: str, encoding: str = "utf-8") -> None:
+        self.write_bytes(text.encode(encoding))
+
+    def read_bytes(self) -> bytes:
+        try:
+            return self.folder.contents[self.name]
+        except KeyError:
+            raise FileNotFoundError(2, "No such file", self.name) from None
+
+    def __str__(self) -> str:
+        return self.name
 
 
 def check_output(path: str | os.PathLike, kind: str, option: str = "--out") -> Path | None:
@@ -244,7 +289,11 @@ def _on_sigterm(signum, frame) -> None:
     raise SystemExit(128 + signal.SIGTERM)
 
 
-def write_text(path, text: str) -> Path:
+def write_text(path, text: str) -> Path | MemoryFile:
+    """``text`` into file ``path`` (UTF-8), atomically; a ``MemoryFile`` keeps it in memory."""
+    if isinstance(path, MemoryFile):
+        path.write_text(text)
+        return path
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)

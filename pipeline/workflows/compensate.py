@@ -13,8 +13,6 @@ file plus the measured residual (``pipeline.compensation.active``).
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from numbers import Real
 from pathlib import Path
@@ -282,7 +280,7 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
                               "reference_mm": reference_mm, "fanuc_unit_um": fanuc_unit_um,
                               "active": active, "sign": sign, "verify": verify,
                               "uncertainty": uncertainty, "progress": progress}, "compensate")
-    from features.readings.fileio import temp_folder
+    from features.readings.fileio import MemoryFolder
     from pipeline.compensation.common import Options
     from pipeline.compensation.profile import parse_conditions
 
@@ -316,18 +314,14 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     reversal = [p.reversal_variation() for p in profiles]
     notes = [f"{p.machine_id} {p.axis}: {n}" for p in profiles for n in p.notes]
     notes += _reversal_notes(profiles, reversal, names)
-    # The files are read back as each controller applies them (and verified on the twin)
-    # before anything reaches ``out``: written once into a scratch folder that a kill sweeps,
-    # their bytes kept for ``write``.
-    folder = temp_folder(Path(tempfile.gettempdir()) / "backlash-compensation")
-    try:
-        written = _write_all(profiles, names, folder, options)
-        _read_back(written, profiles, folder, sign, comps)
-        verification = _verify(data, profiles, names, written, folder, progress,
-                               sign, comps) if verify else {}
-        contents = {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+    # The files are made in memory, read back as each controller applies them (and verified
+    # on the twin) before anything reaches the disk; ``write`` writes them once, together.
+    folder = MemoryFolder()
+    written = _write_all(profiles, names, folder, options)
+    _read_back(written, profiles, folder, sign, comps)
+    verification = _verify(data, profiles, names, written, folder, progress,
+                           sign, comps) if verify else {}
+    contents = dict(sorted(folder.contents.items()))
     if budget is not None:
         notes += _resolution(written, profiles, verification, budget)
     return CompensationResult(profiles, names, written, verification, contents, reversal,
@@ -461,8 +455,9 @@ def _predicted(model, conditions, spacing, at_hours, at_date, machine, axis) -> 
     return profiles
 
 
-def _write_all(profiles, names, folder: Path, options) -> list[dict]:
-    """Every controller's files for every profile into ``folder``; file names per role."""
+def _write_all(profiles, names, folder, options) -> list[dict]:
+    """Every controller's files for every profile into ``folder`` (a ``MemoryFolder``); file
+    names per role."""
     written = []
     for name in names:
         record = CONTROLLERS[name]
@@ -473,17 +468,17 @@ def _write_all(profiles, names, folder: Path, options) -> list[dict]:
             result.setdefault("per_direction", record.per_direction)
             result.update(controller=name, kind=record.kind, machine_id=profile.machine_id,
                           axis=profile.axis)
-            result["files"] = {role: Path(p).name for role, p in result["files"].items()}
+            result["files"] = {role: p.name for role, p in result["files"].items()}
             written.append(result)
     return written
 
 
-def _read_back(written, profiles, folder: Path, sign, active: dict) -> None:
+def _read_back(written, profiles, folder, sign, active: dict) -> None:
     """Each file set read back as its controller applies it: the reversal value it leaves
     [um], and with an active file the change per target (also written as a CSV)."""
     import numpy as np
 
-    from features.readings.fileio import atomic_path
+    from features.readings.fileio import write_text
     from pipeline.compensation.active import changes
 
     by_key = {(p.machine_id, p.axis): p for p in profiles}
@@ -496,8 +491,7 @@ def _read_back(written, profiles, folder: Path, sign, active: dict) -> None:
         if key in active:
             w["changes"] = changes(p, active[key], comp)
             path = folder / f"{p.stem}_{w['controller']}_changes.csv"
-            with atomic_path(path) as tmp:
-                w["changes"].to_csv(tmp, index=False, float_format="%.6f")
+            write_text(path, w["changes"].to_csv(index=False, float_format="%.6f"))
             w["files"]["changes"] = path.name
 
 
@@ -535,9 +529,9 @@ def _resolution(written, profiles, verification, budget) -> list[str]:
     return notes
 
 
-def _verify(data, profiles, names, written, folder: Path, progress, sign=None,
+def _verify(data, profiles, names, written, folder, progress, sign=None,
             active=None) -> dict[str, list[dict]]:
-    """Closed loop per controller, on the files as written (read back from ``folder``);
+    """Closed loop per controller, on the files as made (read back from ``folder``);
     'before' is the twin with the ``active`` compensation, if any, applied."""
     from pipeline.compensation.verify import closed_loop, uncompensated
 
