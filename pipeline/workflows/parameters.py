@@ -163,3 +163,8 @@ MODEL = (str, os.PathLike, HasMethods(["predict"]))  # a model directory or a tr
 
 # the fleet store a store job (void, store check) works on: its positional argument
 STORE = Param((str, os.PathLike), "store folder or postgresql://USER@HOST/DB", flag="STORE")
+
+# the backlash definition a job's points use (features.targets): targets and the model jobs
+TARGET = Param((StrOptions(("auto", "paper", "iso")),), "backlash definition: pendulum minus "
+               "linear (paper), ISO reversal value (iso) or chosen from the measuring-system "
+               "evidence (auto)")
