@@ -60,7 +60,7 @@ def test_every_format_option_and_readings_help_come_from_the_records():
                 assert text == READINGS_HELP, (command, text)
     assert with_format >= 10
     for command in ("convert", "iso"):
-        file = next(a for a in parser.commands[command]._actions if a.dest == "file")
+        file = next(a for a in parser.commands[command]._actions if a.dest == "data")
         assert file.help == READINGS_HELP
 
 

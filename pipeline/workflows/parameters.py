@@ -160,3 +160,11 @@ MIN_JUMP_SIGMA = Param((_POSITIVE,), "a change point must move the level by this
 
 BUDGET = (str, os.PathLike, dict, "features.uncertainty.UncertaintyBudget", None)  # ISO/TR 230-9
 MODEL = (str, os.PathLike, HasMethods(["predict"]))  # a model directory or a trained predictor
+
+# the fleet store a store job (void, store check) works on: its positional argument
+STORE = Param((str, os.PathLike), "store folder or postgresql://USER@HOST/DB", flag="STORE")
+
+# the backlash definition a job's points use (features.targets): targets and the model jobs
+TARGET = Param((StrOptions(("auto", "paper", "iso")),), "backlash definition: pendulum minus "
+               "linear (paper), ISO reversal value (iso) or chosen from the measuring-system "
+               "evidence (auto)")
