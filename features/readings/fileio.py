@@ -18,9 +18,9 @@ import errno
 import json
 import os
 import re
+import secrets
 import shutil
 import signal
-import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -43,19 +43,37 @@ _lock = threading.RLock()
 _handler: dict = {}
 
 
-@contextlib.contextmanager
-def _sigterm_held():
-    """SIGTERM held back (in the main thread) while a temporary file is created and
-    registered: delivered at the end, it finds the file registered and removes it."""
-    if (threading.current_thread() is not threading.main_thread()
-            or not hasattr(signal, "pthread_sigmask")):
-        yield
-        return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+def _new_temp(beside: Path, suffix: str, make) -> str:
+    """A new hidden temporary name beside ``beside``, made by ``make(name)``
+    (``_create_file`` or ``os.mkdir``) and known to the SIGTERM handler from before it exists.
+
+    Registering first closes the window in which a SIGTERM finds a file it does not know:
+    Python runs the handler in the main thread at its next instruction, and the kernel hands
+    the signal to whichever thread does not block it, so masking it in this thread cannot
+    hold it back. A name that exists already (another run's) is never registered.
+    """
+    while True:
+        tmp = str(beside.parent / f".{beside.name}.{secrets.token_hex(4)}{TEMP_MARK}"
+                  f"{os.getpid()}{suffix}")
+        if os.path.lexists(tmp):
+            continue
+        with _lock:
+            _open_temps.add(tmp)
+        try:
+            make(tmp)
+            return tmp
+        except BaseException as err:
+            with _lock:
+                _open_temps.discard(tmp)
+            if isinstance(err, FileExistsError):
+                continue
+            if isinstance(err, OSError):
+                raise _user_error(err, beside) from None
+            raise
+
+
+def _create_file(name: str) -> None:
+    os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
 
 
 @contextlib.contextmanager
@@ -67,21 +85,12 @@ def atomic_path(path: str | os.PathLike):
     _make_folder(path.parent)
     sweep_orphans(path.parent)
     _install_sigterm_handler()
-    with _sigterm_held():
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
-                                       suffix=f"{TEMP_MARK}{os.getpid()}{path.suffix}",
-                                       dir=path.parent)
-        except OSError as err:
-            raise _user_error(err, path) from None
-        os.close(fd)
-        with _lock:
-            _open_temps.add(tmp)
+    tmp = _new_temp(path, path.suffix, _create_file)
     try:
         yield Path(tmp)
         if "terminating" in _handler:  # SIGTERM came where its SystemExit was swallowed
             raise SystemExit(128 + signal.SIGTERM)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs follow the umask
+        os.chmod(tmp, 0o666 & ~_UMASK)  # made 0600; outputs follow the umask
         os.replace(tmp, path)
     except OSError as err:
         if err.errno in _USER_ERRNOS:
@@ -102,15 +111,7 @@ def temp_folder(beside: str | os.PathLike) -> Path:
     _make_folder(beside.parent)
     sweep_orphans(beside.parent)
     _install_sigterm_handler()
-    with _sigterm_held():
-        try:
-            tmp = tempfile.mkdtemp(prefix=f".{beside.name}.",
-                                   suffix=f"{TEMP_MARK}{os.getpid()}", dir=beside.parent)
-        except OSError as err:
-            raise _user_error(err, beside) from None
-        with _lock:
-            _open_temps.add(tmp)
-    return Path(tmp)
+    return Path(_new_temp(beside, "", lambda name: os.mkdir(name, 0o700)))
 
 
 def write_files(out: str | os.PathLike, contents: dict[str, bytes]) -> dict[str, Path]:
