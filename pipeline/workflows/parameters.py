@@ -21,7 +21,7 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
-from numbers import Real
+from numbers import Integral, Real
 
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
@@ -168,3 +168,5 @@ STORE = Param((str, os.PathLike), "store folder or postgresql://USER@HOST/DB", f
 TARGET = Param((StrOptions(("auto", "paper", "iso")),), "backlash definition: pendulum minus "
                "linear (paper), ISO reversal value (iso) or chosen from the measuring-system "
                "evidence (auto)")
+
+SEED = (Interval(Integral, 0, 2**32 - 1, closed="both"),)  # numpy's and torch's seed range

@@ -18,10 +18,7 @@ from models.physics import PRESETS
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import Param, python_only
-
-MAX_SEED = 2**32 - 1
-_SEED = Interval(Integral, 0, MAX_SEED, closed="both")
+from pipeline.workflows.parameters import SEED, Param, python_only
 
 PARAMETERS = {
     "preset": Param((str, None), f"shipped campaign: {', '.join(PRESETS)} (default paper: the "
@@ -29,14 +26,14 @@ PARAMETERS = {
     "config": Param((str, os.PathLike, dict, "models.physics.campaign.Campaign", None),
                     "campaign configuration; overrides the preset's values",
                     metavar="FILE.toml"),
-    "seed": Param((_SEED,), "random seed"),
+    "seed": Param(SEED, "random seed"),
     "out": Param((str, os.PathLike, None), "output folder", required=True, output="folder"),
     "traces": Param(("boolean",), "write controller traces instead (motor encoder and load "
                     "scale, wear, an adjustment): OUT/traces/ and OUT/traces_truth.csv"),
     "days": Param((Interval(Integral, 1, 3650, closed="both"),), "with --traces: logged days"),
     "rate_hz": Param((Interval(Real, 100, 1000, closed="both"),),
                      "with --traces: sampling rate [Hz]"),
-    "session_seed": python_only(_SEED, None),
+    "session_seed": python_only(*SEED, None),
     "compensation": python_only(dict, None),
 }
 
