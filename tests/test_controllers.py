@@ -43,8 +43,7 @@ def test_names_and_aliases_are_unambiguous_and_resolve():
 
 def test_the_cli_offers_the_records():
     from pipeline.cli import build_parser
-    from pipeline.commands.compensate import controller_help
-    from pipeline.workflows.compensate import WORKFLOW
+    from pipeline.workflows.compensate import WORKFLOW, controller_help
 
     command = build_parser().commands["compensate"]
     option = next(a for a in command._actions if a.dest == "controller")

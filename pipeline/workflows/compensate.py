@@ -12,6 +12,7 @@ file plus the measured residual (``pipeline.compensation.active``).
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 from dataclasses import dataclass, field
 from numbers import Real
@@ -20,40 +21,64 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
+from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, readings
 
 
-def _parameters() -> dict:
-    """The constraints of ``compensate``'s parameters (scikit-learn's constraint language),
-    built on first use: the CLI reads the workflow records on every start."""
-    import datetime as dt
-
-    import pandas as pd
-
-    from features.uncertainty import UncertaintyBudget
-    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-
-    return {
-        "data": [str, os.PathLike, pd.DataFrame, HasMethods(["predict"])],
-        "controller": [str, list, tuple],
-        "format": [str],
-        "conditions": [None, str, dict],
-        "at_hours": [None, Interval(Real, 0, None, closed="left")],
-        "at_date": [None, str, dt.date],
-        "machine": [None, str, list, tuple],
-        "axis": [None, str],
-        "spacing": [None, Interval(Real, 0, None, closed="neither")],
-        "reference_mm": [None, Interval(Real, None, None, closed="neither")],
-        "fanuc_unit_um": [Interval(Real, 0, None, closed="neither")],
-        "active": [None, str, os.PathLike, list, tuple],
-        "sign": [None, StrOptions(set(SIGNS))],
-        "verify": ["boolean"],
-        "uncertainty": [None, str, os.PathLike, dict, UncertaintyBudget],
-        "progress": [None, callable],
-    }
+def controller_help() -> str:
+    """The ``--controller`` help, from the controller records."""
+    aliases = [f"{a}={c.name}" for c in CONTROLLERS.values() for a in c.aliases]
+    return (f"one or more of {', '.join(CONTROLLERS)} (comma-separated), or all; "
+            f"aliases {', '.join(aliases)}")
 
 
-PARAMETERS = Constraints(_parameters)
+_PATHS = (str, os.PathLike)
+PARAMETERS = {
+    "data": readings("model directory (backlash train) or readings file (ISO tests)",
+                     flag="DATA|MODEL_DIR",
+                     accepts=(*_PATHS, "pandas.DataFrame", HasMethods(["predict"]))),
+    "format": FORMAT,
+    "controller": Param((str, list, tuple), controller_help(), required=True),
+    "out": Param((*_PATHS, None), "output folder", required=True, output="folder"),
+    "conditions": Param((None, str, dict), "conditions for a predictor, e.g. "
+                        "feed_mm_min=500,machine_temp_c=21", metavar="NAME=VALUE,..."),
+    "axis": Param((None, str), "axis name: a predictor's axis (default X), or only this "
+                  "axis's tests of DATA or a wear map's axes"),
+    "machine": Param((None, str, list, tuple), "only the tests of these machines, or their "
+                     "axes of a wear map", metavar="ID[,ID...]",
+                     group="test selection (a store or a file)"),
+    "at_hours": Param((None, Interval(Real, 0, None, closed="left")), "wear map: forecast the "
+                      "table for this reading of the axis's operating-hours counter (default: "
+                      "the middle of the next maintenance interval)", metavar="H"),
+    "at_date": Param((None, str, dt.date), "wear map: forecast the table for this day, "
+                     "through the axis's usage rate when the model records it",
+                     metavar="YYYY-MM-DD"),
+    "spacing": Param((None, Interval(Real, 0, None, closed="neither")), "table spacing of "
+                     "equidistant formats (default: a quarter of the smallest target interval, "
+                     "rounded down to 1/2/2.5/5 x 10^k)", metavar="MM"),
+    "reference_mm": Param((None, Interval(Real, None, None, closed="neither")), "reference "
+                          "point where SINUMERIK/Fanuc/Heidenhain tables are 0 (default: the "
+                          "table point nearest 0)"),
+    "fanuc_unit_um": Param((Interval(Real, 0, None, closed="neither"),),
+                           "Fanuc detection unit [um]"),
+    "active": Param((None, *_PATHS, list, tuple), "DATA was measured with this compensation "
+                    "file active (one controller's file for one machine axis; repeat for its "
+                    "table and its parameter file): write the active file plus the measured "
+                    "residual, and the change per target", metavar="FILE"),
+    "sign": Param((None, StrOptions(SIGNS)), "what a positive table value means at this site "
+                  "(SINUMERIK, Fanuc, Heidenhain tables; default: each controller's documented "
+                  "convention); also how --active is read"),
+    "store": Param((*_PATHS, None), "fleet store (folder or postgresql:// URL, made by "
+                   "backlash ingest) to record this compensation in; backlash fleet shows the "
+                   "last one", metavar="STORE"),
+    "uncertainty": Param(BUDGET, "uncertainty budget of the measurement (as backlash iso "
+                         "takes): say whether each file set's residual is within or beyond "
+                         "U(B)", metavar="BUDGET.toml"),
+    "verify": Param(("boolean",), "twin data only: re-run the ISO tests with the written files "
+                    "applied; report before/after (verify.html); exit 3 if worse"),
+    "progress": PROGRESS,
+}
 
 
 @dataclass
@@ -273,7 +298,7 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     CompensationResult
         Nothing is written until ``result.write(out)``.
     """
-    check_params(_parameters(), {"data": data, "controller": controller, "format": format,
+    check_params(PARAMETERS, {"data": data, "controller": controller, "format": format,
                               "conditions": conditions, "at_hours": at_hours,
                               "at_date": at_date, "machine": machine, "axis": axis,
                               "spacing": spacing,
