@@ -6,12 +6,14 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.convert import WORKFLOW
+from pipeline.workflows.parameters import JSON_HELP
 
 HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "convert")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,4 +30,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_job("convert", args)
     print(f"{len(result.readings)} readings in {result.tests} tests -> {args.out}",
           file=sys.stderr)
+    if args.json:
+        from features.readings.fileio import dumps
+
+        print(dumps(result.to_json()))
     return 0

@@ -170,3 +170,26 @@ TARGET = Param((StrOptions(("auto", "paper", "iso")),), "backlash definition: pe
                "evidence (auto)")
 
 SEED = (Interval(Integral, 0, 2**32 - 1, closed="both"),)  # numpy's and torch's seed range
+
+
+def parameters_table(job: str) -> str:
+    """The Markdown table of job ``job``'s parameters for its docs page, generated from its
+    table: the Python name, the command line's option (as ``pipeline.commands.parameters``
+    generates it), the default and the meaning (``tests/test_docs.py`` checks each page holds
+    its job's table as generated here)."""
+    import inspect
+
+    from pipeline.workflows import workflow
+
+    record = workflow(job)
+    signature = inspect.signature(record.function).parameters
+    rows = ["| Python | command line | default | meaning |", "|---|---|---|---|"]
+    for name, param in record.parameters.items():
+        if not param.on_cli:
+            continue
+        default = signature[name].default if name in signature else None
+        shown = "" if default in (None, inspect.Parameter.empty) else f"`{default!r}`"
+        option = param.option(name)
+        option = f"`{option}`" + (f" {param.metavar}" if param.metavar else "")
+        rows.append(f"| `{name}` | {option} | {shown} | {param.help.replace('|', '/')} |")
+    return "\n".join(rows)
