@@ -5,15 +5,13 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.circle import PARAMETERS, WORKFLOW
+from pipeline.workflows.circle import WORKFLOW
 
 HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    data = PARAMETERS["data"]  # circular tests, not readings: no test selection goes with them
-    parser.add_argument("data", metavar=data.flag, help=data.help)
-    add_parameters(parser, "circle", skip=("data",))
+    add_parameters(parser, "circle")
     parser.add_argument("--json", action="store_true",
                         help="print G_um, H_um and the diagnosis of every circle as JSON")
 

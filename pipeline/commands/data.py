@@ -37,8 +37,10 @@ def run_job(job: str, args, progress: str | None = None, **params):
     selection given on the command line (``--machine``, ``--axis``, ``--since``, ``--until``)
     and ``--no-track``; ``progress`` names a progress bar to draw."""
     from pipeline.runner import run
+    from pipeline.workflows import workflow
 
-    params = {**selected(args), **given(job, args), **params}
+    own = tuple(workflow(job).parameters)  # a filter the job declares comes as its table says
+    params = {**selected(args, skip=own), **given(job, args), **params}
     params["track"] = not getattr(args, "no_track", False)
     if progress is None:
         return run(job, **params)

@@ -29,7 +29,7 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
         default = signature[name].default if name in signature else None
         default = None if default is inspect.Parameter.empty else default
         where.add_argument(*_names(name, param), **_keywords(name, param, default))
-        if name in ("data", "files") and "selection" not in groups:
+        if param.reads_readings and "selection" not in groups:
             group = _group(parser, groups, "test selection (a store or a file)")
             for f in FILTERS:
                 if f.name not in record.parameters:
@@ -59,6 +59,8 @@ def _keywords(name: str, param, default) -> dict:
         action = "store_true" if not default else argparse.BooleanOptionalAction
         return {"dest": name, "action": action, "default": bool(default), "help": help}
     keywords = {"help": help, "default": default, "type": param.parse or _parser(name, param)}
+    if param.repeated:
+        keywords["action"] = "append"
     if param.positional:
         keywords["metavar"] = param.flag
         if default is None:

@@ -23,7 +23,7 @@ from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
 from pipeline.workflows import Workflow, check_params, readings_of
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, readings
+from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, comma_list, readings
 
 
 def controller_help() -> str:
@@ -46,7 +46,7 @@ PARAMETERS = {
     "axis": Param((None, str), "axis name: a predictor's axis (default X), or only this "
                   "axis's tests of DATA or a wear map's axes"),
     "machine": Param((None, str, list, tuple), "only the tests of these machines, or their "
-                     "axes of a wear map", metavar="ID[,ID...]",
+                     "axes of a wear map", metavar="ID[,ID...]", parse=comma_list,
                      group="test selection (a store or a file)"),
     "at_hours": Param((None, Interval(Real, 0, None, closed="left")), "wear map: forecast the "
                       "table for this reading of the axis's operating-hours counter (default: "
@@ -65,7 +65,7 @@ PARAMETERS = {
     "active": Param((None, *_PATHS, list, tuple), "DATA was measured with this compensation "
                     "file active (one controller's file for one machine axis; repeat for its "
                     "table and its parameter file): write the active file plus the measured "
-                    "residual, and the change per target", metavar="FILE"),
+                    "residual, and the change per target", metavar="FILE", repeated=True),
     "sign": Param((None, StrOptions(SIGNS)), "what a positive table value means at this site "
                   "(SINUMERIK, Fanuc, Heidenhain tables; default: each controller's documented "
                   "convention); also how --active is read"),

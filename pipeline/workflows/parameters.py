@@ -58,6 +58,12 @@ class Param:
         in a user error).
     group : str or None
         The title of the help section it is listed under.
+    repeated : bool
+        The option may be given several times, one value each; the values reach the workflow
+        as a list.
+    reads_readings : bool
+        The job's readings (``readings()``): the command line adds the test selection
+        (``--machine``, ``--axis``, ``--since``, ``--until``) the job does not declare itself.
     """
 
     accepts: tuple
@@ -70,6 +76,8 @@ class Param:
     required: bool = False
     output: str | None = None
     group: str | None = None
+    repeated: bool = False
+    reads_readings: bool = False
 
     @property
     def on_cli(self) -> bool:
@@ -89,13 +97,17 @@ def python_only(*accepts) -> Param:
     return Param(tuple(accepts))
 
 
-def names(text: str) -> list[str]:
-    """A comma list of names (``"X,Y"``) as the list; an empty one is refused."""
+def comma_list(text: str) -> list[str]:
+    """A comma list of names (``"X,Y"``) as the list; an empty one, or a name given twice, is
+    refused."""
     import argparse
 
     listed = [p.strip() for p in text.split(",") if p.strip()]
     if not listed:
         raise argparse.ArgumentTypeError("is empty; give comma-separated names")
+    twice = sorted({n for n in listed if listed.count(n) > 1})
+    if twice:
+        raise argparse.ArgumentTypeError(f"names {twice[0]!r} twice")
     return listed
 
 
@@ -132,7 +144,7 @@ def readings(help: str | None = None, flag: str = "DATA", accepts: tuple = READI
     from features.readings.schema import DATA_HELP
 
     return Param(accepts, (DATA_HELP if help is None else help) + STORE_HELP, flag=flag,
-                 nargs=nargs)
+                 nargs=nargs, reads_readings=True)
 
 
 FORMAT = _format()
