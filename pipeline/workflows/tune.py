@@ -38,8 +38,8 @@ PARAMETERS = {
     "trials": Param((_COUNT,), "trials to run in total"),
     "storage": Param((str, None), "Optuna storage URL, e.g. postgresql://user@host/db "
                      "(default: sqlite:///optuna.db)"),
-    "study": Param((str, None), f"study name (default {DEFAULT_STUDY}-<the first 12 hex digits "
-                   "of the data's SHA-256>: one study per data)"),
+    "study": Param((str, None), f"study name (default {DEFAULT_STUDY}-DIGEST, DIGEST the first "
+                   "12 hex digits of the data's SHA-256: one study per data)"),
     "workers": Param((_COUNT,), "worker processes sharing the study"),
     "folds": Param((Interval(Integral, 2, None, closed="left"),), "cross-validation folds"),
     "heartbeat_s": Param((_COUNT,), "running trials report every S seconds; a trial silent for "
