@@ -57,12 +57,13 @@ def test_tune_has_no_hold_out_options():
 
 @pytest.mark.parametrize("argv, words", [
     (["train", "{data}", "--out", "{tmp}/m", "--features", " , "], "--features: is empty"),
-    (["train", "{data}", "--out", "{tmp}/m", "--seed", "-1"], "expected a seed from 0 to"),
+    (["train", "{data}", "--out", "{tmp}/m", "--seed", "-1"],
+     "--seed: '-1': expected an int in the range [0, 4294967295]"),
     (["compare", "{data}", "--models", ","], "--models: is empty"),
     (["compare", "{data}", "--split", "sideways"], "invalid choice: 'sideways'"),
-    (["tune", "{data}", "--folds", "1"], "'1': expected a whole number >= 2"),
+    (["tune", "{data}", "--folds", "1"], "'1': expected an int in the range [2, inf)"),
     (["replicate", "{data}", "--out", "{tmp}/r", "--boot", "-1"],
-     "'-1': expected a whole number >= 0"),
+     "'-1': expected an int in the range [0, inf)"),
     (["rank", "{data}", "--out", "{tmp}/r", "--bins", "1"], "--bins: must be at least 2"),
     (["predict", "{tmp}/m", "{data}", "--out", "{tmp}/p.txt"], "expected a .csv file name"),
     (["predict", "{data}", "--out", "{tmp}/p.csv"], "required: DATA"),
