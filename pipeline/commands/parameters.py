@@ -52,8 +52,10 @@ def _keywords(name: str, param, default) -> dict:
     """argparse's keywords for ``param``: a flag for a boolean, else a checked type."""
     from pipeline.workflows.constraints import takes_bool
 
-    # a required option has no default on the command line (the Python call's is not shown)
-    help = param.help + ("" if param.required else _default_text(param.help, default))
+    # a required option has no default on the command line (the Python call's is not shown);
+    # a help is plain text, not a format ("15 %")
+    shown = "" if param.required else _default_text(param.help, default)
+    help = param.help.replace("%", "%%") + shown
     if takes_bool(param.accepts) and not any(isinstance(c, type) and c is not bool
                                              for c in param.accepts):
         action = "store_true" if not default else argparse.BooleanOptionalAction

@@ -205,3 +205,14 @@ def parameters_table(job: str) -> str:
         option = f"`{option}`" + (f" {param.metavar}" if param.metavar else "")
         rows.append(f"| `{name}` | {option} | {shown} | {param.help.replace('|', '/')} |")
     return "\n".join(rows)
+
+
+# the model data of train, compare, tune, rank, replicate (pipeline.steps.model_data)
+SPLITS = ("random", "forward")  # compare adds its backtest
+FEATURES = Param((list, tuple, None), "comma-separated feature-table columns (default: the "
+                 "paper's inputs the data supply, plus dwell_s and operating_hours)", parse=names)
+SPLIT = Param((StrOptions(SPLITS),), "hold-out: random 15 % (paper) or the later visits "
+              "(forward)")
+TRUTH = Param((*READINGS, None), "twin truth table (backlash simulate): also score against the "
+              "true backlash", metavar="FILE")
+RANDOM_SEED = Param(SEED, "random seed")
