@@ -1,5 +1,6 @@
 """What the commands share: comma lists, output checks and the progress bar (the checked option
-types are in ``options``, the DATA argument of every command that reads readings in ``data``)."""
+types are in ``options``, the options generated from a job's table in ``parameters``, how a
+command runs its job in ``data``)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from features.readings import schema
 from features.readings.errors import InputError
-
-FORMATS = schema.FORMATS  # the input layouts every --format option offers
 
 
 def parse_list(text: str | None, parameter: str) -> list[str] | None:
@@ -24,16 +22,6 @@ def parse_list(text: str | None, parameter: str) -> list[str] | None:
     if not names:
         raise InputError("is empty; give comma-separated names", parameter=parameter)
     return each_once(names, parameter)
-
-
-def parse_features(text: str | None) -> list[str] | None:
-    return parse_list(text, "features")
-
-
-def read_truth(path):
-    from models.evaluation import read_truth
-
-    return read_truth(path)
 
 
 def check_outputs(command: str, args) -> list[Path]:

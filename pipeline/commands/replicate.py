@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 from pipeline.workflows.replicate import WORKFLOW
 
 HELP = WORKFLOW.summary
@@ -13,6 +14,7 @@ HELP = WORKFLOW.summary
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "replicate")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -23,4 +25,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_job("replicate", args, "replicate")
     print(result.markdown(), file=sys.stderr)
     print(f"report: {result.files['html']}", file=sys.stderr)
+    if args.json:
+        from features.readings.fileio import dumps
+
+        print(dumps(result.to_json()))
     return 0

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 from pipeline.workflows.train import WORKFLOW
 
 REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.REGISTERED_NAME
@@ -14,6 +15,7 @@ HELP = WORKFLOW.summary
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "train")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,6 +29,10 @@ def run(args: argparse.Namespace) -> int:
     tracked = (f"; MLflow run {logged['run_id']}, {REGISTERED_NAME} v{logged['version']}"
                f"{' (champion)' if logged['champion'] else ''}" if logged else "")
     print(f"model -> {result.files['model']}/{tracked}", file=sys.stderr)
+    if args.json:
+        from features.readings.fileio import dumps
+
+        print(dumps(result.to_json()))
     return 0
 
 

@@ -26,7 +26,7 @@ from pipeline.workflows.parameters import (
     TARGET,
     TRUTH,
     Param,
-    names,
+    comma_list,
     readings,
 )
 
@@ -46,7 +46,7 @@ PARAMETERS = {
     "truth": TRUTH,
     "seed": RANDOM_SEED,
     "models": Param((list, tuple, None), "comma-separated predictor names (default: all); "
-                    + registry.help_text(), parse=names),
+                    + registry.help_text(), parse=comma_list),
     "out": Param((str, os.PathLike, None), "folder for the comparison table and figures",
                  output="folder"),
 }

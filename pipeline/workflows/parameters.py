@@ -210,7 +210,7 @@ def parameters_table(job: str) -> str:
 # the model data of train, compare, tune, rank, replicate (pipeline.steps.model_data)
 SPLITS = ("random", "forward")  # compare adds its backtest
 FEATURES = Param((list, tuple, None), "comma-separated feature-table columns (default: the "
-                 "paper's inputs the data supply, plus dwell_s and operating_hours)", parse=names)
+                 "paper's inputs the data supply, plus dwell_s and operating_hours)", parse=comma_list)
 SPLIT = Param((StrOptions(SPLITS),), "hold-out: random 15 % (paper) or the later visits "
               "(forward)")
 TRUTH = Param((*READINGS, None), "twin truth table (backlash simulate): also score against the "

@@ -60,6 +60,11 @@ class ReplicationResult(Result):
 
         return markdown(self.rows)
 
+    def to_json(self) -> dict:
+        """The side-by-side table (``rows``: quantity, paper, with and without deviations,
+        note) and the source."""
+        return {"source": self.source, "rows": self.rows}
+
     def write(self, out) -> dict[str, Path]:
         """``replication.html``, ``.md``, ``.json`` and the Fig. 10 and 13 figures."""
         from pipeline.replication import write_replication
