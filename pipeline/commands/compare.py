@@ -7,10 +7,7 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.compare import WORKFLOW
 from pipeline.workflows.parameters import JSON_HELP
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

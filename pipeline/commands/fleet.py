@@ -6,10 +6,7 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.results import ALERT_EXIT
-from pipeline.workflows.fleet import WORKFLOW
 from pipeline.workflows.parameters import JSON_HELP
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

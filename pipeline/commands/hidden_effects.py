@@ -8,9 +8,6 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.hidden_effects import WORKFLOW
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

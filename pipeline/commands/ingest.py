@@ -5,10 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.ingest import WORKFLOW
 from pipeline.workflows.parameters import JSON_HELP
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -5,9 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.iso import WORKFLOW
 
-HELP = WORKFLOW.summary
 OUTPUTS = {"plot": "file"}  # the chart, a command-only output: checked before any work
 FLAGS = {"path": "--plot"}
 

@@ -6,9 +6,6 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.results import ALERT_EXIT
-from pipeline.workflows.monitor import WORKFLOW
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

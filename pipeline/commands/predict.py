@@ -8,9 +8,6 @@ import sys
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
-from pipeline.workflows.predict import WORKFLOW
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -7,9 +7,6 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
-from pipeline.workflows.replicate import WORKFLOW
-
-HELP = WORKFLOW.summary
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -6,9 +6,7 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.simulate import WORKFLOW
 
-HELP = WORKFLOW.summary
 WRITTEN = {False: "readings.csv, truth.csv, truth_visits.csv, parameters.json",
            True: "traces/, traces_truth.csv"}  # by --traces
 

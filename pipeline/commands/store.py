@@ -6,9 +6,7 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
-from pipeline.workflows.store import WORKFLOW
 
-HELP = WORKFLOW.summary
 # Exit code when the check finds a problem it did not mend.
 PROBLEMS_EXIT = 1
 

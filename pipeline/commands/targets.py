@@ -6,9 +6,7 @@ import argparse
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
-from pipeline.workflows.targets import WORKFLOW
 
-HELP = WORKFLOW.summary
 TABLE_ROWS = 40  # rows printed; targets.csv and --json hold every point
 
 

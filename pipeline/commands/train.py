@@ -7,11 +7,8 @@ import sys
 
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
-from pipeline.workflows.train import WORKFLOW
 
 REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.REGISTERED_NAME
-HELP = WORKFLOW.summary
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "train")

@@ -21,7 +21,7 @@ from numbers import Real
 from pathlib import Path
 
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import Param
 
@@ -327,10 +327,3 @@ def circle_days(frame, source: str) -> dict:
     first = frame.groupby(list(fc.CIRCLE_KEYS), sort=False)["started_at"].min()
     return {(str(m), str(p), str(v), float(r), float(f)): t.date().isoformat()
             for (m, p, v, r, f), t in first.items()}
-
-
-WORKFLOW = Workflow(
-    name="circle", function=circle, inputs=("data",),
-    summary="ISO 230-4 circular tests (ballbar): circular deviation G per direction, "
-            "hysteresis H and the diagnosis per axis (backlash, reversal spike) and per plane "
-            "(squareness, scale and servo mismatch), each with its uncertainty; polar plots.")

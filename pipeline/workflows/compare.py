@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, each_once
+from pipeline.workflows import check_params, each_once
 from pipeline.workflows.constraints import StrOptions
 from pipeline.workflows.parameters import (
     FEATURES,
@@ -318,10 +318,3 @@ def plot_wear_map(wear: pd.DataFrame, path) -> Path:
     ax.set_title("Where the screw wears, and how fast")
     ax.legend(loc="best")
     return save_figure(fig, path)
-
-
-WORKFLOW = Workflow(
-    name="compare", function=compare,
-    summary="Train every predictor (network, physics baselines, comparators) on one split; "
-            "compare.",
-    inputs=("data", "truth"), tracked=True)

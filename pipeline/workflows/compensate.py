@@ -21,7 +21,7 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, comma_list, readings
 
@@ -591,9 +591,3 @@ def _profile_json(p) -> dict:
             "reversal_um": p.reversal.tolist(), "at_hours": p.at_hours, "notes": p.notes}
 
 
-_LABELS = ", ".join(c.label for c in CONTROLLERS.values())
-WORKFLOW = Workflow(
-    name="compensate", function=compensate,
-    summary=(f"Write controller compensation files ({_LABELS}) from ISO tests or a predictor; "
-             "optionally re-measure the twin with them applied."),
-    inputs=("data", "active"))

@@ -18,7 +18,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import StrOptions
 from pipeline.workflows.parameters import FORMAT, Param, python_only, readings, scale_offset
 
@@ -209,11 +209,3 @@ def convert(data, out=None, format: str = "auto", channels=None, reference_scale
     if out is not None:  # exactly this file (a name without suffix is refused, not a folder)
         result.out = result.files["readings"] = write(readings, out)
     return result
-
-
-WORKFLOW = Workflow(
-    name="convert", function=convert,
-    summary="Read a readings file (canonical, paper Table 2, ecmc, Renishaw .rtl or an EPICS "
-            "camonitor log of an ISO 230-2 run) or a fleet store, validate it, write "
-            "CSV/Parquet.",
-    inputs=("data",))

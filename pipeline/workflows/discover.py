@@ -14,7 +14,7 @@ from pathlib import Path
 
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.parameters import FORMAT, SEED, Param, readings
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
@@ -152,9 +152,3 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     for text in found.notes:
         note(text)
     return DiscoveryResult(found, names, source, readings, seed, notes=list(found.notes))
-
-
-WORKFLOW = Workflow(
-    name="discover", function=discover, inputs=("data",),
-    summary=("Find where simulation and measurement disagree, name the missing physical "
-             "effect, add it and show the gap shrink."), tracked=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 from features import uncertainty as unc
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.parameters import (
     ALPHA,
     AS_OF,
@@ -304,10 +304,3 @@ def _evidence_records(store, sources: tuple) -> dict | None:
         raise InputError("trace and ballbar evidence is read from a fleet store; give the "
                          "store as data or store", parameter="evidence")
     return read_evidence(store)
-
-
-WORKFLOW = Workflow(
-    name="drift", function=drift, inputs=("data", "model", "uncertainty"),
-    summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
-             "it crosses a threshold, and (with --model) residual and input drift of a trained "
-             "model. Exit 3 when an alert fires."), tracked=True)

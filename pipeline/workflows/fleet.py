@@ -40,7 +40,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import (
     ALPHA,
@@ -767,10 +767,3 @@ def last_iso(s, parts: _Parts) -> dict | None:
             "targets": {c: rows[c].to_numpy(float) for c in
                         ("target", "mean_up", "mean_down", "s_up", "s_down", "mean_bi", "B_i")},
             "figures": [] if figures is None else figures.to_dict("records")}
-
-
-WORKFLOW = Workflow(
-    name="fleet", function=fleet, inputs=("data",),
-    summary=("One view of the fleet: every machine axis's backlash now, trend, change points, "
-             "threshold crossing and next visit due, worst first, with a static site (--out). "
-             "Exit 3 when an alert fires."), tracked=True)

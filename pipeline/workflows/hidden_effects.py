@@ -16,7 +16,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import HasMethods, Interval
 from pipeline.workflows.parameters import PROGRESS, Param
 
@@ -118,8 +118,3 @@ def _reported(scenarios: list, progress: Progress | None):
         report(progress, done, len(scenarios), scenario["name"])
         yield scenario
     report(progress, len(scenarios), len(scenarios), "done")
-
-
-WORKFLOW = Workflow(
-    name="hidden-effects", function=hidden_effects, inputs=("scenarios",),
-    summary="Benchmark the missing-effect workflow on twin data in which effects were hidden.", tracked=True)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.parameters import FORMAT, READINGS, Param, readings
 
 PARAMETERS = {
@@ -195,10 +195,3 @@ def _notes(result: IngestResult) -> list[str]:
     if not result.added:
         notes.append(f"nothing changed: every test is already in the store {result.store}")
     return notes
-
-
-WORKFLOW = Workflow(
-    name="ingest", function=ingest,
-    summary="Validate readings files (any accepted layout) and add their tests to a fleet "
-            "store (a folder, or PostgreSQL for a team); the same test twice changes nothing.",
-    inputs=("files",))

@@ -24,7 +24,7 @@ from pathlib import Path
 from features.readings.errors import InputError, note
 from pipeline.engines import ENGINES
 from pipeline.results import Result, axis_alerts
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
 from pipeline.workflows.parameters import PROGRESS, Param, python_only
 
@@ -374,9 +374,3 @@ def _source(traces) -> str:
     if isinstance(traces, (list, tuple)):
         return ", ".join(str(t) for t in traces)
     return "traces"
-
-
-WORKFLOW = Workflow(
-    name="monitor", function=monitor, inputs=("traces",),
-    summary="Lost motion per machine axis and day from controller traces with motor- and "
-            "load-side positions, with its uncertainty, change points and trend.")

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, note
 from models.registry import TrainedModel
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.parameters import FORMAT, READINGS, Param, python_only, readings
 
 if TYPE_CHECKING:
@@ -300,10 +300,3 @@ def extrapolation_notes(model, inputs: pd.DataFrame) -> list[str]:
                          f"span ({low:g}-{high:g} h) beyond its end; the forecast "
                          "extrapolates the wear rate that far")
     return lines
-
-
-WORKFLOW = Workflow(
-    name="predict", function=predict,
-    summary="Predict backlash with a trained model directory from new tests or from a plan "
-            "table (targets and conditions); write a CSV.",
-    inputs=("model", "data", "plan"))

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval, StrOptions
 from pipeline.workflows.parameters import (
     FEATURES,
@@ -261,10 +261,3 @@ def _notes(predictor, table) -> list[str]:
         notes.append("a single visit: no input can be told apart from the visit, and "
                      "operating hours cannot be tested")
     return notes
-
-
-WORKFLOW = Workflow(
-    name="rank", function=rank, inputs=("data", "model"),
-    summary=("Which inputs drive backlash given the others (driver with its effect in um, "
-             "proxy, none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
-             "permutation importance, mutual information); writes an HTML report."), tracked=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from features.readings.errors import Progress
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
 
@@ -116,9 +116,3 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
                                   progress=progress)
     source = source_of(data, readings)
     return ReplicationResult(cases, source)
-
-
-WORKFLOW = Workflow(
-    name="replicate", function=replicate, inputs=("data", "truth"),
-    summary=("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, "
-             "k-NN accuracy) on paired tests, with and without the deviation inputs."))

@@ -23,7 +23,7 @@ from features import uncertainty as unc
 from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
 from pipeline.steps import iso as iso_workflow
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.parameters import BUDGET, FORMAT, Param
 
 PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
@@ -115,10 +115,3 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
         params["uncertainty"] = budget
     result = iso_workflow.iso(**params)
     return ReportResult(iso=result, meta=signed, notes=list(result.notes))
-
-
-WORKFLOW = Workflow(
-    name="report", function=report,
-    summary="Printable test report (HTML and PDF): conditions, per-target table, axis figures "
-            "and chart of every test, one page each.",
-    inputs=("data", "uncertainty"))

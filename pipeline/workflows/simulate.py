@@ -16,7 +16,7 @@ from pathlib import Path
 from features.readings.errors import InputError
 from models.physics import PRESETS
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import SEED, Param, python_only
 
@@ -178,12 +178,6 @@ def _as_text(frame):
 
     names = [c for c in frame.columns if isinstance(frame[c].dtype, pd.CategoricalDtype)]
     return frame.astype(dict.fromkeys(names, "str")) if names else frame
-
-
-WORKFLOW = Workflow(
-    name="simulate", function=simulate, inputs=("config",),
-    summary="Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and "
-            "truth.")
 
 
 @dataclass

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.parameters import STORE, Param
 
 PARAMETERS = {
@@ -87,9 +87,3 @@ def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResu
     checked = open_store(store, write=repair, parameter="store").check(repair=repair)
     return StoreCheckResult(store=redact(store), tests=checked.tests, readings=checked.readings,
                             problems=checked.problems, repaired=checked.repaired)
-
-
-WORKFLOW = Workflow(
-    name="store", function=check_store,
-    summary="Check a fleet store: every recorded test's readings present and intact, every "
-            "part recorded, nothing orphaned (--repair mends what is provably safe).")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.parameters import BUDGET, FORMAT, TARGET, Param, readings
 
 # Columns of the printed table (those the points have).
@@ -132,9 +132,3 @@ def targets(data, *, format: str = "auto", target: str = "auto",
     return TargetsResult(points, points.attrs["target_kind"], points.attrs["target_reason"],
                          source_of(data, readings),
                          None if budget is None else budget.coverage_factor, values)
-
-
-WORKFLOW = Workflow(
-    name="targets", function=targets, inputs=("data", "uncertainty"),
-    summary=("Backlash per point (pendulum minus linear or the ISO reversal value) with its "
-             "uncertainty; with --uncertainty also its expanded uncertainty from a budget."))

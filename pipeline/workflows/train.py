@@ -16,7 +16,7 @@ from pathlib import Path
 from features.readings.errors import InputError, note
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.parameters import (
     BUDGET,
     FEATURES,
@@ -274,10 +274,3 @@ def load_model(path):
     """A model directory written by ``train`` (``TrainResult.write``), checked before anything
     is built (``models.registry.load_model``); ``predict`` takes it."""
     return registry.load_model(path)
-
-
-WORKFLOW = Workflow(
-    name="train", function=train,
-    summary="Train a backlash predictor on paired tests and save it (default: the recommended "
-            "model).",
-    inputs=("data", "truth", "uncertainty"), tracked=True)

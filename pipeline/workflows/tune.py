@@ -15,7 +15,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import (
     FEATURES,
@@ -324,10 +324,3 @@ def _close_killed_runs(study, stale: list[int]) -> list[str]:
 def safe_url(url: str) -> str:
     """The storage URL without a password."""
     return re.sub(r"://([^:/@]+):[^@]*@", r"://\1:***@", url)
-
-
-WORKFLOW = Workflow(
-    name="tune", function=tune,
-    summary="Tune the network (hidden sizes, activation, trainer, regularisation) by "
-            "cross-validation with Optuna.",
-    inputs=("data",), tracked=True)

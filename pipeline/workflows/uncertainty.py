@@ -20,7 +20,7 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import StrOptions
 from pipeline.workflows.parameters import Param
 
@@ -137,9 +137,3 @@ def uncertainty(budget, *, arithmetic: str | None = None) -> UncertaintyResult:
                      "length) is reported first; the ISO arithmetic is shown beside it")
     return UncertaintyResult(budget=read, values=values, other=other, source=source,
                              parameters={"arithmetic": arithmetic}, notes=notes)
-
-
-WORKFLOW = Workflow(
-    name="uncertainty", function=uncertainty, inputs=("budget",),
-    summary="ISO/TR 230-9 measurement-uncertainty budget of a positioning test: each "
-            "contributor, u_P and the expanded uncertainties of A, E, M, R, R+/R- and B.")

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.parameters import STORE, Param
 
 PARAMETERS = {
@@ -105,9 +105,3 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
     result.notes.append(text)
     note(text)
     return result
-
-
-WORKFLOW = Workflow(
-    name="void", function=void,
-    summary="Retire tests of a fleet store from every reader, kept with when, who and why "
-            "in its audit table (--undo restores them).")

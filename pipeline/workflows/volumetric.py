@@ -21,7 +21,7 @@ from numbers import Integral, Real
 from pathlib import Path
 
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 from pipeline.workflows.parameters import SEED, Param
 
@@ -159,10 +159,3 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0
         result.notes.append(f"the Abbe-aware model did not leave less than the traditional one "
                             f"on {', '.join(missed)}")
     return result
-
-
-WORKFLOW = Workflow(
-    name="volumetric", function=volumetric,
-    summary="The seed paper's volumetric compensation on the machine twin: the 21 geometric "
-            "errors identified off the tool point, compensated with the traditional and the "
-            "Abbe-aware model, the four body diagonals before and after.")
