@@ -11,7 +11,7 @@ done here, the same way for every entry point (kedro's runner and hooks):
    ``compensate`` do, applies it itself);
 3. **tracking** (``track``): a tracked job (``Workflow.tracked``) logs its result's
    ``tracking_record()`` to MLflow (parameters, metrics, artifacts, a model to register and
-   the champion alias) through ``pipeline.background_run``: from the ``backlash`` program the
+   the champion alias) through ``pipeline.tracking.background``: from the ``backlash`` program the
    MLflow child starts while the job computes; inside an active MLflow run (an experiment
    file's) the record is logged as a nested run;
 4. **output**: ``out`` is written by ``result.write(out)`` (a workflow that takes ``out``
@@ -213,7 +213,7 @@ class _Tracked(_Untracked):
         import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
 
         from pipeline import tracking
-        from pipeline.background_run import BackgroundRun
+        from pipeline.tracking.background import BackgroundRun
 
         self.logged, self._tracking, self._run = {}, tracking, None
         tracking.check_uri()
@@ -246,7 +246,7 @@ class _Tracked(_Untracked):
     def _drawn_beside(self, result, out) -> None:
         """A result that saves and draws (train's): a second child draws the figures while
         this process scores what the record needs and the MLflow child logs the model."""
-        from pipeline.background_run import BackgroundTask
+        from pipeline.tracking.background import BackgroundTask
 
         tracking = self._tracking
         result.save(out)

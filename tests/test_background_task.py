@@ -1,4 +1,4 @@
-"""``pipeline.background_run.BackgroundTask``: work done in a forked child gives back its value
+"""``pipeline.tracking.background.BackgroundTask``: work done in a forked child gives back its value
 or its error, as the same work done in-process does."""
 
 from __future__ import annotations
@@ -8,16 +8,16 @@ import os
 import pytest
 
 from features.readings.errors import InputError
-from pipeline import background_run
-from pipeline.background_run import BackgroundTask
+from pipeline.tracking import background
+from pipeline.tracking.background import BackgroundTask
 
 
 @pytest.fixture(params=[False, True], ids=["in-process", "forked"])
 def forking(request, monkeypatch):
     """Whether the task runs in a child: allowed here, and possible in this test process
     (another test may have left a thread running, and a process with threads never forks)."""
-    monkeypatch.setattr(background_run, "_allowed", request.param)
-    return background_run._can_fork(mlflow_free=False)
+    monkeypatch.setattr(background, "_allowed", request.param)
+    return background._can_fork(mlflow_free=False)
 
 
 def test_the_value_comes_back(forking):
@@ -44,7 +44,7 @@ def test_a_bug_is_raised_with_its_traceback(forking):
 
 
 def test_leaving_on_an_error_stops_the_child(tmp_path, monkeypatch):
-    monkeypatch.setattr(background_run, "_allowed", True)
+    monkeypatch.setattr(background, "_allowed", True)
     marker = tmp_path / "late"
 
     def work():

@@ -23,9 +23,10 @@ import pandas as pd
 import pytest
 
 import backlash as bl
-from pipeline import model_tracking, tracking
+from pipeline import tracking
+from pipeline.tracking import model_registry
 
-NAME = model_tracking.REGISTERED_NAME
+NAME = model_registry.REGISTERED_NAME
 # a small fleet: 2 machines x 2 axes, 6 visits, one feed and dwell, 3 cycles (under a second)
 FLEET = {"fleet": {"machines": 2, "axes": ["X", "Y"], "visits": 6, "adjust_at": []},
          "plan": {"feeds_mm_min": [1000.0], "dwells_s": [3.0], "repeats": 1, "cycles": 3}}
@@ -94,9 +95,9 @@ def test_skill_is_na_with_its_reason(fleet):
 
 def test_long_lists_are_cut_with_a_count():
     axes = [f"M{m:02d}/{a}" for m in range(1, 41) for a in "XYZ"]
-    text = model_tracking.compact_list(axes, "axes", limit=60)
+    text = model_registry.compact_list(axes, "axes", limit=60)
     assert len(text) <= 60 and text.startswith("M01/X,M01/Y,") and text.endswith(",... (120 axes)")
-    assert model_tracking.compact_list(["M1/X", "M1/Y"], "axes") == "M1/X,M1/Y"
+    assert model_registry.compact_list(["M1/X", "M1/Y"], "axes") == "M1/X,M1/Y"
 
 
 # --------------------------------------------------------------------------- signature
@@ -117,7 +118,7 @@ def test_signature_lists_the_plan_columns_the_wear_map_uses(wear_map):
 def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
     result = quiet(bl.train, fleet[0], model="ridge", track=False)
     result.write(tmp_path / "ridge")
-    spec = model_tracking.model_record(result.fit, result.files["model"])["signature"]
+    spec = model_registry.model_record(result.fit, result.files["model"])["signature"]
     names = [c["name"] for c in spec["inputs"]]
     assert names == list(result.trained.feature_names_) and "deviation_up_um" in names
     assert all(c["required"] for c in spec["inputs"])
@@ -146,7 +147,7 @@ def promote(version: str, digest: str, skill: float | None, rmse: float) -> bool
 
 
 def champion(client) -> str:
-    return client.get_model_version_by_alias(NAME, model_tracking.CHAMPION).version
+    return client.get_model_version_by_alias(NAME, model_registry.CHAMPION).version
 
 
 def test_higher_skill_on_the_same_data_takes_the_champion():

@@ -16,7 +16,7 @@ import pytest
 from test_targets import ideal_tests
 
 from pipeline.cli import main
-from pipeline.model_tracking import CHAMPION, REGISTERED_NAME
+from pipeline.tracking.model_registry import CHAMPION, REGISTERED_NAME
 
 pytestmark = pytest.mark.postgres
 

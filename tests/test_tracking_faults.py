@@ -15,8 +15,9 @@ import pytest
 from mlflow.utils.validation import _validate_metric_name
 from test_drift import visit_readings
 
-from pipeline import model_tracking, tracking
+from pipeline import tracking
 from pipeline.cli import main
+from pipeline.tracking import model_registry
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -96,10 +97,10 @@ def registered_version(client, rmse: float, digest: str) -> str:
         mlflow.log_params({"data_sha256": digest})
         mlflow.log_metric("test_rmse_um", rmse)
     try:
-        client.create_registered_model(model_tracking.REGISTERED_NAME)
+        client.create_registered_model(model_registry.REGISTERED_NAME)
     except mlflow.exceptions.MlflowException:
         pass  # exists
-    return client.create_model_version(model_tracking.REGISTERED_NAME,
+    return client.create_model_version(model_registry.REGISTERED_NAME,
                                        f"runs:/{run.info.run_id}/model",
                                        run.info.run_id).version
 
@@ -112,7 +113,7 @@ def test_two_processes_promote_at_once_and_the_better_model_wins(tmp_path):
     better = registered_version(client, 1.0, "d" * 64)
     body = """
         from mlflow import MlflowClient
-        from pipeline import model_tracking
+        from pipeline.tracking import model_registry
         read = MlflowClient.get_model_version_by_alias
         def slow_read(self, *args):
             try:
@@ -122,18 +123,18 @@ def test_two_processes_promote_at_once_and_the_better_model_wins(tmp_path):
         MlflowClient.get_model_version_by_alias = slow_read
         # --- start
         time.sleep({delay})
-        print(model_tracking.promote_if_best("{version}", "{digest}", {rmse}))
+        print(model_registry.promote_if_best("{version}", "{digest}", {rmse}))
         """
     scripts = [body.format(pause=1.5, delay=0.0, version=worse, digest="d" * 64, rmse=2.0),
                body.format(pause=0.0, delay=0.3, version=better, digest="d" * 64, rmse=1.0)]
     done = start_together(scripts, tmp_path, dict(os.environ))
     assert [d.returncode for d in done] == [0, 0], [d.stderr[-1500:] for d in done]
-    champion = client.get_model_version_by_alias(model_tracking.REGISTERED_NAME, "champion")
+    champion = client.get_model_version_by_alias(model_registry.REGISTERED_NAME, "champion")
     assert champion.version == better
     assert done[1].stdout.strip() == "True"
     # the lock is released: no stray registered model is left
     names = {m.name for m in client.search_registered_models()}
-    assert names == {model_tracking.REGISTERED_NAME}
+    assert names == {model_registry.REGISTERED_NAME}
 
 
 def test_lock_of_a_killed_holder_is_broken_after_its_lease():

@@ -94,8 +94,8 @@ class CompareResult(Result):
         """``comparison.csv`` and, per predictor, its model directory with figures under
         ``models/NAME``."""
         from features.readings.fileio import atomic_path
-        from pipeline import model_tracking
         from pipeline.reports.model_report import write_figures
+        from pipeline.tracking import model_registry
 
         out = Path(out)
         files = {}
@@ -104,7 +104,7 @@ class CompareResult(Result):
                 fit.trained_model({"data_sha256": self.params.get("data_sha256")}),
                 out / "models" / name)
             files[name] = model_dir
-            files[f"{name} figures"] = write_figures(fit, model_dir / model_tracking.FIGURES)
+            files[f"{name} figures"] = write_figures(fit, model_dir / model_registry.FIGURES)
         out.mkdir(parents=True, exist_ok=True)
         with atomic_path(out / "comparison.csv") as tmp:
             self.table.to_csv(tmp, index=False)
@@ -122,8 +122,7 @@ class CompareResult(Result):
         (registered); the best becomes champion if it beats the champion on the same data."""
         import tempfile
 
-        from pipeline import model_tracking
-        from pipeline.tracking import RunRecord
+        from pipeline.tracking import RunRecord, model_registry
 
         if "comparison" not in self.files:
             self.write(tempfile.mkdtemp(prefix="backlash-compare-"))
@@ -132,8 +131,8 @@ class CompareResult(Result):
         children = [RunRecord(
             experiment="compare", run_name=name, params={"model": name, **child_params},
             metrics=fit.metrics, artifacts=list(self.files[f"{name} figures"]),
-            artifact_path=model_tracking.FIGURES,
-            model=model_tracking.model_record(fit, self.files[name]))
+            artifact_path=model_registry.FIGURES,
+            model=model_registry.model_record(fit, self.files[name]))
             for name, fit in self.fits.items()]
         return RunRecord(
             experiment="compare", run_name=f"compare {Path(self.params['data']).name}",

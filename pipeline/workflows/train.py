@@ -98,10 +98,10 @@ class TrainResult(Result):
     def draw(self) -> list[Path]:
         """The second half of ``write``: the figures of the fit in the saved model directory's
         ``figures`` folder."""
-        from pipeline import model_tracking
         from pipeline.reports.model_report import write_figures
+        from pipeline.tracking import model_registry
 
-        return self.drawn(write_figures(self.fit, self.files["model"] / model_tracking.FIGURES,
+        return self.drawn(write_figures(self.fit, self.files["model"] / model_registry.FIGURES,
                                         U_um=self.metrics.get("U_B_um")))
 
     def drawn(self, figures: list) -> list[Path]:
@@ -126,25 +126,24 @@ class TrainResult(Result):
         ``figures_record`` logs them once drawn."""
         import tempfile
 
-        from pipeline import model_tracking
-        from pipeline.tracking import RunRecord
+        from pipeline.tracking import RunRecord, model_registry
 
         if "model" not in self.files:
             self.write(Path(tempfile.mkdtemp(prefix="backlash-train-")) / self.model)
         return RunRecord(
             experiment="train", run_name=f"train {self.model}", params=self.params,
             metrics=self.metrics, artifacts=list(self.figures),
-            artifact_path=model_tracking.FIGURES,
-            model=model_tracking.model_record(self.fit, self.files["model"]), promote=True)
+            artifact_path=model_registry.FIGURES,
+            model=model_registry.model_record(self.fit, self.files["model"]), promote=True)
 
     def figures_record(self):
         """The figures alone, for the run ``tracking_record`` started before they were drawn:
         the model is logged while they are drawn."""
-        from pipeline import model_tracking
         from pipeline.results import TrackingRecord
+        from pipeline.tracking import model_registry
 
         return TrackingRecord(experiment="train", run_name=f"train {self.model}",
-                              artifacts=list(self.figures), artifact_path=model_tracking.FIGURES)
+                              artifacts=list(self.figures), artifact_path=model_registry.FIGURES)
 
 
 def train(data, *, model: str | None = None, format: str = "auto", target: str = "auto",

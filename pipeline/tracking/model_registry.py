@@ -36,7 +36,7 @@ __all__ = ["CHAMPION", "CHAMPION_LOCK", "FIGURES", "REGISTERED_NAME", "REQUIREME
 def model_record(fit, model_dir: Path) -> dict:
     """What ``pipeline.tracking.log_model`` logs of a fit saved in ``model_dir``, as plain JSON
     data: another process that has neither the fit nor its libraries may log it
-    (``pipeline.background_run``).
+    (``pipeline.tracking.background``).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The ``backlash`` program logs ``train`` from a forked child (``pipeline.background_run``):
+"""The ``backlash`` program logs ``train`` from a forked child (``pipeline.tracking.background``):
 the same run as in-process logging, no trace of a command that failed on its input, a run
 marked FAILED when the command dies after it started, and a child's error in one line."""
 
@@ -85,7 +85,7 @@ SCRIPT = """
 import json
 import sys
 from features.readings.errors import InputError
-from pipeline import background_run
+from pipeline.tracking import background
 
 def log(record):
     if record.get("fail") == "input":
@@ -94,8 +94,8 @@ def log(record):
         raise KeyError("oops")
     return {"seen": record["n"]}
 
-background_run.allow_fork()
-with background_run.BackgroundRun("child-test", log) as run:
+background.allow_fork()
+with background.BackgroundRun("child-test", log) as run:
     assert run._pid is not None, "expected a forked child"
     run.start("case " + sys.argv[1])
     run.log({"n": 1, "fail": sys.argv[1]})

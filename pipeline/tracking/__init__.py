@@ -213,7 +213,7 @@ def prepare_model_logging() -> None:
     ``mlflow.pyfunc`` and build MLflow's map of installed packages to their modules, which
     ``log_model`` reads to check the model's requirements against the installed versions
     (it reads the file list of every installed package: about half a second). A process
-    that waits for a model to log (``pipeline.background_run``) calls it while it waits."""
+    that waits for a model to log (``pipeline.tracking.background``) calls it while it waits."""
     import mlflow.pyfunc  # noqa: F401
     from mlflow.utils import requirements_utils
 
@@ -431,7 +431,7 @@ class RunRecord(TrackingRecord):
     ----------
     model : dict or None
         A trained model to log and register as ``backlash-predictor``
-        (``pipeline.model_tracking.model_record``).
+        (``pipeline.tracking.model_registry.model_record``).
     children : list of TrackingRecord
         Runs nested under this one (one per compared model, one per tuning trial).
     promote : bool
@@ -477,7 +477,7 @@ def log_result(result, *, nested: bool = False) -> dict:
 
 def log_into(data: dict) -> dict:
     """Log a record (``record_data``) into the active run; the logging function of
-    ``pipeline.background_run`` (plain data in, plain data out)."""
+    ``pipeline.tracking.background`` (plain data in, plain data out)."""
     mlflow = mlflow_module()
     if data.get("params"):
         mlflow.log_params(params(data["params"]))
@@ -558,7 +558,7 @@ REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "sci
 
 
 def log_model(model: dict) -> str:
-    """Log a trained model (``pipeline.model_tracking.model_record``) into the active run:
+    """Log a trained model (``pipeline.tracking.model_registry.model_record``) into the active run:
     its estimator parameters, per-epoch history, backtest scores (``backtest_skill``,
     ``backtest_rmse_um``, ``backtest_persistence_rmse_um``), the model directory and the model
     from code, registered as ``backlash-predictor`` with the record's version tags; returns the
@@ -611,7 +611,7 @@ def _log_pyfunc(model: dict, model_dir: Path):
     example = pd.DataFrame(**model["example"])
     return Model.log(
         artifact_path=None, name="model", flavor=_PyfuncFlavor, flavor_name="pyfunc.ModelFromCode",
-        python_model=str(Path(__file__).parents[1] / "models" / "pyfunc_model.py"),
+        python_model=str(Path(__file__).parents[2] / "models" / "pyfunc_model.py"),
         artifacts={"model_dir": str(model_dir)}, signature=signature(model["signature"]),
         input_example=example, registered_model_name=REGISTERED_NAME,
         tags=model.get("tags") or None,
