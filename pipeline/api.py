@@ -18,39 +18,22 @@ import functools
 import importlib
 
 from features.readings.errors import BacklashWarning, InputError
+from pipeline.workflows import WORKFLOWS, workflow
 
-# Public name -> the workflow module that defines it (imported on first use, so that
-# ``import backlash`` stays light).
-_WHERE = {
-    "read": "convert", "validate": "convert", "write": "convert", "convert": "convert",
-    "ingest": "ingest", "check_store": "store", "void": "void",
-    "iso": "iso", "report": "report", "simulate": "simulate",
-    "train": "train", "load_model": "train", "predict": "predict", "compare": "compare",
-    "backtest": "compare", "tune": "tune",
-    "rank": "rank", "replicate": "replicate", "drift": "drift", "discover": "discover",
-    "hidden_effects": "hidden_effects", "compensate": "compensate", "uncertainty": "uncertainty",
-    "fleet": "fleet", "targets": "targets",
-    "volumetric": "volumetric", "circle": "circle", "monitor": "monitor",
-}
-__all__ = [  # noqa: F822 (the jobs resolve on first use, in __getattr__)
-    "BacklashWarning", "InputError", "backtest", "check_store", "circle", "compare", "compensate", "convert", "discover",
-    "drift", "fleet", "hidden_effects", "ingest", "iso", "load_model", "monitor", "predict", "rank", "read", "replicate", "report",
-    "simulate", "targets", "train", "tune", "uncertainty", "validate", "void", "volumetric",
-    "write",
-]
-
-
-_JOBS = {"check_store": "store"}  # a job whose function is named otherwise
+# Public names that are not jobs -> the workflow module that defines them (imported on first
+# use, so that ``import backlash`` stays light). Every job is a name too, from its record.
+_WHERE = {"read": "convert", "validate": "convert", "write": "convert",
+          "load_model": "train", "backtest": "compare"}
+_JOBS = {w.function_name or w.name.replace("-", "_"): w.name for w in WORKFLOWS}
+__all__ = ["BacklashWarning", "InputError", *_WHERE, *_JOBS]  # noqa: PLE0604 (from the records)
 
 
 def __getattr__(name: str):
+    if name in _JOBS:
+        record = workflow(_JOBS[name])
+        return _through_runner(record.name, record.function)
     if name in _WHERE:
-        from pipeline.workflows import NAMES
-
-        module = importlib.import_module(f"pipeline.workflows.{_WHERE[name]}")
-        job = _JOBS.get(name, name.replace("_", "-"))
-        function = getattr(module, name)
-        return _through_runner(job, function) if job in NAMES else function
+        return getattr(importlib.import_module(f"pipeline.workflows.{_WHERE[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
