@@ -29,6 +29,7 @@ import warnings
 
 from features.readings.errors import VERBOSE, BacklashWarning, InputError
 from pipeline.commands import NAMES as COMMANDS  # the one command registry
+from pipeline.commands import command_of
 from pipeline.commands.common import check_outputs, remove_created
 from pipeline.tracking import TRACKING_DIR
 
@@ -60,7 +61,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         cmd = sub.add_parser(name, help=summary, description=summary)
         if name not in build:
             continue
-        module = importlib.import_module(f"pipeline.commands.{name.replace('-', '_')}")
+        module = command_of(name)
         module.add_arguments(cmd)
         add_common_arguments(cmd)
         checked_types(cmd)

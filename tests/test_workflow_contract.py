@@ -94,3 +94,23 @@ def test_the_docs_list_every_command_with_a_page_of_its_own():
               if line.startswith("| `backlash ")]
     assert listed == list(COMMANDS)
     assert all((ROOT / "docs" / f"{name}.md").is_file() for name in COMMANDS)
+
+
+def test_a_job_without_a_command_module_gets_the_default_command(capsys, monkeypatch):
+    """A new job needs a command module only to print more than its result's short form:
+    the default command gives its table's options and its JSON, as the job's own does."""
+    import json
+
+    from pipeline import commands
+    from pipeline.cli import main
+    from pipeline.commands.default import command
+
+    budget = str(ROOT / "experiments" / "data" / "paper_uncertainty.toml")
+    assert main(["uncertainty", budget, "--json", "--no-track"]) == 0
+    own = json.loads(capsys.readouterr().out)
+    assert commands.command_of("no-such-job").run is not None  # no module: the default
+    monkeypatch.setattr(commands, "command_of", command)
+    monkeypatch.setattr("pipeline.cli.command_of", command)
+    assert main(["uncertainty", budget, "--json", "--no-track"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out) == own and out.err.startswith("UncertaintyResult")

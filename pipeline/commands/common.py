@@ -27,11 +27,10 @@ def parse_list(text: str | None, parameter: str) -> list[str] | None:
 def check_outputs(command: str, args) -> list[Path]:
     """Refuse output paths that cannot work before any work is done; return the folders
     this run will create (removed again if the run ends in a user error)."""
-    import importlib
-
     from features.readings.fileio import check_output
+    from pipeline.commands import command_of
 
-    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
+    module = command_of(command)
     outputs = {dest: (kind, f"--{dest.replace('_', '-')}")
                for dest, kind in getattr(module, "OUTPUTS", {}).items()}
     for name, param in _table(command).items():
@@ -60,9 +59,9 @@ def _table(command: str) -> dict:
 def option_names(command: str) -> dict:
     """Python parameter -> the option or argument that gives it on the command line: from the
     job's table, and a command's own ``FLAGS`` (its options that are no job parameter)."""
-    import importlib
+    from pipeline.commands import command_of
 
-    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
+    module = command_of(command)
     names = {name: param.option(name) for name, param in _table(command).items()}
     return {**names, **getattr(module, "FLAGS", {})}
 
