@@ -276,6 +276,7 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     from scipy.linalg import solveh_banded
 
     q = dense.shape[1]
+    dense = [np.ascontiguousarray(dense[:, j]) for j in range(q)]  # columns, contiguous
     starts = np.flatnonzero(np.r_[True, np.diff(day) != 0])  # day is sorted
     present = day[starts]
     n_day = np.add.reduceat(weight, starts).astype(int)  # samples per day
@@ -298,9 +299,9 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     def per_day(w):  # weighted sum of w over each day's rows
         return np.add.reduceat(weight * w, starts)
 
-    a_dense = np.stack([np.stack([per_day(dense[:, j] * dense[:, m]) for m in range(q)], -1)
+    a_dense = np.stack([np.stack([per_day(dense[j] * dense[m]) for m in range(q)], -1)
                         for j in range(q)], 1)  # (D, q, q)
-    cross = np.stack([spline_t(dense[:, j]) for j in range(q)], axis=1)  # (total, q)
+    cross = np.stack([spline_t(dense[j]) for j in range(q)], axis=1)  # (total, q)
     band = np.concatenate([_penalty_band(int(k), width) * (SMOOTHING * n)
                            for k, n in zip(k_day, n_day)], axis=1)
     for o in range(width):  # C[j, j + o], summed from the samples
@@ -319,7 +320,7 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
         return np.add.reduceat(u[:, :, None] * v[:, None, :], bounds)
 
     schur = a_dense - block_t(cross, solved[:, :q])
-    rhs_dense = np.stack([per_day(dense[:, j] * y) for j in range(q)], -1)  # (D, q)
+    rhs_dense = np.stack([per_day(dense[j] * y) for j in range(q)], -1)  # (D, q)
     unit = np.zeros_like(rhs_dense)
     unit[:, 0] = 1.0  # the first row of the inverse: L's lever on each sample
     cross_rhs = block_t(cross, solved[:, q:])[:, :, 0]
@@ -331,7 +332,7 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     def fitted(which):  # X z for the coefficients ``which`` (0: beta, 1: the lever)
         out = np.zeros(len(y))
         for j in range(q):
-            out += dense[:, j] * z_dense[slot, j, which]
+            out += dense[j] * z_dense[slot, j, which]
         for a in range(width):
             out += values[a] * z_spline[cols[a], which]
         return out
