@@ -30,7 +30,7 @@ would add from a linear test and its conditions.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -54,7 +54,9 @@ class FeatureTable:
     ``target_kind``) aligned row by row; ``target_kind`` of the table is 'paper', 'iso' or
     'mixed' (axes with different definitions). ``earlier``: rows set aside from this
     table that a model may still learn from but is never scored on (the visits before an
-    adjustment that left the hour counter running on)."""
+    adjustment that left the hour counter running on). ``auto_points``: the backlash points
+    as ``features.targets.targets_of(stats, "auto")`` gave them, when the table was built from
+    those (the per-visit series reuses them instead of computing them again)."""
 
     X: pd.DataFrame
     y: pd.Series
@@ -62,6 +64,7 @@ class FeatureTable:
     target_kind: str
     reason: str = ""
     earlier: FeatureTable | None = None
+    auto_points: pd.DataFrame | None = field(default=None, repr=False)
 
 
 def default_features(readings: pd.DataFrame, kind: str = "paper") -> list[str]:
@@ -126,7 +129,8 @@ def feature_table(readings: pd.DataFrame, target: str = "auto",
     meta_cols = [c for c in (*POINT_KEYS, "started_at", "direction", "target_kind")
                  if c in table]
     return FeatureTable(table[names].astype(float), table["backlash_um"].astype(float),
-                        table[meta_cols], kind, points.attrs.get("target_reason", ""))
+                        table[meta_cols], kind, points.attrs.get("target_reason", ""),
+                        auto_points=points if target in ("auto", MIXED) else None)
 
 
 def prediction_inputs(readings: pd.DataFrame, features: list[str]) -> pd.DataFrame:

@@ -126,16 +126,17 @@ def model_inputs(table: FeatureTable, name: str, hours_origin: dict | None = Non
     return registry.with_axes(table.X, table.meta), {"hours_origin": hours_origin or {}}
 
 
-def visit_series(readings: pd.DataFrame,
-                 stats: pd.DataFrame | None = None) -> tuple[pd.DataFrame | None, str]:
+def visit_series(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
+                 points: pd.DataFrame | None = None) -> tuple[pd.DataFrame | None, str]:
     """Per-visit backlash of every machine axis (``features.visits.visit_backlash``) for the
     change-point search of ``since_adjustment``, or None and why it cannot be had; ``stats``
-    the readings' ``features.iso230.per_target`` when already computed."""
+    the readings' ``features.iso230.per_target`` and ``points`` their 'auto' backlash points
+    when already computed."""
     from features.readings.errors import InputError
     from features.visits import visit_backlash
 
     try:
-        return visit_backlash(readings, stats), ""
+        return visit_backlash(readings, stats, points=points), ""
     except InputError as err:
         return None, f"no change-point search ({err.message})"
 
@@ -153,7 +154,7 @@ def since_adjustment(table: FeatureTable, readings: pd.DataFrame | None = None,
     """
     from models.wear.wear_map import found_adjustments, wear_epochs
 
-    series, why_not = (visit_series(readings, stats) if readings is not None
+    series, why_not = (visit_series(readings, stats, table.auto_points) if readings is not None
                        else (None, "no change-point search (no readings)"))
     adjustments = found_adjustments(series) if series is not None else None
     mask, notes = wear_epochs(table.meta, table.X.get("operating_hours"),

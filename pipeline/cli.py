@@ -1,12 +1,14 @@
 """The ``backlash`` command. Each subcommand lives in ``pipeline.commands.<name>`` and exposes
-``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``. Command modules import only light
-modules at top level; heavy libraries (torch, mlflow, sklearn) are imported inside ``run``.
+``add_arguments(parser)`` and ``run(args) -> int``; its summary is its job's record. Only the
+command named is built (``backlash --help`` imports no command module), and command modules
+import only light modules at top level; heavy libraries (torch, mlflow, sklearn) are imported
+inside ``run``.
 
 Error contract: a user error (``InputError``, or a ``ValueError`` naming a parameter, raised
 anywhere below a subcommand, and every bad option) is printed as one line
 ``backlash COMMAND: error: ...`` with exit code 2, and any output folder the run created is
 removed again. A Python parameter named in an error is shown as the option it maps to (the
-command's ``FLAGS``, else ``--name-with-dashes``). Any other exception is a bug and keeps its
+job's parameter table, the command's ``FLAGS``, else ``--name-with-dashes``). Any other exception is a bug and keeps its
 traceback. Notes the library issues (``BacklashWarning``) are printed as ``note: ...`` after a
 successful command, never before an error line.
 
@@ -40,12 +42,12 @@ class Parser(argparse.ArgumentParser):
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The parser of every command. Given the command line ``argv``, only the command it names
-    is built in full (the others are bare names), so that a command, and its ``--help``,
-    imports its own modules only; ``backlash --help`` builds every one for their help."""
+    is built in full (the others are a name and a summary, from the job records), so that a
+    command, and its ``--help``, imports its own modules only and ``backlash --help`` none."""
     from pipeline.commands.options import checked_types
 
     chosen = argv[0] if argv and argv[0] in COMMANDS else None
-
+    build = COMMANDS if argv is None else (chosen,)  # None: every command, built (tests, docs)
     parser = Parser(
         prog="backlash",
         description="ISO 230-2 positioning tests to backlash predictions, drift alerts, "
@@ -54,17 +56,26 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser.commands = {}
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
-        if chosen is not None and name != chosen:
-            sub.add_parser(name)
+        summary = _summary(name)
+        cmd = sub.add_parser(name, help=summary, description=summary)
+        if name not in build:
             continue
         module = importlib.import_module(f"pipeline.commands.{name.replace('-', '_')}")
-        cmd = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(cmd)
         add_common_arguments(cmd)
         checked_types(cmd)
         cmd.set_defaults(_run=module.run)
         parser.commands[name] = cmd
     return parser
+
+
+def _summary(name: str) -> str:
+    """A command's one sentence: its job's record, or the experiment runner's ``HELP``."""
+    from pipeline.workflows import NAMES, workflow
+
+    if name in NAMES:
+        return workflow(name).summary
+    return importlib.import_module(f"pipeline.commands.{name}").HELP
 
 
 def add_common_arguments(cmd: argparse.ArgumentParser) -> None:
@@ -142,9 +153,10 @@ def _show(caught: list[warnings.WarningMessage]) -> None:
 
 
 def _flag_namer(command: str):
-    """Python parameter -> the option that sets it: the command's ``FLAGS``, else ``--name``."""
-    module = importlib.import_module(f"pipeline.commands.{command.replace('-', '_')}")
-    flags = getattr(module, "FLAGS", {})
+    """Python parameter -> the option that sets it (``option_names``), else ``--name``."""
+    from pipeline.commands.common import option_names
+
+    flags = option_names(command)
     return lambda name: flags.get(name, f"--{name.replace('_', '-')}")
 
 

@@ -131,7 +131,7 @@ def _checked(record, bound: dict) -> None:
     work: the signature bound, no name skipped (the selection is checked as it is read)."""
     from pipeline.workflows import check_params
 
-    table = sys.modules[f"pipeline.workflows.{record.name.replace('-', '_')}"].PARAMETERS
+    table = record.parameters
     check_params(table, {k: v for k, v in bound.items()
                          if k != "progress" and not (k in SELECTION and k not in table)},
                  record.name)

@@ -212,7 +212,7 @@ def test_predictor_source(tmp_path, capsys):
      "--conditions: applies to a model directory"),
     (["--controller", "heidenhain", "--spacing", "0.01"], "at most 256"),
     (["--controller", "siemens", "--spacing", "-1"],
-     "--spacing: must be None or a float in the range (0.0, inf)"),
+     "--spacing: '-1': expected a float in the range (0.0, inf)"),
     (["--controller", "linuxcnc", "--verify"], "--verify: needs twin data"),
     (["--controller", ","], "unknown controller"),
     (["--controller", "fanuc", "--fanuc-unit-um", "0"], "--fanuc-unit-um"),

@@ -127,7 +127,7 @@ def test_a_model_without_usage_refuses_a_date(twin):
 
 
 @pytest.mark.parametrize("options, message", [
-    (["--at-hours", "-5"], "--at-hours: must be None or a float in the range [0.0, inf)"),
+    (["--at-hours", "-5"], "--at-hours: '-5': expected a float in the range [0.0, inf)"),
     (["--at-date", "2026-01-01"], "is before the axis's last visit"),
     (["--at-date", "July"], "'July' is not a date YYYY-MM-DD"),
     (["--at-hours", "10", "--at-date", "2026-07-01"], "not both"),

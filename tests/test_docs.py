@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.workflows import NAMES as JOBS
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 README = ROOT / "README.md"
@@ -147,6 +149,19 @@ def test_the_predictor_table_is_the_registry():
     text = (DOCS / "train.md").read_text(encoding="utf-8")
     assert predictor_table() in text, (
         "docs/train.md: paste models.registry.table() as markdown\n" + predictor_table())
+
+
+@pytest.mark.parametrize("job", JOBS)
+def test_every_job_page_shows_its_parameter_table(job):
+    """The table of options and Python names on a job's page is its parameter table, as
+    the command line generates its options from it."""
+    from pipeline.workflows.parameters import parameters_table
+
+    table = parameters_table(job)
+    text = (DOCS / f"{job}.md").read_text(encoding="utf-8")
+    assert f"<!-- parameters -->\n{table}\n<!-- /parameters -->" in text, (
+        f"docs/{job}.md: paste pipeline.workflows.parameters.parameters_table({job!r})\n"
+        + table)
 
 
 def test_run_page_example_is_an_excerpt_of_the_demo():

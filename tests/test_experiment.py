@@ -87,7 +87,6 @@ out = "drift"
 
 
 def test_each_step_calls_its_workflow_with_the_table_as_keywords(tmp_path, monkeypatch):
-    import dataclasses
     import functools
     import json
 
@@ -95,13 +94,14 @@ def test_each_step_calls_its_workflow_with_the_table_as_keywords(tmp_path, monke
 
     calls = []
 
-    @functools.wraps(simulate.simulate)  # the same parameters
+    original = simulate.simulate
+
+    @functools.wraps(original)  # the same parameters
     def recorded(**params):
         calls.append(params)
-        return simulate.simulate(**params)
+        return original(**params)
 
-    monkeypatch.setattr(simulate, "WORKFLOW", dataclasses.replace(simulate.WORKFLOW,
-                                                                  function=recorded))
+    monkeypatch.setattr(simulate, "simulate", recorded)  # the record finds it by name
     spec = write_spec(tmp_path, """
 [[steps]]
 title = "an inline campaign"
@@ -133,14 +133,16 @@ def test_a_tracked_job_is_logged_nested_in_the_experiments_run(tmp_path, monkeyp
     import dataclasses
 
     from pipeline import tracking
-    from pipeline.workflows import convert
 
     logged = []
     monkeypatch.setattr(tracking, "log_result", lambda result, **kw: logged.append(kw) or {})
     spec = write_spec(tmp_path, convert_step(psi_file, "{out}/a.csv"))
     assert experiment.execute(experiment.load(spec)).code == 0
     assert logged == []  # convert is not a tracked job
-    monkeypatch.setattr(convert, "WORKFLOW", dataclasses.replace(convert.WORKFLOW, tracked=True))
+    from pipeline import workflows
+
+    monkeypatch.setitem(workflows._BY_NAME, "convert",
+                        dataclasses.replace(workflows.workflow("convert"), tracked=True))
     assert experiment.execute(experiment.load(spec)).code == 0
     assert logged == [{"nested": True}]
 
@@ -151,15 +153,13 @@ def test_failing_step_stops_the_experiment_and_leaves_no_empty_folder(
     bad = tmp_path / "bad.csv"
     bad.write_text("machine_id,axis\nM1,X\n")
     if library_error:  # library code names the parameter in a ValueError
-        import dataclasses
 
         from pipeline.workflows import convert
 
         def refuse(data, out=None, format="auto"):
             raise ValueError("alpha must lie in (0, 1), got 2 (bad.csv)")
 
-        monkeypatch.setattr(convert, "WORKFLOW", dataclasses.replace(convert.WORKFLOW,
-                                                                     function=refuse))
+        monkeypatch.setattr(convert, "convert", refuse)
     spec = write_spec(tmp_path, convert_step(bad, "{out}/sub/x.csv")
                       + convert_step(bad, "{out}/never-reached.csv"))
     assert main(["run", str(spec)]) == 2

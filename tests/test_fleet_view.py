@@ -355,12 +355,13 @@ def test_the_command_module_is_ready_to_register():
     import argparse
 
     from pipeline.commands import fleet as command
-    from pipeline.workflows import Workflow
-    from pipeline.workflows.fleet import PARAMETERS, WORKFLOW
+    from pipeline.workflows import Workflow, workflow
+    from pipeline.workflows.fleet import PARAMETERS
 
-    assert isinstance(WORKFLOW, Workflow) and WORKFLOW.name == "fleet"
-    assert WORKFLOW.function is fleet and WORKFLOW.inputs == ("data",)
-    assert command.HELP == WORKFLOW.summary and command.OUTPUTS == {"out": "folder"}
+    record = workflow("fleet")
+    assert isinstance(record, Workflow) and record.name == "fleet"
+    assert record.function is fleet and record.inputs == ("data",)
+    assert PARAMETERS["out"].output == "folder"
     assert {"threshold_um", "interval_days", "out"} <= set(PARAMETERS)
     parser = argparse.ArgumentParser()
     command.add_arguments(parser)

@@ -210,7 +210,7 @@ def test_an_unreachable_postgresql_url_is_one_line_without_its_password(tmp_path
 def test_every_command_that_reads_data_takes_a_store_and_the_filters():
     parser = build_parser()
     readers = [name for name, command in parser.commands.items()
-               if any(a.dest == "format" for a in command._actions)]
+               if any("--format" in a.option_strings for a in command._actions)]
     assert set(readers) >= {"convert", "iso", "train", "predict", "compare", "tune", "rank",
                             "replicate", "drift", "discover", "compensate", "ingest"}
     for name in set(readers) - {"ingest"}:

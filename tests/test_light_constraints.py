@@ -74,7 +74,7 @@ def test_drift_checks_its_parameters_without_scikit_learn():
     code = ("import sys\n"
             "from pipeline.workflows import check_params, drift\n"
             "try:\n"
-            "    check_params(drift._parameters(), {'alpha': 0.7}, 'drift')\n"
+            "    check_params(drift.PARAMETERS, {'alpha': 0.7}, 'drift')\n"
             "except Exception as err:\n"
             "    print(type(err).__name__)\n"
             "print('sklearn' in sys.modules)\n")

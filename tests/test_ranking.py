@@ -321,7 +321,7 @@ def test_rank_command_refuses_negative_boot(tmp_path, capsys):
     from pipeline.cli import main
 
     assert main(["rank", "missing.csv", "--out", str(tmp_path), "--boot", "-1"]) == 2  # refused by the option's type, before any work
-    assert "--boot" in (err := capsys.readouterr().err) and "expected a whole number >= 0" in err
+    assert "--boot" in (err := capsys.readouterr().err) and "expected an int in the range [0, inf)" in err
 
 
 def test_paper_replication_experiment_names_only_known_options():
@@ -382,5 +382,5 @@ def test_replicate_command_refuses_negative_boot(tmp_path, capsys):
     from pipeline.cli import main
 
     assert main(["replicate", "missing.csv", "--out", str(tmp_path), "--boot", "-2"]) == 2  # refused by the option's type, before any work
-    assert "--boot" in (err := capsys.readouterr().err) and "expected a whole number >= 0" in err
+    assert "--boot" in (err := capsys.readouterr().err) and "expected an int in the range [0, inf)" in err
     assert not any(tmp_path.iterdir())  # nothing written

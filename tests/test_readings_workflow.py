@@ -15,7 +15,7 @@ from features import iso230
 from features.readings import layouts, schema
 from features.readings.errors import BacklashWarning, InputError
 from pipeline.cli import build_parser, main
-from pipeline.commands.data import READINGS_HELP
+from pipeline.workflows.parameters import readings
 
 
 def small_table(cycles: int = 3) -> pd.DataFrame:
@@ -36,6 +36,9 @@ def one_error_line(capsys, command: str) -> str:
 # ------------------------------------------------------------------ one record per layout
 
 
+READINGS_HELP = readings().help
+
+
 def test_every_format_option_and_readings_help_come_from_the_records():
     names = tuple(record.name for record in layouts.RECORDS)
     assert "rtl" in names and schema.FORMATS == ("auto", *names)
@@ -47,11 +50,11 @@ def test_every_format_option_and_readings_help_come_from_the_records():
     parser = build_parser()
     with_format = 0
     for command, sub in parser.commands.items():
-        actions = {a.dest: a for a in sub._actions}
-        if "format" not in actions:
+        actions = {a.option_strings[0]: a for a in sub._actions if a.option_strings}
+        if "--format" not in actions:
             continue
         with_format += 1
-        assert tuple(actions["format"].choices) == schema.FORMATS, command
+        assert tuple(actions["--format"].choices) == schema.FORMATS, command
         # A readings argument that lists layouts lists all of them: it is DATA_HELP.
         for action in sub._actions:
             text = action.help or ""
@@ -59,8 +62,8 @@ def test_every_format_option_and_readings_help_come_from_the_records():
                                                   for r in layouts.RECORDS):
                 assert text == READINGS_HELP, (command, text)
     assert with_format >= 10
-    for command in ("convert", "iso"):
-        file = next(a for a in parser.commands[command]._actions if a.dest == "file")
+    for command in ("convert", "iso"):  # the readings, as every job that reads them says
+        file = next(a for a in parser.commands[command]._actions if a.dest == "data")
         assert file.help == READINGS_HELP
 
 

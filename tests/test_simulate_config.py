@@ -58,3 +58,41 @@ def test_estimate_counts_the_readings_the_twin_writes():
 
     config = load_config({"fleet": {"visits": 2, "axes": ["X", "Y"]}}, preset="demo")
     assert n_readings(config) == len(simulate(config, seed=0).readings)
+
+
+def test_python_writes_the_traces_the_command_writes(tmp_path):
+    """``simulate --traces`` and ``bl.simulate(traces=True)`` are one job: same seed, same
+    files, the same truth (3 axes x 2 days)."""
+    import pandas as pd
+
+    import backlash as bl
+
+    assert main(["simulate", "--traces", "--days", "2", "--seed", "3", "--out",
+                 str(tmp_path / "cli")]) == 0
+    result = bl.simulate(traces=True, days=2, seed=3, out=tmp_path / "py")
+    assert result.files["truth"] == tmp_path / "py" / "traces_truth.csv"
+    truth = pd.read_csv(result.files["truth"])
+    assert len(truth) == 6 and sorted(truth["axis"].unique()) == ["X", "Y", "Z"]
+    pd.testing.assert_frame_equal(truth, pd.read_csv(tmp_path / "cli" / "traces_truth.csv"))
+    assert (tmp_path / "py" / "traces" / "machine_id=M01").is_dir()
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["--days", "5"], "--days"), (["--rate-hz", "500"], "--rate-hz"),
+    (["--traces", "--preset", "wear"], "--preset"), (["--traces", "--config", "c.toml"],
+                                                     "--config")])
+def test_options_of_the_other_kind_are_refused_not_ignored(tmp_path, capsys, argv, option):
+    out = tmp_path / "out"
+    assert main(["simulate", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"backlash simulate: error: {option}: "), err
+    assert not out.exists()
+
+
+def test_python_refuses_a_campaign_parameter_with_traces():
+    from features.readings.errors import InputError
+    from pipeline.workflows.simulate import simulate
+
+    with pytest.raises(InputError, match="not to controller traces") as err:
+        simulate(traces=True, session_seed=2)
+    assert err.value.parameter == "session_seed"

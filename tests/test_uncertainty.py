@@ -11,7 +11,8 @@ import pytest
 
 from features import uncertainty as unc
 from features.readings.errors import InputError
-from pipeline.workflows.uncertainty import WORKFLOW, UncertaintyResult, uncertainty
+from pipeline.workflows import workflow
+from pipeline.workflows.uncertainty import UncertaintyResult, uncertainty
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "experiments" / "data" / "paper_uncertainty.toml"
@@ -89,8 +90,9 @@ def test_write_and_workflow_record(tmp_path, paper):
     files = paper.write(tmp_path / "out")
     saved = json.loads(files["json"].read_text(encoding="utf-8"))
     assert saved["U_um"]["B"] == pytest.approx(paper.expanded_um["B"])
-    assert WORKFLOW.name == "uncertainty" and WORKFLOW.inputs == ("budget",)
-    assert WORKFLOW.function is uncertainty
+    record = workflow("uncertainty")
+    assert record.name == "uncertainty" and record.inputs == ("budget",)
+    assert record.function is uncertainty
 
 
 # --------------------------------------------------------------------------- the CLI

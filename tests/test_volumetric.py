@@ -247,7 +247,7 @@ def test_bad_parameters_in_python_name_the_parameter():
 
 @pytest.mark.parametrize("argv, says", [
     (["--targets", "3"], "--targets"), (["--seed", "-1"], "--seed"),
-    (["--targets", "many"], "--targets")])
+    (["--targets", "many"], "--targets"), (["--radius-mm", "0"], "--radius-mm")])
 def test_bad_options_are_one_line_exit_2(cli, capsys, argv, says, tmp_path):
     try:
         code = cli(["volumetric", *argv, "--out", str(tmp_path / "v")])
@@ -257,3 +257,12 @@ def test_bad_options_are_one_line_exit_2(cli, capsys, argv, says, tmp_path):
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and says in err[0], err
     assert not (tmp_path / "v").exists()
+
+
+def test_the_circles_are_written_at_the_radius_given(cli, tmp_path):
+    import pandas as pd
+
+    assert cli(["volumetric", "--targets", "5", "--radius-mm", "80", "--out",
+                str(tmp_path / "v")]) == 0
+    circles = pd.read_csv(tmp_path / "v" / "circles.csv")
+    assert set(circles["radius_mm"]) == {80.0} and set(circles["plane"]) == {"XY", "YZ", "ZX"}

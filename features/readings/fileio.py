@@ -18,11 +18,12 @@ import errno
 import json
 import os
 import re
+import secrets
 import shutil
 import signal
-import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from features.readings.errors import InputError
@@ -42,19 +43,37 @@ _lock = threading.RLock()
 _handler: dict = {}
 
 
-@contextlib.contextmanager
-def _sigterm_held():
-    """SIGTERM held back (in the main thread) while a temporary file is created and
-    registered: delivered at the end, it finds the file registered and removes it."""
-    if (threading.current_thread() is not threading.main_thread()
-            or not hasattr(signal, "pthread_sigmask")):
-        yield
-        return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+def _new_temp(beside: Path, suffix: str, make) -> str:
+    """A new hidden temporary name beside ``beside``, made by ``make(name)``
+    (``_create_file`` or ``os.mkdir``) and known to the SIGTERM handler from before it exists.
+
+    Registering first closes the window in which a SIGTERM finds a file it does not know:
+    Python runs the handler in the main thread at its next instruction, and the kernel hands
+    the signal to whichever thread does not block it, so masking it in this thread cannot
+    hold it back. A name that exists already (another run's) is never registered.
+    """
+    while True:
+        tmp = str(beside.parent / f".{beside.name}.{secrets.token_hex(4)}{TEMP_MARK}"
+                  f"{os.getpid()}{suffix}")
+        if os.path.lexists(tmp):
+            continue
+        with _lock:
+            _open_temps.add(tmp)
+        try:
+            make(tmp)
+            return tmp
+        except BaseException as err:
+            with _lock:
+                _open_temps.discard(tmp)
+            if isinstance(err, FileExistsError):
+                continue
+            if isinstance(err, OSError):
+                raise _user_error(err, beside) from None
+            raise
+
+
+def _create_file(name: str) -> None:
+    os.close(os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
 
 
 @contextlib.contextmanager
@@ -66,21 +85,12 @@ def atomic_path(path: str | os.PathLike):
     _make_folder(path.parent)
     sweep_orphans(path.parent)
     _install_sigterm_handler()
-    with _sigterm_held():
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
-                                       suffix=f"{TEMP_MARK}{os.getpid()}{path.suffix}",
-                                       dir=path.parent)
-        except OSError as err:
-            raise _user_error(err, path) from None
-        os.close(fd)
-        with _lock:
-            _open_temps.add(tmp)
+    tmp = _new_temp(path, path.suffix, _create_file)
     try:
         yield Path(tmp)
         if "terminating" in _handler:  # SIGTERM came where its SystemExit was swallowed
             raise SystemExit(128 + signal.SIGTERM)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; outputs follow the umask
+        os.chmod(tmp, 0o666 & ~_UMASK)  # made 0600; outputs follow the umask
         os.replace(tmp, path)
     except OSError as err:
         if err.errno in _USER_ERRNOS:
@@ -101,15 +111,7 @@ def temp_folder(beside: str | os.PathLike) -> Path:
     _make_folder(beside.parent)
     sweep_orphans(beside.parent)
     _install_sigterm_handler()
-    with _sigterm_held():
-        try:
-            tmp = tempfile.mkdtemp(prefix=f".{beside.name}.",
-                                   suffix=f"{TEMP_MARK}{os.getpid()}", dir=beside.parent)
-        except OSError as err:
-            raise _user_error(err, beside) from None
-        with _lock:
-            _open_temps.add(tmp)
-    return Path(tmp)
+    return Path(_new_temp(beside, "", lambda name: os.mkdir(name, 0o700)))
 
 
 def write_files(out: str | os.PathLike, contents: dict[str, bytes]) -> dict[str, Path]:
@@ -129,6 +131,50 @@ def write_files(out: str | os.PathLike, contents: dict[str, bytes]) -> dict[str,
         with _lock:
             _open_temps.discard(str(tmp))
     return {name: out / name for name in contents}
+
+
+class MemoryFolder:
+    """A folder of files made in memory (name -> bytes), for ``write_files`` to write
+    together: files that must be read back and checked before any reaches the disk (the
+    compensation files) are made here, and written once.
+
+    ``folder / name`` is a ``MemoryFile``; ``contents`` holds the bytes by name, in the order
+    they were made.
+    """
+
+    def __init__(self):
+        self.contents: dict[str, bytes] = {}
+
+    def __truediv__(self, name: str) -> MemoryFile:
+        return MemoryFile(self, str(name))
+
+
+@dataclass(frozen=True)
+class MemoryFile:
+    """A file of a ``MemoryFolder``: the few ``pathlib.Path`` methods writers and readers use
+    (``name``, ``stem``, ``write_text``, ``write_bytes``, ``read_bytes``)."""
+
+    folder: MemoryFolder
+    name: str
+
+    @property
+    def stem(self) -> str:
+        return Path(self.name).stem
+
+    def write_bytes(self, data: bytes) -> None:
+        self.folder.contents[self.name] = bytes(data)
+
+    def write_text(self, text: str, encoding: str = "utf-8") -> None:
+        self.write_bytes(text.encode(encoding))
+
+    def read_bytes(self) -> bytes:
+        try:
+            return self.folder.contents[self.name]
+        except KeyError:
+            raise FileNotFoundError(2, "No such file", self.name) from None
+
+    def __str__(self) -> str:
+        return self.name
 
 
 def check_output(path: str | os.PathLike, kind: str, option: str = "--out") -> Path | None:
@@ -244,7 +290,11 @@ def _on_sigterm(signum, frame) -> None:
     raise SystemExit(128 + signal.SIGTERM)
 
 
-def write_text(path, text: str) -> Path:
+def write_text(path, text: str) -> Path | MemoryFile:
+    """``text`` into file ``path`` (UTF-8), atomically; a ``MemoryFile`` keeps it in memory."""
+    if isinstance(path, MemoryFile):
+        path.write_text(text)
+        return path
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)

@@ -115,8 +115,9 @@ def table_flipped(comp: Compensation) -> Compensation:
 
 
 def file_text(path) -> str:
-    """The text of a compensation file (UTF-8, else Latin-1, as controls write it)."""
-    path = Path(path)
+    """The text of a compensation file (UTF-8, else Latin-1, as controls write it): a path,
+    or a file made in memory (anything with ``read_bytes``)."""
+    path = path if hasattr(path, "read_bytes") else Path(path)
     try:
         data = path.read_bytes()
     except OSError as err:

@@ -1,7 +1,9 @@
-"""The ``backlash`` CLI: one module per subcommand, each ``HELP``, ``OUTPUTS`` (output paths by
-argparse dest, checked before any work), optional ``FLAGS`` (Python parameter -> option, where it
-is not ``--name``), ``add_arguments(parser)`` and ``run(args) -> int``. A command parses, calls a
-workflow (``pipeline.workflows``), prints or writes its result."""
+"""The ``backlash`` CLI: one module per subcommand with ``add_arguments(parser)`` (the job's
+options, generated from its parameter table by ``parameters.add_parameters``, plus the
+command's own: ``--json``, a plot) and ``run(args) -> int`` (``data.run_job``, then print).
+A command's summary is its job's record (``pipeline.workflows.WORKFLOWS``); its own options
+that name an output or a Python parameter may be listed in ``OUTPUTS`` (checked before any
+work) and ``FLAGS``. A command parses, calls the runner, prints or writes its result."""
 
 from pipeline.workflows import NAMES as JOBS
 

@@ -6,38 +6,24 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.data import add_data_arguments
-
-HELP = "Train every predictor (network, physics baselines, comparators) on one split; compare."
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from models.registry import help_text
-
-    add_data_arguments(parser)
-    for action in parser._actions:  # compare alone also backtests (rolling origin)
-        if action.dest == "split":
-            action.choices = (*action.choices, "backtest")
-            action.help += "; or backtest: train on visits <= k, forecast visit k + 1, every k"
-    parser.add_argument("--models", help="comma-separated predictor names (default: all); "
-                                         + help_text().replace("%", "%%"))
-    parser.add_argument("--out", help="folder for the comparison table and figures")
-    parser.add_argument("--json", action="store_true", help="print the table as JSON on stdout")
+    add_parameters(parser, "compare")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the table)")
 
 
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from features.readings.fileio import dumps
-    from pipeline.commands.common import parse_list
-    from pipeline.commands.data import data_params, run_job
+    from pipeline.commands.data import run_job
 
-    models = parse_list(args.models, "models")  # same list syntax as --features
     backtest = args.split == "backtest"
     out = args.out or tempfile.mkdtemp(prefix=f"backlash-{'backtest' if backtest else 'compare'}-")
-    result = run_job("compare", args, "origins" if backtest else "models", data=args.data,
-                     out=out, models=models, split=args.split, **data_params(args))
+    result = run_job("compare", args, "origins" if backtest else "models", out=out)
     logged = result.tracking
     run_id = f"; MLflow run {logged['run_id']}" if logged else ""
     (print_backtest if backtest else print_table)(result, file=sys.stderr)

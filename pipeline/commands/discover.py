@@ -5,30 +5,19 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.data import add_readings_argument
-from pipeline.workflows.discover import DEFAULT_BASELINE, WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.commands.parameters import add_parameters
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_readings_argument(parser, help="readings file (columns of docs/data-contract.md; "
-                                       "measured_at for time effects)")
-    parser.add_argument("--baseline", default=DEFAULT_BASELINE,
-                        help="comma-separated effects of the simulation model "
-                             f"(default {DEFAULT_BASELINE})")
-    parser.add_argument("--out", required=True, help="output folder for the report")
+    add_parameters(parser, "discover")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
 
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("discover", args, data=args.data, out=args.out, format=args.format,
-                     baseline=args.baseline, seed=args.seed)
+    result = run_job("discover", args)
     unit = result.discovery.unit
     for step in result.steps:
         print(f"named {step.effect} {step.parameters}: gap {step.rmse_before_um:.3f} -> "

@@ -4,35 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
-from pipeline.commands.data import add_readings_argument
+from pipeline.commands.parameters import add_parameters
 from pipeline.results import ALERT_EXIT
-from pipeline.workflows.drift import WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_readings_argument(parser, help="readings file with several visits (visit, "
-                                       "started_at)")
-    parser.add_argument("--out", help="output folder for the report (optional with --json)")
-    add_limit_arguments(parser)
-    add_as_of_argument(parser)
-    parser.add_argument("--model", metavar="DIR",
-                        help="trained model directory: monitor its residuals and inputs")
-    add_trend_arguments(parser)
-    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
-                        help="ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
-                             "each visit's backlash; steps within it do not alert")
-    parser.add_argument("--evidence", default="laser", metavar="SOURCES",
-                        help="sources of each series: laser (default), trace, ballbar, a "
-                             "comma-separated list or all; the others are shifted onto the "
-                             "laser by their estimated offsets (docs/drift.md)")
-    parser.add_argument("--store", metavar="STORE",
-                        help="fleet store holding the trace and ballbar records (default the "
-                             "readings when they name a store)")
-    parser.add_argument("--json", action="store_true", help="print the series as JSON")
+    add_parameters(parser, "drift")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the series)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,12 +23,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out is None and not args.json:  # before any work
         raise InputError("give the report folder (--out) or --json", parameter="out")
-    result = run_job("drift", args, data=args.data, out=args.out, format=args.format,
-                     threshold_um=args.threshold_um, threshold_arcsec=args.threshold_arcsec,
-                     limits=args.limits, as_of=args.as_of, model=args.model,
-                     warn_months=args.warn_months, alpha=args.alpha,
-                     min_jump_sigma=args.min_jump_sigma, uncertainty=args.uncertainty,
-                     evidence=args.evidence, store=args.store)
+    result = run_job("drift", args)
     print_summary(result.series, result.files.get("html"), file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

@@ -4,30 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.common import add_as_of_argument, add_limit_arguments, add_trend_arguments
-from pipeline.commands.data import add_readings_argument
+from pipeline.commands.parameters import add_parameters
 from pipeline.results import ALERT_EXIT
-from pipeline.workflows.fleet import DEFAULT_INTERVAL_DAYS, WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_readings_argument(parser, help="readings with several visits per machine axis (visit, "
-                                       "started_at)")
-    add_limit_arguments(parser)
-    add_as_of_argument(parser)
-    parser.add_argument("--interval-days", type=float, default=DEFAULT_INTERVAL_DAYS,
-                        metavar="D", help="maintenance interval [days]: the next visit is due "
-                                          "this long after the last one at the latest "
-                                          f"(default {DEFAULT_INTERVAL_DAYS:g})")
-    add_trend_arguments(parser)
-    parser.add_argument("--out", metavar="DIR",
-                        help="write the fleet site into DIR (index.html, one page per axis, "
-                             "fleet.json); it opens from disk")
-    parser.add_argument("--json", action="store_true", help="print the axes as JSON, worst "
-                                                            "first")
+    add_parameters(parser, "fleet")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the axes worst "
+                                                                       "first)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,11 +21,7 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("fleet", args, data=args.data, format=args.format,
-                     threshold_um=args.threshold_um, threshold_arcsec=args.threshold_arcsec,
-                     limits=args.limits, as_of=args.as_of, interval_days=args.interval_days,
-                     warn_months=args.warn_months, alpha=args.alpha,
-                     min_jump_sigma=args.min_jump_sigma, out=args.out)
+    result = run_job("fleet", args)
     print_summary(result, file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

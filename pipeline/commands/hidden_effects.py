@@ -7,18 +7,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.workflows.hidden_effects import SCENARIOS, WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.commands.parameters import add_parameters
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", required=True, help="output folder for the scenario table")
-    parser.add_argument("--scenarios", default=str(SCENARIOS),
-                        help="scenario file (default experiments/hidden_effect_scenarios.toml)")
-    parser.add_argument("--seeds", type=int, default=None,
-                        help="seeds per design (default: the scenario file's seeds)")
+    add_parameters(parser, "hidden-effects")
     parser.add_argument("--json", action="store_true", help="print the score as JSON")
 
 
@@ -26,8 +19,7 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("hidden-effects", args, "scenarios", scenarios=args.scenarios,
-                     seeds=args.seeds, out=args.out)
+    result = run_job("hidden-effects", args, "scenarios")
     score = result.score
     print(result.by_design.to_string(index=False), file=sys.stderr)
     print(f"named correctly {score['named_correctly']}/{score['hidden_scenarios']} "

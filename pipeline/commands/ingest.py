@@ -4,29 +4,22 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.data import add_readings_argument
-from pipeline.workflows.ingest import WORKFLOW
-
-HELP = WORKFLOW.summary
-FLAGS = {"files": "FILE"}
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_readings_argument(parser, "files", metavar="FILE", nargs="+")
-    parser.add_argument("--store", required=True, metavar="STORE",
-                        help="store folder (created when new or empty) or postgresql://USER@HOST"
-                             "/DB (password in ~/.pgpass or PGPASSWORD, not in the URL)")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_parameters(parser, "ingest")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.fileio import dumps
-    from pipeline.commands.data import one_or_all, run_job
+    from pipeline.commands.data import run_job
 
-    result = run_job("ingest", args, "ingest", files=one_or_all(args.files), store=args.store,
-                     format=args.format)
+    result = run_job("ingest", args, "ingest")
     for f in result.inputs:
         print(f"{f['file']}: {f['tests']} tests, {f['readings']} readings: {f['added']} added, "
               f"{f['unchanged']} already stored", file=sys.stderr)

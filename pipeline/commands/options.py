@@ -24,7 +24,7 @@ def finite_float(text: str) -> float:
 
 def count(text: str) -> int:
     """An integer count option: a whole number >= 1."""
-    value = _whole(text)
+    value = whole(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 1")
     return value
@@ -32,7 +32,7 @@ def count(text: str) -> int:
 
 def zero_or_more(text: str) -> int:
     """An integer option where 0 means "none" (e.g. bootstrap resamples): a whole number >= 0."""
-    value = _whole(text)
+    value = whole(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 0")
     return value
@@ -40,13 +40,13 @@ def zero_or_more(text: str) -> int:
 
 def seed(text: str) -> int:
     """A random seed: a whole number from 0 to 2**32 - 1."""
-    value = _whole(text)
+    value = whole(text)
     if not 0 <= value <= MAX_SEED:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a seed from 0 to {MAX_SEED}")
     return value
 
 
-def _whole(text: str) -> int:
+def whole(text: str) -> int:
     try:
         return int(text)
     except ValueError:
@@ -71,3 +71,4 @@ def checked_types(parser: argparse.ArgumentParser) -> None:
             action.type = seed if action.dest.endswith("seed") else count
         elif action.type is None and isinstance(action, argparse._StoreAction):
             action.type = non_empty
+

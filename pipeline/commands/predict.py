@@ -6,22 +6,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.data import add_readings_argument
-
-HELP = ("Predict backlash with a trained model directory from new tests or from a plan table "
-        "(targets and conditions); write a CSV.")
-OUTPUTS = {"out": "file"}  # output paths by argparse dest: checked before any work
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", metavar="DIR", help="model directory written by backlash train")
-    add_readings_argument(parser, help="readings file (linear tests suffice) or a plan table "
-                                       "(target and conditions, no deviations)")
-    parser.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    parser.add_argument("--json", action="store_true", help="print the predictions as JSON")
-    parser.add_argument("--store", metavar="STORE",
-                        help="fleet store (folder or postgresql:// URL) to record the forecast "
-                             "in, per machine axis; backlash fleet shows the last one")
+    add_parameters(parser, "predict")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the predictions)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,8 +22,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not str(args.out).lower().endswith(".csv"):  # before any work
         raise InputError("expected a .csv file name", file=args.out, parameter="out")
-    result = run_job("predict", args, model=args.model, data=args.data, format=args.format,
-                     store=args.store, out=args.out)
+    result = run_job("predict", args)
     out = result.predictions
     for unit, part in (out.groupby("unit", sort=False) if "unit" in out else [("um", out)]):
         print(f"{len(part)} points, backlash {part['backlash_um'].min():.2f}-"

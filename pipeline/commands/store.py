@@ -4,22 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.workflows.store import WORKFLOW
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
-HELP = WORKFLOW.summary
-OUTPUTS = {}  # prints only (a repair changes the store itself)
 # Exit code when the check finds a problem it did not mend.
 PROBLEMS_EXIT = 1
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", choices=("check",), help="what to do with the store")
-    parser.add_argument("store", metavar="STORE",
-                        help="store folder or postgresql://USER@HOST/DB")
-    parser.add_argument("--repair", action="store_true",
-                        help="relink tests to the part that holds their readings intact and "
-                             "remove files and parts that are provably orphaned")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_parameters(parser, "store")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("store", args, store=args.store, repair=args.repair)
+    result = run_job("store", args)
     if args.json:
         print(dumps(result.to_json()))
     else:

@@ -4,22 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.commands.data import add_readings_argument, add_target_argument
-from pipeline.workflows.targets import WORKFLOW
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
 TABLE_ROWS = 40  # rows printed; targets.csv and --json hold every point
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_readings_argument(parser)
-    parser.add_argument("--out", help="output folder: write targets.csv")
-    add_target_argument(parser)
-    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
-                        help="ISO/TR 230-9 budget: add backlash_U_um (the expanded uncertainty "
-                             "of each point's backlash)")
-    parser.add_argument("--json", action="store_true", help="print the points as JSON")
+    add_parameters(parser, "targets")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the points)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,8 +21,7 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("targets", args, data=args.data, format=args.format, target=args.target,
-                     uncertainty=args.uncertainty, out=args.out)
+    result = run_job("targets", args)
     print(f"{len(result.points)} points in {result.unit}, target {result.target_kind}: "
           f"{result.target_reason}", file=sys.stderr)
     print(result.table(max_rows=TABLE_ROWS), file=sys.stderr)

@@ -5,32 +5,20 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.data import add_data_arguments
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
 REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.REGISTERED_NAME
-HELP = ("Train a backlash predictor on paired tests and save it (default: the recommended "
-        "model).")
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from models.registry import RECOMMENDED, names
-
-    add_data_arguments(parser)
-    parser.add_argument("--out", required=True, help="model directory to write")
-    parser.add_argument("--model", metavar="NAME",
-                        help=f"predictor (default: {RECOMMENDED}): {', '.join(names())}; "
-                             "backlash compare lists what each does")
-    parser.add_argument("--uncertainty", metavar="BUDGET.toml",
-                        help="ISO/TR 230-9 uncertainty budget: score the test error against "
-                             "U(B), what the measurement can resolve")
+    add_parameters(parser, "train")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.commands.data import data_params, run_job
+    from pipeline.commands.data import run_job
 
-    result = run_job("train", args, data=args.data, out=args.out, model=args.model,
-                     split=args.split, uncertainty=args.uncertainty, **data_params(args))
+    result = run_job("train", args)
     print(f"{result.n_points} backlash points, target {result.target_kind}: "
           f"{result.target_reason}", file=sys.stderr)
     print_metrics(result.model, result.metrics, file=sys.stderr)
@@ -38,6 +26,10 @@ def run(args: argparse.Namespace) -> int:
     tracked = (f"; MLflow run {logged['run_id']}, {REGISTERED_NAME} v{logged['version']}"
                f"{' (champion)' if logged['champion'] else ''}" if logged else "")
     print(f"model -> {result.files['model']}/{tracked}", file=sys.stderr)
+    if args.json:
+        from features.readings.fileio import dumps
+
+        print(dumps(result.to_json()))
     return 0
 
 

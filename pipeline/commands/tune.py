@@ -7,40 +7,20 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.commands.data import add_data_arguments
-
-HELP = ("Tune the network (hidden sizes, activation, trainer, regularisation) by "
-        "cross-validation with Optuna.")
-OUTPUTS = {}
+from pipeline.commands.parameters import add_parameters
+from pipeline.workflows.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_data_arguments(parser)
-    parser.add_argument("--trials", type=int, default=30, help="trials to run in total "
-                                                                "(default 30)")
-    parser.add_argument("--storage", help="Optuna storage URL, e.g. postgresql://user@host/db "
-                                          "(default: sqlite:///optuna.db)")
-    parser.add_argument("--study", help="study name (default backlash-network-<the first 12 "
-                                        "hex digits of the data's SHA-256>: one study per data)")
-    parser.add_argument("--workers", type=int, default=1,
-                        help="worker processes sharing the study (default 1)")
-    parser.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
-    parser.add_argument("--heartbeat-s", type=int, default=10, metavar="S",
-                        help="running trials report every S seconds; a trial silent for 2 S "
-                             "(its worker was killed) is marked failed (default 10)")
-    parser.add_argument("--json", action="store_true", help="print the best trial as JSON")
+    add_parameters(parser, "tune")
+    parser.add_argument("--json", action="store_true", help=JSON_HELP + " (the best trial)")
 
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
-    from pipeline.commands.common import parse_features
     from pipeline.commands.data import run_job
 
-    result = run_job("tune", args, "trials", data=args.data, trials=args.trials,
-                     storage=args.storage, study=args.study, workers=args.workers,
-                     folds=args.folds, heartbeat_s=args.heartbeat_s, format=args.format,
-                     target=args.target, features=parse_features(args.features),
-                     seed=args.seed)
+    result = run_job("tune", args, "trials")
     others = ", ".join(f"{n} {state}" for state, n in sorted(result.trials.items())
                        if state != "complete")
     complete = result.trials.get("complete", 0)

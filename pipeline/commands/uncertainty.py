@@ -4,18 +4,11 @@ from __future__ import annotations
 
 import argparse
 
-from pipeline.workflows.uncertainty import WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {}  # prints only: nothing is written
+from pipeline.commands.parameters import add_parameters
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("budget", metavar="BUDGET.toml",
-                        help="uncertainty budget (e.g. experiments/data/paper_uncertainty.toml)")
-    parser.add_argument("--arithmetic", choices=("iso", "paper"),
-                        help="arithmetic reported first (default: the budget's 'arithmetic', "
-                             "else iso); the other is shown beside it")
+    add_parameters(parser, "uncertainty")
     parser.add_argument("--json", action="store_true",
                         help="print contributors_um, u_P_um and U_um (R_dir, B, R, E, M, A) "
                              "as JSON")
@@ -27,7 +20,7 @@ def run(args: argparse.Namespace) -> int:
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
-    result = run_job("uncertainty", args, budget=args.budget, arithmetic=args.arithmetic)
+    result = run_job("uncertainty", args)
     if args.json:
         print(dumps(result.to_json()))
     else:

@@ -5,20 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from pipeline.workflows.volumetric import WORKFLOW
-
-HELP = WORKFLOW.summary
-OUTPUTS = {"out": "folder"}  # output paths by argparse dest: checked before any work
+from pipeline.commands.parameters import add_parameters
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seed", type=int, default=0,
-                        help="random seed of the measurement noise (default 0)")
-    parser.add_argument("--targets", type=int, default=11,
-                        help="targets along each axis and diagonal, 5 to 101 (default 11, "
-                             "as the paper)")
-    parser.add_argument("--out", help="folder for volumetric.json, diagonals.csv (every "
-                                      "reading) and circles.csv (ISO 230-4, SCHEMA section 11)")
+    add_parameters(parser, "volumetric")
     parser.add_argument("--json", action="store_true",
                         help="print diagonals (before_um, traditional_um, abbe_um), axes, the "
                              "finding and the identification errors as JSON")
@@ -29,7 +20,7 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.commands.data import run_job
     from pipeline.workflows.volumetric import PAPER_TABLE1
 
-    result = run_job("volumetric", args, seed=args.seed, targets=args.targets, out=args.out)
+    result = run_job("volumetric", args)
     if args.json:
         print(dumps(result.to_json()))
         return 0

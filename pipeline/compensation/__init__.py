@@ -3,8 +3,8 @@
 ``CONTROLLERS`` is the registry: the CLI's choices and help, the docs' table
 (``docs/controllers.md``) and the workflow (``pipeline.workflows.compensate``) all read it.
 
-Each writer takes an ``AxisProfile`` (``pipeline.compensation.profile``), an output folder and
-``Options`` and returns ``{"files": {role: path}, "interpolation_error_um", "points",
+Each writer takes an ``AxisProfile`` (``pipeline.compensation.profile``), a folder made in
+memory (``features.readings.fileio.MemoryFolder``) and ``Options`` and returns ``{"files": {role: path}, "interpolation_error_um", "points",
 "spacing_mm", "backlash", "unconfirmed"}``; the roles (``table``, ``parameters``) are what the
 record's reader reads back for the closed-loop check.
 
@@ -42,7 +42,9 @@ class Controller:
     aliases : tuple of str
         Other names accepted for it.
     writer : callable
-        ``writer(profile, out_dir, options) -> dict``: writes the files of one machine axis.
+        ``writer(profile, out_dir, options) -> dict``: makes the files of one machine axis in
+        ``out_dir``, a ``features.readings.fileio.MemoryFolder`` (written to disk once, by
+        the result).
     reader : callable
         ``reader(files) -> models.physics.controller.Compensation``: reads them back as the
         controller applies them (the closed-loop check).

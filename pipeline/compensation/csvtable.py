@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from features.readings.fileio import atomic_path
+from features.readings.fileio import write_text
 from pipeline.compensation.common import in_units
 
 
@@ -32,8 +32,7 @@ def write(profile, out_dir, options) -> dict:
     }
     frame = pd.DataFrame({in_units(name, profile): values for name, values in columns.items()})
     path = out_dir / f"{profile.stem}_compensation.csv"
-    with atomic_path(path) as tmp:
-        frame.to_csv(tmp, index=False, float_format="%.6f")
+    write_text(path, frame.to_csv(index=False, float_format="%.6f"))
     return {"files": {"table": path}, "interpolation_error_um": 0.0,
             "points": len(frame), "spacing_mm": None,
             "backlash": round(profile.backlash, 4), "unconfirmed": []}

@@ -25,7 +25,9 @@ from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import Constraints, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
+from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows.parameters import BUDGET, FORMAT, READINGS, Param, readings
 
 # Keys of each test's object in the JSON form (``backlash iso --json``): a public contract.
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
@@ -38,24 +40,15 @@ TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
 UNCERTAINTY_KEYS = unc.TEST_UNCERTAINTY_KEYS
 
 
-def _parameters() -> dict:
-    """The constraints of ``iso``'s parameters (scikit-learn's constraint language), built on
-    first use: the CLI reads the workflow records on every start."""
-    import pandas as pd
-
-    from pipeline.workflows.constraints import StrOptions
-
-    return {
-        "data": [str, os.PathLike, pd.DataFrame, list, tuple],
-        "format": [StrOptions(set(schema.FORMATS))],
-        "drop_outliers": ["boolean"],
-        "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
-        "standard": [StrOptions(set(standards.NAMES))],
-    }
-
-
-
-PARAMETERS = Constraints(_parameters)  # the iso job's table (pipeline.workflows.iso)
+# the iso job's table (pipeline.workflows.iso); report shares its data and standard
+PARAMETERS = {
+    "data": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
+    "format": FORMAT,
+    "drop_outliers": Param(("boolean",), "leave flagged outlier readings out of the figures"),
+    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add U_A_um ... U_B_um (expanded "
+                         "uncertainties at each test's measuring length)", metavar="BUDGET.toml"),
+    "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
+}
 
 
 @dataclass
@@ -241,9 +234,8 @@ def iso(data, format: str = "auto", drop_outliers: bool = False,
     """
     from features import iso230
 
-    check_params(_parameters(), {"data": data, "format": format,
-                                 "drop_outliers": drop_outliers, "uncertainty": uncertainty,
-                                 "standard": standard}, "iso")
+    check_params(PARAMETERS, {"data": data, "format": format, "drop_outliers": drop_outliers,
+                              "uncertainty": uncertainty, "standard": standard}, "iso")
     record = standards.standard(standard)
     budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     readings, sources = read_tests(data, format)

@@ -1,35 +1,18 @@
 """A model job's data: readings -> checked feature table, noise floor, truth table.
 
 ``train``, ``compare`` (and its backtest) and ``tune`` read their data the same way, with the
-same parameters (``DATA_PARAMETERS``).
+same parameters (``pipeline.workflows.parameters``: ``TARGET``, ``FEATURES``, ``TRUTH``...).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from numbers import Integral
 
 import pandas as pd
 
 from features.readings.errors import InputError
-from features.readings.schema import FORMATS
 from pipeline.workflows import each_once, readings_of, source_of
-from pipeline.workflows.constraints import Interval, StrOptions
 
-MAX_SEED = 2**32 - 1  # numpy's and torch's seed range
-TARGETS = ("auto", "paper", "iso")
-SPLITS = ("random", "forward")
-PATH_OR_FRAME = [str, os.PathLike, pd.DataFrame]
-# The parameters every model job shares (train, compare, backtest, tune).
-DATA_PARAMETERS = {
-    "data": PATH_OR_FRAME,
-    "format": [StrOptions(set(FORMATS))],
-    "target": [StrOptions(set(TARGETS))],
-    "features": [list, tuple, None],
-    "truth": [*PATH_OR_FRAME, None],
-    "seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
-}
 
 @dataclass
 class ModelData:

@@ -41,7 +41,7 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
         if name not in constraints:  # never skipped: a parameter without a constraint
             raise InputError(f"is not a parameter of {caller}; expected one of "
                              f"{', '.join(constraints)}", parameter=name)
-        given = constraints[name]
+        given = list(getattr(constraints[name], "accepts", constraints[name]))  # a Param's
         if isinstance(value, bool) and not light.takes_bool(given):
             message = light.must_be(given, value, name, caller)
         elif light.understood(given):
@@ -187,22 +187,18 @@ def source_of(data, readings) -> str:
 import importlib
 from dataclasses import dataclass
 
-# Every job, in the order the CLI lists it; ``pipeline.workflows.<module>`` defines ``WORKFLOW``.
-NAMES = ("convert", "ingest", "store", "void", "iso", "targets", "report", "simulate", "train", "predict", "compare", "tune", "rank",
-         "replicate", "drift", "fleet", "discover", "hidden-effects", "compensate",
-         "uncertainty", "volumetric", "circle", "monitor")
-
 
 @dataclass(frozen=True)
 class Workflow:
-    """One job's record: the CLI command, the experiment runner and the docs read it.
+    """One job's record: the CLI command, the experiment runner and the docs read it. The
+    records are plain data (``WORKFLOWS``), so ``backlash --help`` lists every job without
+    importing one; a job's module loads when its function or table is asked for.
 
     Attributes
     ----------
     name : str
-        The job's name, also its CLI command and an experiment step's ``job``.
-    function : callable
-        ``function(**parameters, progress=None) -> Result``.
+        The job's name, also its CLI command and an experiment step's ``job``; its module is
+        ``pipeline.workflows.<name with _ for ->``.
     summary : str
         One sentence: the command's help and the docs' table of jobs.
     inputs : tuple of str
@@ -211,18 +207,136 @@ class Workflow:
     tracked : bool
         The result is logged to MLflow (``tracking_record``) when the runner tracks
         (``pipeline.runner``).
+    function_name : str or None
+        The workflow function's name in its module, when not the module's own name.
     """
 
     name: str
-    function: object
     summary: str
     inputs: tuple[str, ...] = ()
     tracked: bool = False
+    function_name: str | None = None
+
+    @property
+    def module(self):
+        return importlib.import_module(f"pipeline.workflows.{self.name.replace('-', '_')}")
+
+    @property
+    def function(self):
+        """``function(**parameters, progress=None) -> Result``."""
+        return getattr(self.module, self.function_name or self.name.replace("-", "_"))
+
+    @property
+    def parameters(self) -> Mapping:
+        """The job's parameter table (``PARAMETERS`` of its module:
+        ``pipeline.workflows.parameters``): the runner checks calls against it, the CLI
+        generates its options from it."""
+        return self.module.PARAMETERS
+
+
+# Every job, in the order the CLI lists it: adding a job is a line here, its module
+# (``PARAMETERS`` and the function), its command module and its docs page.
+WORKFLOWS = (
+    Workflow('convert',
+             'Read a readings file (canonical, paper Table 2, ecmc, Renishaw .rtl or an EPICS '
+             'camonitor log of an ISO 230-2 run) or a fleet store, validate it, write CSV/Parquet.',
+             inputs=('data',)),
+    Workflow('ingest',
+             'Validate readings files (any accepted layout) and add their tests to a fleet store (a '
+             'folder, or PostgreSQL for a team); the same test twice changes nothing.',
+             inputs=('files',)),
+    Workflow('store',
+             "Check a fleet store: every recorded test's readings present and intact, every part "
+             "recorded, nothing orphaned (--repair mends what is provably safe).",
+             function_name='check_store'),
+    Workflow('void',
+             'Retire tests of a fleet store from every reader, kept with when, who and why in its '
+             'audit table (--undo restores them).'),
+    Workflow('iso',
+             'ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.',
+             inputs=('data', 'uncertainty')),
+    Workflow('targets',
+             'Backlash per point (pendulum minus linear or the ISO reversal value) with its '
+             'uncertainty; with --uncertainty also its expanded uncertainty from a budget.',
+             inputs=('data', 'uncertainty')),
+    Workflow('report',
+             'Printable test report (HTML and PDF): conditions, per-target table, axis figures and '
+             'chart of every test, one page each.',
+             inputs=('data', 'uncertainty')),
+    Workflow('simulate',
+             'Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and truth.',
+             inputs=('config',)),
+    Workflow('train',
+             'Train a backlash predictor on paired tests and save it (default: the recommended '
+             'model).',
+             inputs=('data', 'truth', 'uncertainty'), tracked=True),
+    Workflow('predict',
+             'Predict backlash with a trained model directory from new tests or from a plan table '
+             '(targets and conditions); write a CSV.',
+             inputs=('model', 'data', 'plan')),
+    Workflow('compare',
+             'Train every predictor (network, physics baselines, comparators) on one split; compare.',
+             inputs=('data', 'truth'), tracked=True),
+    Workflow('tune',
+             'Tune the network (hidden sizes, activation, trainer, regularisation) by cross- '
+             'validation with Optuna.',
+             inputs=('data',), tracked=True),
+    Workflow('rank',
+             "Which inputs drive backlash given the others (driver with its effect in um, proxy, "
+             "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), permutation "
+             "importance, mutual information); writes an HTML report.",
+             inputs=('data', 'model'), tracked=True),
+    Workflow('replicate',
+             "Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, k-NN "
+             "accuracy) on paired tests, with and without the deviation inputs.",
+             inputs=('data', 'truth')),
+    Workflow('drift',
+             'Follow backlash across maintenance visits: robust trend, change points, the date it '
+             'crosses a threshold, and (with --model) residual and input drift of a trained model. '
+             'Exit 3 when an alert fires.',
+             inputs=('data', 'model', 'uncertainty'), tracked=True),
+    Workflow('fleet',
+             "One view of the fleet: every machine axis's backlash now, trend, change points, "
+             "threshold crossing and next visit due, worst first, with a static site (--out). Exit 3 "
+             "when an alert fires.",
+             inputs=('data',), tracked=True),
+    Workflow('discover',
+             'Find where simulation and measurement disagree, name the missing physical effect, add '
+             'it and show the gap shrink.',
+             inputs=('data',), tracked=True),
+    Workflow('hidden-effects',
+             'Benchmark the missing-effect workflow on twin data in which effects were hidden.',
+             inputs=('scenarios',), tracked=True),
+    Workflow('compensate',
+             'Write controller compensation files (LinuxCNC, Siemens SINUMERIK, Fanuc, Heidenhain '
+             'TNC, Marlin, RepRapFirmware, grblHAL, CSV) from ISO tests or a predictor; optionally '
+             're-measure the twin with them applied.',
+             inputs=('data', 'active')),
+    Workflow('uncertainty',
+             'ISO/TR 230-9 measurement-uncertainty budget of a positioning test: each contributor, '
+             'u_P and the expanded uncertainties of A, E, M, R, R+/R- and B.',
+             inputs=('budget',)),
+    Workflow('volumetric',
+             "The seed paper's volumetric compensation on the machine twin: the 21 geometric errors "
+             "identified off the tool point, compensated with the traditional and the Abbe-aware "
+             "model, the four body diagonals before and after."),
+    Workflow('circle',
+             'ISO 230-4 circular tests (ballbar): circular deviation G per direction, hysteresis H '
+             'and the diagnosis per axis (backlash, reversal spike) and per plane (squareness, scale '
+             'and servo mismatch), each with its uncertainty; polar plots.',
+             inputs=('data',)),
+    Workflow('monitor',
+             'Lost motion per machine axis and day from controller traces with motor- and load-side '
+             'positions, with its uncertainty, change points and trend.',
+             inputs=('traces',)),
+)
+NAMES = tuple(w.name for w in WORKFLOWS)
+_BY_NAME = {w.name: w for w in WORKFLOWS}
 
 
 def workflow(name: str) -> Workflow:
-    """The record of job ``name`` (imports its module on first use)."""
-    if name not in NAMES:
+    """The record of job ``name``."""
+    if name not in _BY_NAME:
         raise InputError(f"unknown job {name!r}; expected one of {', '.join(NAMES)}",
                          parameter="name")
-    return importlib.import_module(f"pipeline.workflows.{name.replace('-', '_')}").WORKFLOW
+    return _BY_NAME[name]

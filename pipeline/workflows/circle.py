@@ -17,26 +17,25 @@ from __future__ import annotations
 import os
 import re
 from dataclasses import dataclass, field
+from numbers import Real
 from pathlib import Path
 
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import Param
 
-
-def _parameters() -> dict:
-    """The constraints of ``circle``'s parameters, built on first use."""
-    from numbers import Real
-
-    import pandas as pd
-
-    from pipeline.workflows.constraints import Interval
-
-    return {"data": [str, os.PathLike, pd.DataFrame],
-            "tolerance_um": [None, Interval(Real, 0, None, closed="neither")],
-            "store": [str, os.PathLike, None]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": Param((str, os.PathLike, "pandas.DataFrame"), "circular-test table, CSV or Parquet "
+                  "(docs/circle.md)", flag="FILE"),
+    "out": Param((str, os.PathLike, None), "output folder: a polar plot per circle, "
+                 "circles.csv, circles.html", metavar="DIR", output="folder"),
+    "tolerance_um": Param((None, Interval(Real, 0, None, closed="neither")), "width of the "
+                          "tolerance band drawn in the plots [um]", flag="--tolerance",
+                          metavar="UM"),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
+                   "record each axis's backlash in (docs/fleet.md)", metavar="STORE"),
+}
 
 # JSON keys of the diagnosis: (key, model term of the first axis, of the second) or (key, term).
 AXIS_KEYS = (("backlash_um", "backlash_1", "backlash_2"),
@@ -293,7 +292,7 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     """
     from features import circle as fc
 
-    check_params(_parameters(), {"data": data, "tolerance_um": tolerance_um, "store": store},
+    check_params(PARAMETERS, {"data": data, "tolerance_um": tolerance_um, "store": store},
                  "circle")
     if store is not None:  # before any work: a store that cannot take the records
         from pipeline.store.records import open_for_records
@@ -328,10 +327,3 @@ def circle_days(frame, source: str) -> dict:
     first = frame.groupby(list(fc.CIRCLE_KEYS), sort=False)["started_at"].min()
     return {(str(m), str(p), str(v), float(r), float(f)): t.date().isoformat()
             for (m, p, v, r, f), t in first.items()}
-
-
-WORKFLOW = Workflow(
-    name="circle", function=circle, inputs=("data",),
-    summary="ISO 230-4 circular tests (ballbar): circular deviation G per direction, "
-            "hysteresis H and the diagnosis per axis (backlash, reversal spike) and per plane "
-            "(squareness, scale and servo mismatch), each with its uncertainty; polar plots.")

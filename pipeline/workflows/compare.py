@@ -7,23 +7,49 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
-from pipeline.steps.model_data import DATA_PARAMETERS, SPLITS, model_data
-from pipeline.workflows import Workflow, check_params, each_once
+from pipeline.workflows import check_params, each_once
 from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows.parameters import (
+    FEATURES,
+    FORMAT,
+    RANDOM_SEED,
+    SPLIT,
+    SPLITS,
+    TARGET,
+    TRUTH,
+    Param,
+    comma_list,
+    readings,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
 BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "coverage_pct",
                     "truth_coverage_pct", "skill_vs_persistence")
-PARAMETERS = {**DATA_PARAMETERS, "models": [list, tuple, None],
-              "split": [StrOptions({*SPLITS, "backtest"})]}
+PARAMETERS = {
+    "data": readings(),
+    "format": FORMAT,
+    "target": TARGET,
+    "features": FEATURES,
+    "split": Param((StrOptions((*SPLITS, "backtest")),), SPLIT.help + "; or backtest: train "
+                   "on visits <= k, forecast visit k + 1, every k"),
+    "truth": TRUTH,
+    "seed": RANDOM_SEED,
+    "models": Param((list, tuple, None), "comma-separated predictor names (default: all); "
+                    + registry.help_text(), parse=comma_list),
+    "out": Param((str, os.PathLike, None), "folder for the comparison table and figures",
+                 output="folder"),
+}
 
 
 def model_names(models) -> list[str]:
@@ -129,7 +155,10 @@ def compare(data, *, models: list[str] | None = None, format: str = "auto",
     -------
     CompareResult, or BacktestResult for ``split='backtest'``
     """
+    import pandas as pd
+
     from models.training import fit_model
+    from pipeline.steps.model_data import model_data
 
     values = {"data": data, "models": models, "format": format, "target": target,
               "features": features, "split": split, "truth": truth, "seed": seed}
@@ -208,6 +237,8 @@ class BacktestResult(Result):
     def tracking_record(self):
         import tempfile
 
+        import pandas as pd
+
         from pipeline.results import TrackingRecord
 
         if not self.files:
@@ -234,6 +265,7 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
     """
     from models import backtest as rolling
     from models.training import visit_series
+    from pipeline.steps.model_data import model_data
 
     check_params(PARAMETERS, {"data": data, "models": models, "format": format,
                               "target": target, "features": features, "truth": truth,
@@ -286,10 +318,3 @@ def plot_wear_map(wear: pd.DataFrame, path) -> Path:
     ax.set_title("Where the screw wears, and how fast")
     ax.legend(loc="best")
     return save_figure(fig, path)
-
-
-WORKFLOW = Workflow(
-    name="compare", function=compare,
-    summary="Train every predictor (network, physics baselines, comparators) on one split; "
-            "compare.",
-    inputs=("data", "truth"), tracked=True)

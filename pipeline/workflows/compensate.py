@@ -12,9 +12,8 @@ file plus the measured residual (``pipeline.compensation.active``).
 
 from __future__ import annotations
 
+import datetime as dt
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from numbers import Real
 from pathlib import Path
@@ -22,40 +21,64 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
+from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
+from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, comma_list, readings
 
 
-def _parameters() -> dict:
-    """The constraints of ``compensate``'s parameters (scikit-learn's constraint language),
-    built on first use: the CLI reads the workflow records on every start."""
-    import datetime as dt
-
-    import pandas as pd
-
-    from features.uncertainty import UncertaintyBudget
-    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-
-    return {
-        "data": [str, os.PathLike, pd.DataFrame, HasMethods(["predict"])],
-        "controller": [str, list, tuple],
-        "format": [str],
-        "conditions": [None, str, dict],
-        "at_hours": [None, Interval(Real, 0, None, closed="left")],
-        "at_date": [None, str, dt.date],
-        "machine": [None, str, list, tuple],
-        "axis": [None, str],
-        "spacing": [None, Interval(Real, 0, None, closed="neither")],
-        "reference_mm": [None, Interval(Real, None, None, closed="neither")],
-        "fanuc_unit_um": [Interval(Real, 0, None, closed="neither")],
-        "active": [None, str, os.PathLike, list, tuple],
-        "sign": [None, StrOptions(set(SIGNS))],
-        "verify": ["boolean"],
-        "uncertainty": [None, str, os.PathLike, dict, UncertaintyBudget],
-        "progress": [None, callable],
-    }
+def controller_help() -> str:
+    """The ``--controller`` help, from the controller records."""
+    aliases = [f"{a}={c.name}" for c in CONTROLLERS.values() for a in c.aliases]
+    return (f"one or more of {', '.join(CONTROLLERS)} (comma-separated), or all; "
+            f"aliases {', '.join(aliases)}")
 
 
-PARAMETERS = Constraints(_parameters)
+_PATHS = (str, os.PathLike)
+PARAMETERS = {
+    "data": readings("model directory (backlash train) or readings file (ISO tests)",
+                     flag="DATA|MODEL_DIR",
+                     accepts=(*_PATHS, "pandas.DataFrame", HasMethods(["predict"]))),
+    "format": FORMAT,
+    "controller": Param((str, list, tuple), controller_help(), required=True),
+    "out": Param((*_PATHS, None), "output folder", required=True, output="folder"),
+    "conditions": Param((None, str, dict), "conditions for a predictor, e.g. "
+                        "feed_mm_min=500,machine_temp_c=21", metavar="NAME=VALUE,..."),
+    "axis": Param((None, str), "axis name: a predictor's axis (default X), or only this "
+                  "axis's tests of DATA or a wear map's axes"),
+    "machine": Param((None, str, list, tuple), "only the tests of these machines, or their "
+                     "axes of a wear map", metavar="ID[,ID...]", parse=comma_list,
+                     group="test selection (a store or a file)"),
+    "at_hours": Param((None, Interval(Real, 0, None, closed="left")), "wear map: forecast the "
+                      "table for this reading of the axis's operating-hours counter (default: "
+                      "the middle of the next maintenance interval)", metavar="H"),
+    "at_date": Param((None, str, dt.date), "wear map: forecast the table for this day, "
+                     "through the axis's usage rate when the model records it",
+                     metavar="YYYY-MM-DD"),
+    "spacing": Param((None, Interval(Real, 0, None, closed="neither")), "table spacing of "
+                     "equidistant formats (default: a quarter of the smallest target interval, "
+                     "rounded down to 1/2/2.5/5 x 10^k)", metavar="MM"),
+    "reference_mm": Param((None, Interval(Real, None, None, closed="neither")), "reference "
+                          "point where SINUMERIK/Fanuc/Heidenhain tables are 0 (default: the "
+                          "table point nearest 0)"),
+    "fanuc_unit_um": Param((Interval(Real, 0, None, closed="neither"),),
+                           "Fanuc detection unit [um]"),
+    "active": Param((None, *_PATHS, list, tuple), "DATA was measured with this compensation "
+                    "file active (one controller's file for one machine axis; repeat for its "
+                    "table and its parameter file): write the active file plus the measured "
+                    "residual, and the change per target", metavar="FILE", repeated=True),
+    "sign": Param((None, StrOptions(SIGNS)), "what a positive table value means at this site "
+                  "(SINUMERIK, Fanuc, Heidenhain tables; default: each controller's documented "
+                  "convention); also how --active is read"),
+    "store": Param((*_PATHS, None), "fleet store (folder or postgresql:// URL, made by "
+                   "backlash ingest) to record this compensation in; backlash fleet shows the "
+                   "last one", metavar="STORE"),
+    "uncertainty": Param(BUDGET, "uncertainty budget of the measurement (as backlash iso "
+                         "takes): say whether each file set's residual is within or beyond "
+                         "U(B)", metavar="BUDGET.toml"),
+    "verify": Param(("boolean",), "twin data only: re-run the ISO tests with the written files "
+                    "applied; report before/after (verify.html); exit 3 if worse"),
+    "progress": PROGRESS,
+}
 
 
 @dataclass
@@ -275,14 +298,14 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     CompensationResult
         Nothing is written until ``result.write(out)``.
     """
-    check_params(_parameters(), {"data": data, "controller": controller, "format": format,
+    check_params(PARAMETERS, {"data": data, "controller": controller, "format": format,
                               "conditions": conditions, "at_hours": at_hours,
                               "at_date": at_date, "machine": machine, "axis": axis,
                               "spacing": spacing,
                               "reference_mm": reference_mm, "fanuc_unit_um": fanuc_unit_um,
                               "active": active, "sign": sign, "verify": verify,
                               "uncertainty": uncertainty, "progress": progress}, "compensate")
-    from features.readings.fileio import temp_folder
+    from features.readings.fileio import MemoryFolder
     from pipeline.compensation.common import Options
     from pipeline.compensation.profile import parse_conditions
 
@@ -316,18 +339,14 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     reversal = [p.reversal_variation() for p in profiles]
     notes = [f"{p.machine_id} {p.axis}: {n}" for p in profiles for n in p.notes]
     notes += _reversal_notes(profiles, reversal, names)
-    # The files are read back as each controller applies them (and verified on the twin)
-    # before anything reaches ``out``: written once into a scratch folder that a kill sweeps,
-    # their bytes kept for ``write``.
-    folder = temp_folder(Path(tempfile.gettempdir()) / "backlash-compensation")
-    try:
-        written = _write_all(profiles, names, folder, options)
-        _read_back(written, profiles, folder, sign, comps)
-        verification = _verify(data, profiles, names, written, folder, progress,
-                               sign, comps) if verify else {}
-        contents = {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
+    # The files are made in memory, read back as each controller applies them (and verified
+    # on the twin) before anything reaches the disk; ``write`` writes them once, together.
+    folder = MemoryFolder()
+    written = _write_all(profiles, names, folder, options)
+    _read_back(written, profiles, folder, sign, comps)
+    verification = _verify(data, profiles, names, written, folder, progress,
+                           sign, comps) if verify else {}
+    contents = dict(sorted(folder.contents.items()))
     if budget is not None:
         notes += _resolution(written, profiles, verification, budget)
     return CompensationResult(profiles, names, written, verification, contents, reversal,
@@ -461,8 +480,9 @@ def _predicted(model, conditions, spacing, at_hours, at_date, machine, axis) -> 
     return profiles
 
 
-def _write_all(profiles, names, folder: Path, options) -> list[dict]:
-    """Every controller's files for every profile into ``folder``; file names per role."""
+def _write_all(profiles, names, folder, options) -> list[dict]:
+    """Every controller's files for every profile into ``folder`` (a ``MemoryFolder``); file
+    names per role."""
     written = []
     for name in names:
         record = CONTROLLERS[name]
@@ -473,17 +493,17 @@ def _write_all(profiles, names, folder: Path, options) -> list[dict]:
             result.setdefault("per_direction", record.per_direction)
             result.update(controller=name, kind=record.kind, machine_id=profile.machine_id,
                           axis=profile.axis)
-            result["files"] = {role: Path(p).name for role, p in result["files"].items()}
+            result["files"] = {role: p.name for role, p in result["files"].items()}
             written.append(result)
     return written
 
 
-def _read_back(written, profiles, folder: Path, sign, active: dict) -> None:
+def _read_back(written, profiles, folder, sign, active: dict) -> None:
     """Each file set read back as its controller applies it: the reversal value it leaves
     [um], and with an active file the change per target (also written as a CSV)."""
     import numpy as np
 
-    from features.readings.fileio import atomic_path
+    from features.readings.fileio import write_text
     from pipeline.compensation.active import changes
 
     by_key = {(p.machine_id, p.axis): p for p in profiles}
@@ -496,8 +516,7 @@ def _read_back(written, profiles, folder: Path, sign, active: dict) -> None:
         if key in active:
             w["changes"] = changes(p, active[key], comp)
             path = folder / f"{p.stem}_{w['controller']}_changes.csv"
-            with atomic_path(path) as tmp:
-                w["changes"].to_csv(tmp, index=False, float_format="%.6f")
+            write_text(path, w["changes"].to_csv(index=False, float_format="%.6f"))
             w["files"]["changes"] = path.name
 
 
@@ -535,9 +554,9 @@ def _resolution(written, profiles, verification, budget) -> list[str]:
     return notes
 
 
-def _verify(data, profiles, names, written, folder: Path, progress, sign=None,
+def _verify(data, profiles, names, written, folder, progress, sign=None,
             active=None) -> dict[str, list[dict]]:
-    """Closed loop per controller, on the files as written (read back from ``folder``);
+    """Closed loop per controller, on the files as made (read back from ``folder``);
     'before' is the twin with the ``active`` compensation, if any, applied."""
     from pipeline.compensation.verify import closed_loop, uncompensated
 
@@ -572,9 +591,3 @@ def _profile_json(p) -> dict:
             "reversal_um": p.reversal.tolist(), "at_hours": p.at_hours, "notes": p.notes}
 
 
-_LABELS = ", ".join(c.label for c in CONTROLLERS.values())
-WORKFLOW = Workflow(
-    name="compensate", function=compensate,
-    summary=(f"Write controller compensation files ({_LABELS}) from ISO tests or a predictor; "
-             "optionally re-measure the twin with them applied."),
-    inputs=("data", "active"))

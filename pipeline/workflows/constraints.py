@@ -63,9 +63,10 @@ class Interval(_Constraint):
 
 
 class Options(_Constraint):
-    """One of the values in the set ``options``, each an instance of ``type``."""
+    """One of the values in ``options`` (a set, or a tuple to keep their order in messages
+    and in the command line's choices), each an instance of ``type``."""
 
-    def __init__(self, type, options: set):
+    def __init__(self, type, options):
         self.type, self.options = type, options
 
     def is_satisfied_by(self, value) -> bool:
@@ -79,7 +80,7 @@ class Options(_Constraint):
 class StrOptions(Options):
     """One of the strings in the set ``options``."""
 
-    def __init__(self, options: set):
+    def __init__(self, options):
         super().__init__(str, options)
 
 
@@ -134,6 +135,34 @@ class _ArrayLike(_Constraint):
         return "an array-like"
 
 
+class _Dotted(_InstanceOf):
+    """An instance of a type named by its dotted path (``"pandas.DataFrame"``), imported only
+    when a value is checked: a parameter table stays light."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    @property
+    def type(self):
+        import importlib
+
+        module, _, name = self.path.rpartition(".")
+        return getattr(importlib.import_module(module), name)
+
+    def __str__(self) -> str:
+        return f"an instance of {self.path!r}"
+
+
+class _Callable(_Constraint):
+    """scikit-learn's ``callable``: a function or any object that can be called."""
+
+    def is_satisfied_by(self, value) -> bool:
+        return callable(value)
+
+    def __str__(self) -> str:
+        return "a callable"
+
+
 NAMED = {"boolean": _Boolean, "array-like": _ArrayLike}
 
 
@@ -159,8 +188,13 @@ def understood(constraints: list) -> bool:
     """Whether this module checks every constraint of a parameter: its own classes, types,
     None, "boolean" and "array-like" (anything else, such as scikit-learn's classes, goes to
     scikit-learn)."""
-    return all(c is None or isinstance(c, (type, _Constraint)) or c in NAMED
+    return all(c is None or c is callable or isinstance(c, (type, _Constraint)) or c in NAMED
+               or _dotted(c)
                for c in constraints)
+
+
+def _dotted(c) -> bool:
+    return isinstance(c, str) and "." in c
 
 
 def violation(constraints: list, value, name: str, caller: str) -> str | None:
@@ -174,7 +208,7 @@ def violation(constraints: list, value, name: str, caller: str) -> str | None:
 
 def must_be(constraints: list, value, name: str, caller: str) -> str:
     """scikit-learn's wording of ``value`` breaking ``constraints`` (theirs or these)."""
-    texts = [c if isinstance(c, str) and c not in NAMED else str(_constraint(c))
+    texts = [c if isinstance(c, str) and c not in NAMED and not _dotted(c) else str(_constraint(c))
              for c in constraints]  # scikit-learn's other names ("random_state") as written
     listed = texts[0] if len(texts) == 1 else f"{', '.join(texts[:-1])} or {texts[-1]}"
     return f"The {name!r} parameter of {caller} must be {listed}. Got {value!r} instead."
@@ -192,8 +226,12 @@ def takes_bool(constraints: list) -> bool:
 def _constraint(c) -> _Constraint:
     if c is None:
         return _IsNone()
+    if c is callable:
+        return _Callable()
     if isinstance(c, type):
         return _InstanceOf(c)
+    if _dotted(c):
+        return _Dotted(c)
     if isinstance(c, str):
         return NAMED[c]()
     return c

@@ -12,36 +12,35 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import InputError
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
+from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows.parameters import FORMAT, Param, python_only, readings, scale_offset
 
-
-def _parameters() -> dict:
-    """The constraints of the parameters (scikit-learn's constraint language), built on first
-    use: the CLI reads the workflow records on every start."""
-    from numbers import Real
-
-    import pandas as pd
-
-    from pipeline.workflows.constraints import StrOptions
-
-    return {
-        "data": [str, os.PathLike, pd.DataFrame],
-        "path": [str, os.PathLike],
-        "out": [str, os.PathLike],
-        "format": [StrOptions(set(schema.FORMATS))],
-        "source": [str, os.PathLike],
-        "channels": [str, dict, None],
-        "reference_scale": [Real, tuple, list, None],
-        "unit": [StrOptions({"mm", "um", "deg"}), None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+_RAW = "a raw log (--format camonitor)"  # the help section of a camonitor log's options
+# convert's table; read, validate and write check their parameters (path, source) in it too
+PARAMETERS = {
+    "data": readings(flag="FILE"),
+    "format": FORMAT,
+    "out": Param((str, os.PathLike), "output file, .csv or .parquet", required=True,
+                 output="file"),
+    "channels": Param((str, dict, None), "PVs of the set point, the reference and ecmc's test "
+                      "number: target=PV,reference=PV[,test=PV] (default: from ecmc's PV names)",
+                      metavar="NAME=PV,...", group=_RAW),
+    "reference_scale": Param((Real, tuple, list, None), "axis position = SCALE * reference + "
+                             "OFFSET, in the set point's unit (default: fitted to the set "
+                             "points, reported in a note)", metavar="SCALE[,OFFSET]",
+                             parse=scale_offset, group=_RAW),
+    "unit": Param((StrOptions(("mm", "um", "deg")), None), "unit of the set point (default: "
+                  "deg when its PV names an axis A, B or C, else mm)", group=_RAW),
+    "path": python_only(str, os.PathLike),
+    "source": python_only(str, os.PathLike),
+}
 
 
 def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None,
@@ -85,7 +84,7 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
     from features.readings.selection import selection
 
     raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
-    check_params(_parameters(), {"path": path, "format": format, **raw}, "read")
+    check_params(PARAMETERS, {"path": path, "format": format, **raw}, "read")
     chosen = selection(machine=machine, axis=axis, since=since, until=until)
     return readings_of(path, format, "path", chosen, raw)
 
@@ -112,7 +111,7 @@ def validate(frame, source: str = "<memory>"):
 
     if not isinstance(frame, pd.DataFrame):
         raise TypeError(f"frame must be a pandas DataFrame; got {type(frame).__name__}")
-    check_params(_parameters(), {"source": source}, "validate")
+    check_params(PARAMETERS, {"source": source}, "validate")
     return validate_frame(frame, Path(source), None)
 
 
@@ -125,7 +124,7 @@ def write(readings, path) -> Path:
         ``readings`` is not a validated readings frame, or ``path`` is not a .csv or .parquet
         name or cannot be written.
     """
-    check_params(_parameters(), {"path": path}, "write")
+    check_params(PARAMETERS, {"path": path}, "write")
     from features.readings.io import write_readings
     from features.readings.validation import check_readings
 
@@ -195,9 +194,9 @@ def convert(data, out=None, format: str = "auto", channels=None, reference_scale
     ConvertResult
     """
     raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
-    check_params(_parameters(), {"data": data, "format": format, **raw}, "convert")
+    check_params(PARAMETERS, {"data": data, "format": format, **raw}, "convert")
     if out is not None:
-        check_params(_parameters(), {"out": out}, "convert")
+        check_params(PARAMETERS, {"out": out}, "convert")
         # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line
         # error, not raise RuntimeError here.
         if isinstance(data, (str, os.PathLike)) and os.path.realpath(out) == os.path.realpath(
@@ -210,11 +209,3 @@ def convert(data, out=None, format: str = "auto", channels=None, reference_scale
     if out is not None:  # exactly this file (a name without suffix is refused, not a folder)
         result.out = result.files["readings"] = write(readings, out)
     return result
-
-
-WORKFLOW = Workflow(
-    name="convert", function=convert,
-    summary="Read a readings file (canonical, paper Table 2, ecmc, Renishaw .rtl or an EPICS "
-            "camonitor log of an ISO 230-2 run) or a fleet store, validate it, write "
-            "CSV/Parquet.",
-    inputs=("data",))

@@ -8,33 +8,27 @@ and show the gap shrink (``models.discovery``).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
-from numbers import Integral
 from pathlib import Path
 
-from features.readings import schema
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.parameters import FORMAT, SEED, Param, readings
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 
 
-def _parameters() -> dict:
-    """The constraints of ``discover``'s parameters (scikit-learn's constraint language),
-    built on first use: the CLI reads the workflow records on every start."""
-    from pipeline.workflows import readings_data  # the data of every job that reads readings
-    from pipeline.workflows.constraints import Interval, StrOptions
-
-    return {
-        "data": readings_data(),
-        "format": [StrOptions(set(schema.FORMATS))],
-        "baseline": [str, list, tuple],
-        "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings("readings file (columns of docs/data-contract.md; measured_at for time "
+                     "effects)"),
+    "format": FORMAT,
+    "baseline": Param((str, list, tuple), "comma-separated effects of the simulation model"),
+    "out": Param((str, os.PathLike, None), "output folder for the report", required=True,
+                 output="folder"),
+    "seed": Param(SEED, "bootstrap seed"),
+}
 
 
 @dataclass
@@ -148,7 +142,7 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     -------
     DiscoveryResult
     """
-    check_params(_parameters(), {"format": format, "baseline": baseline, "seed": seed}, "discover")
+    check_params(PARAMETERS, {"format": format, "baseline": baseline, "seed": seed}, "discover")
     from models import discovery as search
 
     names = search.check_baseline(baseline)  # before the data are read
@@ -158,9 +152,3 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     for text in found.notes:
         note(text)
     return DiscoveryResult(found, names, source, readings, seed, notes=list(found.notes))
-
-
-WORKFLOW = Workflow(
-    name="discover", function=discover, inputs=("data",),
-    summary=("Find where simulation and measurement disagree, name the missing physical "
-             "effect, add it and show the gap shrink."), tracked=True)

@@ -8,43 +8,52 @@ threshold, and (with a trained model) its residual and input drift.
 
 from __future__ import annotations
 
-import datetime as dt
 import os
 from dataclasses import dataclass, field
-from numbers import Real
 from pathlib import Path
 
 from features import uncertainty as unc
-from features.readings import schema
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.parameters import (
+    ALPHA,
+    AS_OF,
+    BUDGET,
+    FORMAT,
+    LIMITS,
+    MIN_JUMP_SIGMA,
+    MODEL,
+    THRESHOLD_ARCSEC,
+    THRESHOLD_UM,
+    WARN_MONTHS,
+    Param,
+    readings,
+)
 
-
-def _parameters() -> dict:
-    """The constraints of ``drift``'s parameters (scikit-learn's constraint language, checked
-    without importing scikit-learn: drift fits no estimator)."""
-    from pipeline.workflows import readings_data  # the data of every job that reads readings
-    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-
-    return {
-        "data": readings_data(),
-        "format": [StrOptions(set(schema.FORMATS))],
-        "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
-        "threshold_arcsec": [Interval(Real, 0, None, closed="neither"), None],
-        "limits": [str, os.PathLike, dict, None],
-        "as_of": [str, dt.date, None],
-        "model": [str, os.PathLike, HasMethods(["predict"]), None],
-        "warn_months": [Interval(Real, 0, None, closed="left")],
-        "alpha": [Interval(Real, 0, 0.5, closed="neither")],
-        "min_jump_sigma": [Interval(Real, 0, None, closed="neither")],
-        "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
-        "evidence": [str, list, tuple],
-        "store": [str, os.PathLike, None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings("readings with several visits (visit, started_at)"),
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "output folder for the report (optional with --json)",
+                 output="folder"),
+    "threshold_um": THRESHOLD_UM,
+    "threshold_arcsec": THRESHOLD_ARCSEC,
+    "limits": LIMITS,
+    "as_of": AS_OF,
+    "model": Param((*MODEL, None), "trained model directory: monitor its residuals and inputs",
+                   metavar="DIR"),
+    "warn_months": WARN_MONTHS,
+    "alpha": ALPHA,
+    "min_jump_sigma": MIN_JUMP_SIGMA,
+    "uncertainty": Param(BUDGET, "ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
+                         "each visit's backlash; steps within it do not alert",
+                         metavar="BUDGET.toml"),
+    "evidence": Param((str, list, tuple), "sources of each series: laser (default), trace, "
+                      "ballbar, a comma-separated list or all; the others are shifted onto the "
+                      "laser by their estimated offsets (docs/drift.md)", metavar="SOURCES"),
+    "store": Param((str, os.PathLike, None), "fleet store holding the trace and ballbar records "
+                   "(default the readings when they name a store)", metavar="STORE"),
+}
 
 
 @dataclass
@@ -212,7 +221,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
               "model": model,
               "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
               "uncertainty": uncertainty, "evidence": evidence, "store": store}
-    check_params(_parameters(), values, "drift")
+    check_params(PARAMETERS, values, "drift")
     from pipeline.steps.evidence import sources_of
 
     sources = sources_of(evidence)
@@ -295,10 +304,3 @@ def _evidence_records(store, sources: tuple) -> dict | None:
         raise InputError("trace and ballbar evidence is read from a fleet store; give the "
                          "store as data or store", parameter="evidence")
     return read_evidence(store)
-
-
-WORKFLOW = Workflow(
-    name="drift", function=drift, inputs=("data", "model", "uncertainty"),
-    summary=("Follow backlash across maintenance visits: robust trend, change points, the date "
-             "it crosses a threshold, and (with --model) residual and input drift of a trained "
-             "model. Exit 3 when an alert fires."), tracked=True)

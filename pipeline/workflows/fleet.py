@@ -40,7 +40,21 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import (
+    ALPHA,
+    AS_OF,
+    FORMAT,
+    LIMITS,
+    MIN_JUMP_SIGMA,
+    THRESHOLD_ARCSEC,
+    THRESHOLD_UM,
+    WARN_MONTHS,
+    Param,
+    python_only,
+    readings,
+)
 
 DEFAULT_INTERVAL_DAYS = 90.0
 # The forecast is drawn one visit interval ahead, further up to the crossing date but never
@@ -53,31 +67,23 @@ MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
 FLEET_RATE_QUANTILE = 0.9
 
 
-def _parameters() -> dict:
-    """The constraints of ``fleet``'s parameters (scikit-learn's constraint language), built on
-    first use: the CLI reads the workflow records on every start."""
-    from pipeline.workflows.constraints import Interval, StrOptions
-
-    positive = Interval(Real, 0, None, closed="neither")
-    from pipeline.workflows import readings_data  # the data of every job that reads readings
-
-    return {
-        "data": readings_data(),
-        "format": [StrOptions(set(schema.FORMATS))],
-        "threshold_um": [positive, None],
-        "threshold_arcsec": [positive, None],
-        "limits": [str, os.PathLike, dict, None],
-        "as_of": [str, dt.date, None],
-        "interval_days": [positive],
-        "warn_months": [Interval(Real, 0, None, closed="left")],
-        "alpha": [Interval(Real, 0, 0.5, closed="neither")],
-        "min_jump_sigma": [positive],
-        "out": [str, os.PathLike, None],
-        "store": [str, os.PathLike, None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings("readings with several visits per machine axis (visit, started_at)"),
+    "format": FORMAT,
+    "threshold_um": THRESHOLD_UM,
+    "threshold_arcsec": THRESHOLD_ARCSEC,
+    "limits": LIMITS,
+    "as_of": AS_OF,
+    "interval_days": Param((Interval(Real, 0, None, closed="neither"),),
+                           "maintenance interval [days]: the next visit is due this long after "
+                           "the last one at the latest", metavar="D"),
+    "warn_months": WARN_MONTHS,
+    "alpha": ALPHA,
+    "min_jump_sigma": MIN_JUMP_SIGMA,
+    "out": Param((str, os.PathLike, None), "write the fleet site into DIR (index.html, one page "
+                 "per axis, fleet.json); it opens from disk", metavar="DIR", output="folder"),
+    "store": python_only(str, os.PathLike, None),
+}
 
 
 # --------------------------------------------------------------------------- one axis
@@ -403,7 +409,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
               "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
               "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
               "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
-    check_params(_parameters(), values, "fleet")
+    check_params(PARAMETERS, values, "fleet")
     from pipeline.steps.dated_view import as_of_date, dated_view
     from pipeline.steps.limits import read_limits
 
@@ -848,10 +854,3 @@ def last_iso(s, parts: _Parts) -> dict | None:
             "targets": {c: rows[c].to_numpy(float) for c in
                         ("target", "mean_up", "mean_down", "s_up", "s_down", "mean_bi", "B_i")},
             "figures": [] if figures is None else figures.to_dict("records")}
-
-
-WORKFLOW = Workflow(
-    name="fleet", function=fleet, inputs=("data",),
-    summary=("One view of the fleet: every machine axis's backlash now, trend, change points, "
-             "threshold crossing and next visit due, worst first, with a static site (--out). "
-             "Exit 3 when an alert fires."), tracked=True)

@@ -16,24 +16,23 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import HasMethods, Interval
+from pipeline.workflows.parameters import PROGRESS, Param
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "hidden_effect_scenarios.toml"
 FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "score": "score.json"}
 
 
-def _parameters() -> dict:
-    """The constraints of ``hidden_effects``'s parameters (scikit-learn's constraint
-    language), built on first use: the CLI reads the workflow records on every start."""
-    from pipeline.workflows.constraints import HasMethods, Interval
-
-    return {
-        "scenarios": [str, os.PathLike, dict, HasMethods(["check"])],
-        "seeds": [Interval(Integral, 1, None, closed="left"), None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "out": Param((str, os.PathLike, None), "output folder for the scenario table",
+                 required=True, output="folder"),
+    "scenarios": Param((str, os.PathLike, dict, HasMethods(["check"])),
+                       "scenario file (default experiments/hidden_effect_scenarios.toml)"),
+    "seeds": Param((Interval(Integral, 1, None, closed="left"), None),
+                   "seeds per design (default: the scenario file's seeds)"),
+    "progress": PROGRESS,
+}
 
 
 @dataclass
@@ -98,7 +97,7 @@ def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
     -------
     HiddenEffectsResult
     """
-    check_params(_parameters(), {"scenarios": scenarios, "seeds": seeds}, "hidden_effects")
+    check_params(PARAMETERS, {"scenarios": scenarios, "seeds": seeds}, "hidden_effects")
     from models.discovery import benchmark as bench
 
     given_as_file = isinstance(scenarios, (str, os.PathLike))
@@ -119,8 +118,3 @@ def _reported(scenarios: list, progress: Progress | None):
         report(progress, done, len(scenarios), scenario["name"])
         yield scenario
     report(progress, len(scenarios), len(scenarios), "done")
-
-
-WORKFLOW = Workflow(
-    name="hidden-effects", function=hidden_effects, inputs=("scenarios",),
-    summary="Benchmark the missing-effect workflow on twin data in which effects were hidden.", tracked=True)

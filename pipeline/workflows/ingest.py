@@ -18,25 +18,16 @@ from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of
+from pipeline.workflows import check_params, readings_of
+from pipeline.workflows.parameters import FORMAT, READINGS, Param, readings
 
-
-def _parameters() -> dict:
-    """The constraints of the parameters (scikit-learn's constraint language), built on first
-    use: the CLI reads the workflow records on every start."""
-    import pandas as pd
-
-    from features.readings import schema
-    from pipeline.workflows.constraints import StrOptions
-
-    return {
-        "files": [str, os.PathLike, pd.DataFrame, list, tuple],
-        "store": [str, os.PathLike],
-        "format": [StrOptions(set(schema.FORMATS))],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "files": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
+    "format": FORMAT,
+    "store": Param((str, os.PathLike), "store folder (created when new or empty) or "
+                   "postgresql://USER@HOST/DB (password in ~/.pgpass or PGPASSWORD, not in the "
+                   "URL)", metavar="STORE", required=True),
+}
 
 
 @dataclass
@@ -99,7 +90,7 @@ def ingest(files, store, *, format: str = "auto", progress=None) -> IngestResult
         A file that cannot be read or breaks the readings contract, a test already stored
         with other readings, a store that cannot be opened or written: nothing is written.
     """
-    check_params(_parameters(), {"files": files, "store": store, "format": format}, "ingest")
+    check_params(PARAMETERS, {"files": files, "store": store, "format": format}, "ingest")
     from pipeline.store import open_store, redact
 
     inputs = _inputs(files)
@@ -204,10 +195,3 @@ def _notes(result: IngestResult) -> list[str]:
     if not result.added:
         notes.append(f"nothing changed: every test is already in the store {result.store}")
     return notes
-
-
-WORKFLOW = Workflow(
-    name="ingest", function=ingest,
-    summary="Validate readings files (any accepted layout) and add their tests to a fleet "
-            "store (a folder, or PostgreSQL for a team); the same test twice changes nothing.",
-    inputs=("files",))

@@ -9,11 +9,5 @@
 from __future__ import annotations
 
 from pipeline.steps.iso import PARAMETERS, iso
-from pipeline.workflows import Workflow
 
-__all__ = ["PARAMETERS", "WORKFLOW", "iso"]
-
-WORKFLOW = Workflow(
-    name="iso", function=iso,
-    summary="ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.",
-    inputs=("data", "uncertainty"))
+__all__ = ["PARAMETERS", "iso"]

@@ -18,39 +18,54 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from numbers import Real
 from pathlib import Path
 
 from features.readings.errors import InputError, note
+from pipeline.engines import ENGINES
 from pipeline.results import Result, axis_alerts
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval, StrOptions
+from pipeline.workflows.parameters import PROGRESS, Param, python_only
+
+_RAW = "raw controller logs (--log-format camonitor or halsampler)"
+_POSITIVE = Interval(Real, 0, None, closed="neither")
+PARAMETERS = {
+    "traces": Param((str, os.PathLike, list, tuple, "pandas.DataFrame"), "trace table (CSV, "
+                    "Parquet) or Parquet dataset folder partitioned by machine_id=, axis=, "
+                    "date= (docs/data-contract.md section 10)", flag="TRACE", nargs="+"),
+    "out": Param((str, os.PathLike, None), "output folder: monitor.json, daily.csv, "
+                 "monitor.html", output="folder"),
+    "engine": Param((StrOptions(ENGINES),), "where the partitions run (default local: this "
+                    "process)"),
+    "address": Param((str, None), "Dask scheduler address (tcp://host:8786); default Dask's "
+                     "local scheduler", metavar="URL"),
+    "threshold_um": Param((_POSITIVE, None), "lost-motion limit [um]: alert at it, forecast "
+                          "its crossing", metavar="X"),
+    "take_up_mm": Param((_POSITIVE,), "travel after a reversal past which the play is taken "
+                        "up", metavar="X"),
+    "settle_s": python_only(Interval(Real, 0, None, closed="left")),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
+                   "record the daily lost motion in (docs/fleet.md)", metavar="STORE"),
+    "format": Param((StrOptions(("trace", "camonitor", "halsampler")),), "what TRACE is: trace "
+                    "tables (default) or a raw log per machine axis", flag="--log-format",
+                    group=_RAW),
+    "channels": Param((str, dict, None), "commanded=PV,motor=PV,load=PV (halsampler: field "
+                      "numbers or pins)", metavar="MAP", group=_RAW),
+    "machine": Param((str, None), "the log's machine (default: the commanded PV's IOC)",
+                     group=_RAW),
+    "axis": Param((str, None), "the log's axis (default: the commanded PV's axis letter)",
+                  group=_RAW),
+    "period_s": Param((_POSITIVE, None), "halsampler output's sample period [s]", metavar="S",
+                      group=_RAW),
+    "progress": PROGRESS,
+}
 
 
-def _parameters() -> dict:
-    """The constraints of ``monitor``'s parameters, built on first use."""
-    from numbers import Real
-
-    import pandas as pd
-
-    from pipeline.engines import ENGINES
-    from pipeline.workflows.constraints import Interval, StrOptions
-
-    return {
-        "traces": [str, os.PathLike, list, tuple, pd.DataFrame],
-        "engine": [StrOptions(set(ENGINES))],
-        "address": [str, None],
-        "threshold_um": [Interval(Real, 0, None, closed="neither"), None],
-        "take_up_mm": [Interval(Real, 0, None, closed="neither")],
-        "settle_s": [Interval(Real, 0, None, closed="left")],
-        "store": [str, os.PathLike, None],
-        "format": [StrOptions({"trace", "camonitor", "halsampler"})],
-        "channels": [str, dict, None],
-        "machine": [str, None],
-        "axis": [str, None],
-        "period_s": [Interval(Real, 0, None, closed="neither"), None],
-    }
+def _parameters() -> dict:  # until the body's check names PARAMETERS itself
+    return PARAMETERS
 
 
-PARAMETERS = Constraints(_parameters)
 LOAD_NEEDED = "lost motion needs a load-side position (column load_mm)"
 
 
@@ -361,9 +376,3 @@ def _source(traces) -> str:
     if isinstance(traces, (list, tuple)):
         return ", ".join(str(t) for t in traces)
     return "traces"
-
-
-WORKFLOW = Workflow(
-    name="monitor", function=monitor, inputs=("traces",),
-    summary="Lost motion per machine axis and day from controller traces with motor- and "
-            "load-side positions, with its uncertainty, change points and trend.")

@@ -11,24 +11,31 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from features.readings.errors import InputError, note
-from features.readings.schema import FORMATS
 from models.registry import TrainedModel
 from pipeline.results import Result
-from pipeline.workflows import Workflow, check_params, readings_of, source_of
-from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.parameters import FORMAT, READINGS, Param, python_only, readings
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")
 PARAMETERS = {
-    "model": [str, os.PathLike, TrainedModel],
-    "data": [str, os.PathLike, pd.DataFrame, None],
-    "plan": [str, os.PathLike, pd.DataFrame, None],
-    "format": [StrOptions(set(FORMATS))],
-    "store": [str, os.PathLike, None],
+    "model": Param((str, os.PathLike, TrainedModel), "model directory written by backlash "
+                   "train", flag="DIR"),
+    "data": readings("readings file (linear tests suffice) or a plan table (target and "
+                     "conditions, no deviations)", accepts=(*READINGS, None)),
+    "plan": python_only(*READINGS, None),  # the command line reads a plan as its DATA
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "predictions to write", metavar="PRED.csv",
+                 required=True, output="file"),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
+                   "record the forecast in, per machine axis; backlash fleet shows the last one",
+                   metavar="STORE"),
 }
 
 
@@ -129,6 +136,8 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         written, or points without ``machine_id`` and ``axis`` to record them by (nothing is
         recorded).
     """
+    import pandas as pd
+
     from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
@@ -291,10 +300,3 @@ def extrapolation_notes(model, inputs: pd.DataFrame) -> list[str]:
                          f"span ({low:g}-{high:g} h) beyond its end; the forecast "
                          "extrapolates the wear rate that far")
     return lines
-
-
-WORKFLOW = Workflow(
-    name="predict", function=predict,
-    summary="Predict backlash with a trained model directory from new tests or from a plan "
-            "table (targets and conditions); write a CSV.",
-    inputs=("model", "data", "plan"))

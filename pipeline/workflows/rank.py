@@ -10,38 +10,49 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from numbers import Integral
 from pathlib import Path
 
-from features.readings import schema
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.constraints import Interval, StrOptions
+from pipeline.workflows.parameters import (
+    FEATURES,
+    FORMAT,
+    MODEL,
+    RANDOM_SEED,
+    TARGET,
+    Param,
+    readings,
+)
 
-
-def _parameters() -> dict:
-    """The constraints of ``rank``'s parameters (scikit-learn's constraint language), built on
-    first use: the CLI reads the workflow records on every start."""
-    from pipeline.workflows import readings_data  # the data of every job that reads readings
-    from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-
-    return {
-        "data": readings_data(),
-        "format": [StrOptions(set(schema.FORMATS))],
-        "model": [str, os.PathLike, HasMethods(["predict"]), None],
-        "bins": [Interval(Integral, 2, None, closed="left"), str, "array-like"],
-        "features": [list, tuple, None],
-        "target": [StrOptions({"auto", "paper", "iso"}), None],
-        "k": [Interval(Integral, 1, None, closed="left")],
-        "rank_by": [StrOptions({"consensus", "anova"})],
-        "boot": [Interval(Integral, 0, None, closed="left")],
-        "dropcolumn": ["boolean"],
-        "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings(),
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "output folder for the report", required=True,
+                 output="folder"),
+    "model": Param((*MODEL, None), "trained model directory; its predictor gives the "
+                   "permutation importance of the association views (default: a gradient "
+                   "boosting regressor fitted per cross-validation fold)", metavar="DIR"),
+    "bins": Param((Interval(Integral, 2, None, closed="left"), str, "array-like"),
+                  "backlash classes: N quantile classes, or comma-separated class boundaries "
+                  "in um such as 2,4,6", parse=str),  # the text as given: parse_bins reads it
+    "features": replace(FEATURES, help="comma-separated feature-table columns (default: every "
+                        "input the data supply)"),
+    "target": Param((*TARGET.accepts, None), "backlash definition (default: the model's, else "
+                    "auto)"),
+    "k": Param((Interval(Integral, 1, None, closed="left"),), "k-NN neighbours"),
+    "rank_by": Param((StrOptions(("consensus", "anova")),), "order of the association views: "
+                     "mean rank of ANOVA, permutation and mutual information (default), or the "
+                     "ANOVA score as in the paper; the report lists drivers first either way"),
+    "boot": Param((Interval(Integral, 0, None, closed="left"),), "bootstrap resamples of the "
+                  "effect intervals and ANOVA spreads"),
+    "dropcolumn": Param(("boolean",), "compute the drop-column importance of gradient "
+                        "boosting (default); --no-dropcolumn skips it (faster)"),
+    "seed": RANDOM_SEED,
+}
 
 
 @dataclass
@@ -176,7 +187,7 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     values = {"format": format, "model": model, "bins": bins, "features": features,
               "target": target, "k": k, "rank_by": rank_by, "boot": boot,
               "dropcolumn": dropcolumn, "seed": seed}
-    check_params(_parameters(), values, "rank")
+    check_params(PARAMETERS, values, "rank")
     from features.table import feature_table
     from models.influence import explain
     from pipeline.steps.model_data import check_feature_names
@@ -250,10 +261,3 @@ def _notes(predictor, table) -> list[str]:
         notes.append("a single visit: no input can be told apart from the visit, and "
                      "operating hours cannot be tested")
     return notes
-
-
-WORKFLOW = Workflow(
-    name="rank", function=rank, inputs=("data", "model"),
-    summary=("Which inputs drive backlash given the others (driver with its effect in um, "
-             "proxy, none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), "
-             "permutation importance, mutual information); writes an HTML report."), tracked=True)

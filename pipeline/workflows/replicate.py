@@ -9,34 +9,25 @@ data set of paired tests, with and without the deviation inputs (``pipeline.repl
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from numbers import Integral
 from pathlib import Path
 
-from features.readings import schema
 from features.readings.errors import Progress
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
 
-
-def _parameters() -> dict:
-    """The constraints of ``replicate``'s parameters (scikit-learn's constraint language),
-    built on first use: the CLI reads the workflow records on every start."""
-    import pandas as pd
-
-    from pipeline.workflows import readings_data  # the data of every job that reads readings
-    from pipeline.workflows.constraints import Interval, StrOptions
-
-    return {
-        "data": readings_data(),
-        "format": [StrOptions(set(schema.FORMATS))],
-        "truth": [str, os.PathLike, pd.DataFrame, None],
-        "boot": [Interval(Integral, 0, None, closed="left")],
-        "seed": [Interval(Integral, 0, 2**32 - 1, closed="both")],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings("readings file with paired linear and pendulum tests"),
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "output folder", required=True, output="folder"),
+    "truth": replace(TRUTH, help="twin truth table: also the k-NN accuracy the true backlash "
+                     "would reach in the measured classes (the ceiling set by noise)"),
+    "boot": Param((Interval(Integral, 0, None, closed="left"),), "bootstrap resamples"),
+    "seed": RANDOM_SEED,
+}
 
 
 @dataclass
@@ -68,6 +59,11 @@ class ReplicationResult(Result):
         from pipeline.replication import markdown
 
         return markdown(self.rows)
+
+    def to_json(self) -> dict:
+        """The side-by-side table (``rows``: quantity, paper, with and without deviations,
+        note) and the source."""
+        return {"source": self.source, "rows": self.rows}
 
     def write(self, out) -> dict[str, Path]:
         """``replication.html``, ``.md``, ``.json`` and the Fig. 10 and 13 figures."""
@@ -103,7 +99,7 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
     -------
     ReplicationResult
     """
-    check_params(_parameters(), {"format": format, "truth": truth, "boot": boot, "seed": seed},
+    check_params(PARAMETERS, {"format": format, "truth": truth, "boot": boot, "seed": seed},
                  "replicate")
     from features.table import PAPER_FEATURES, feature_table
     from pipeline import replication
@@ -120,9 +116,3 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
                                   progress=progress)
     source = source_of(data, readings)
     return ReplicationResult(cases, source)
-
-
-WORKFLOW = Workflow(
-    name="replicate", function=replicate, inputs=("data", "truth"),
-    summary=("Replicate the backlash paper's results (best epoch, regression R, ANOVA Table 5, "
-             "k-NN accuracy) on paired tests, with and without the deviation inputs."))

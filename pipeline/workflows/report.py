@@ -23,15 +23,24 @@ from features import uncertainty as unc
 from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
 from pipeline.steps import iso as iso_workflow
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.parameters import BUDGET, FORMAT, Param
 
-
-def _parameters() -> dict:
-    """``iso``'s constraints and the meta file's."""
-    return {**iso_workflow._parameters(), "meta": [str, os.PathLike, dict, ReportMeta, None]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
+    "data": iso_workflow.PARAMETERS["data"],
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "folder for iso_report.html and iso_report.pdf",
+                 metavar="DIR", required=True, output="folder"),
+    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: print every axis figure as value ± U",
+                         metavar="BUDGET.toml"),
+    "drop_outliers": Param(("boolean",), "leave flagged outliers out of the figures (still "
+                           "ringed on the charts)"),
+    "meta": Param((str, os.PathLike, dict, ReportMeta, None), "[report] table: operator, "
+                  "organisation, instrument, instrument_serial, instrument_calibrated_on, "
+                  "sensors, remarks; printed on every page above the signature block",
+                  metavar="META.toml"),
+    "standard": iso_workflow.PARAMETERS["standard"],
+}
 
 
 @dataclass
@@ -106,10 +115,3 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
         params["uncertainty"] = budget
     result = iso_workflow.iso(**params)
     return ReportResult(iso=result, meta=signed, notes=list(result.notes))
-
-
-WORKFLOW = Workflow(
-    name="report", function=report,
-    summary="Printable test report (HTML and PDF): conditions, per-target table, axis figures "
-            "and chart of every test, one page each.",
-    inputs=("data", "uncertainty"))

@@ -10,31 +10,32 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from pathlib import Path
 
 from features.readings.errors import InputError
+from models.physics import PRESETS
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import SEED, Param, python_only
 
-MAX_SEED = 2**32 - 1
-
-
-def _parameters() -> dict:
-    """The constraints of ``simulate``'s parameters, built on first use (scikit-learn and the
-    twin are slow to import, and every command's start imports this module)."""
-    from numbers import Integral
-
-    from models.physics.campaign import Campaign
-    from pipeline.workflows.constraints import Interval
-
-    seed = Interval(Integral, 0, MAX_SEED, closed="both")
-    return {"config": [str, os.PathLike, dict, Campaign, None],
-            "compensation": [dict, None],
-            "preset": [str, None],  # checked against the shipped presets by ``load_config``
-            "seed": [seed], "session_seed": [seed, None]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "preset": Param((str, None), f"shipped campaign: {', '.join(PRESETS)} (default paper: the "
+                    "campaign's defaults)"),  # checked against the presets by ``load_config``
+    "config": Param((str, os.PathLike, dict, "models.physics.campaign.Campaign", None),
+                    "campaign configuration; overrides the preset's values",
+                    metavar="FILE.toml"),
+    "seed": Param(SEED, "random seed"),
+    "out": Param((str, os.PathLike, None), "output folder", required=True, output="folder"),
+    "traces": Param(("boolean",), "write controller traces instead (motor encoder and load "
+                    "scale, wear, an adjustment): OUT/traces/ and OUT/traces_truth.csv"),
+    "days": Param((Interval(Integral, 1, 3650, closed="both"),), "with --traces: logged days"),
+    "rate_hz": Param((Interval(Real, 100, 1000, closed="both"),),
+                     "with --traces: sampling rate [Hz]"),
+    "session_seed": python_only(*SEED, None),
+    "compensation": python_only(dict, None),
+}
 
 
 FILES = {"readings": "readings.csv", "truth": "truth.csv", "visits": "truth_visits.csv",
@@ -93,9 +94,9 @@ class SimulationResult(Result):
 
 
 def simulate(config=None, preset: str | None = None, seed: int = 0,
-             session_seed: int | None = None, compensation: dict | None = None
-             ) -> SimulationResult:
-    """Simulate a test campaign on the feed-drive twin.
+             session_seed: int | None = None, compensation: dict | None = None,
+             traces: bool = False, days: int = 30, rate_hz: float = 200.0):
+    """Simulate a test campaign on the feed-drive twin, or (``traces``) its controller traces.
 
     Parameters
     ----------
@@ -113,26 +114,60 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
     compensation : dict, optional
         (machine_id, axis) -> controller model applied to the commanded path
         (``models.physics.controller``); the random draws do not depend on it.
+    traces : bool
+        Simulate controller traces instead of a campaign (``simulate_traces``): three axes
+        of one machine, motor encoder and load scale, wear growing, one axis adjusted.
+    days : int
+        With ``traces``: logged days (1-3650).
+    rate_hz : float
+        With ``traces``: sampling rate [Hz] (100-1000).
 
     Returns
     -------
-    SimulationResult
+    SimulationResult or TraceSimulationResult
         Readings, truth per test and per visit, and the parameters; ``write(out)`` writes
-        ``readings.csv``, ``truth.csv``, ``truth_visits.csv`` and ``parameters.json``.
+        ``readings.csv``, ``truth.csv``, ``truth_visits.csv`` and ``parameters.json``. With
+        ``traces`` the traces and their truth; ``write(out)`` writes ``traces/`` and
+        ``traces_truth.csv``.
     """
     from models.physics.campaign import load_config
     from models.physics.campaign import simulate as run_twin
 
-    check_params(_parameters(), {"config": config, "preset": preset, "seed": seed,
-                              "session_seed": session_seed, "compensation": compensation},
-                 "simulate")
+    given = {"config": config, "preset": preset, "seed": seed, "session_seed": session_seed,
+             "compensation": compensation, "traces": traces, "days": days, "rate_hz": rate_hz}
+    check_params(PARAMETERS, given, "simulate")
     for name, value in (("seed", seed), ("session_seed", session_seed)):
         if isinstance(value, bool):  # an Integral to Python, never meant as a seed
             raise InputError(f"must be a whole number, got {value!r}", parameter=name)
+    _one_kind(given)
+    if traces:
+        return simulate_traces(seed=seed, days=days, rate_hz=rate_hz)
     campaign = load_config(config, preset=preset)
     sim = run_twin(campaign, seed, compensation=compensation, session_seed=session_seed)
     return SimulationResult(_as_text(sim.readings), _as_text(sim.truth), sim.visits,
                             sim.parameters, config=campaign)
+
+
+CAMPAIGN_ONLY = ("config", "preset", "session_seed", "compensation")
+TRACES_ONLY = ("days", "rate_hz")
+
+
+def _one_kind(given: dict) -> None:
+    """A campaign's parameters with ``traces``, or the traces' without it, would be ignored:
+    refused instead."""
+    if given["traces"]:
+        name = next((n for n in CAMPAIGN_ONLY if given[n] is not None), None)
+        if name is not None:
+            raise InputError("applies to a test campaign, not to controller traces (--traces)",
+                             parameter=name)
+        return
+    import inspect
+
+    defaults = inspect.signature(simulate).parameters
+    name = next((n for n in TRACES_ONLY if given[n] != defaults[n].default), None)
+    if name is not None:
+        raise InputError("applies to controller traces (--traces) only",
+                         parameter=name)
 
 
 def _as_text(frame):
@@ -143,12 +178,6 @@ def _as_text(frame):
 
     names = [c for c in frame.columns if isinstance(frame[c].dtype, pd.CategoricalDtype)]
     return frame.astype(dict.fromkeys(names, "str")) if names else frame
-
-
-WORKFLOW = Workflow(
-    name="simulate", function=simulate, inputs=("config",),
-    summary="Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and "
-            "truth.")
 
 
 @dataclass
@@ -227,15 +256,10 @@ def simulate_traces(seed: int = 0, days: int = 30, rate_hz: float = 200.0,
     seconds : float
         Length of each day's log [s] (10-3600).
     """
-    from numbers import Integral, Real
-
     from models.physics.traces import TraceCampaign
     from models.physics.traces import simulate_traces as run_twin
-    from pipeline.workflows.constraints import Interval
 
-    check_params({"seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
-                  "days": [Interval(Integral, 1, 3650, closed="both")],
-                  "rate_hz": [Interval(Real, 100, 1000, closed="both")],
+    check_params({**{k: PARAMETERS[k] for k in ("seed", "days", "rate_hz")},
                   "seconds": [Interval(Real, 10, 3600, closed="both")]},
                  {"seed": seed, "days": days, "rate_hz": rate_hz, "seconds": seconds},
                  "simulate_traces")

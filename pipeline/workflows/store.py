@@ -14,18 +14,17 @@ and that holds nothing the store lacks are removed. See ``docs/store.md``.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.parameters import STORE, Param
 
-
-def _parameters() -> dict:
-    return {"store": [str, os.PathLike], "repair": ["boolean"]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "store": STORE,
+    "repair": Param(("boolean",), "relink tests to the part that holds their readings intact "
+                    "and remove files and parts that are provably orphaned"),
+}
 
 
 @dataclass
@@ -82,15 +81,9 @@ def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResu
     InputError
         A location that is no store or cannot be opened.
     """
-    check_params(_parameters(), {"store": store, "repair": repair}, "check_store")
+    check_params(PARAMETERS, {"store": store, "repair": repair}, "check_store")
     from pipeline.store import open_store, redact
 
     checked = open_store(store, write=repair, parameter="store").check(repair=repair)
     return StoreCheckResult(store=redact(store), tests=checked.tests, readings=checked.readings,
                             problems=checked.problems, repaired=checked.repaired)
-
-
-WORKFLOW = Workflow(
-    name="store", function=check_store,
-    summary="Check a fleet store: every recorded test's readings present and intact, every "
-            "part recorded, nothing orphaned (--repair mends what is provably safe).")

@@ -13,31 +13,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from features import uncertainty as unc
-from features.readings import schema
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params, readings_of, source_of
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.parameters import BUDGET, FORMAT, TARGET, Param, readings
 
 # Columns of the printed table (those the points have).
 TABLE_COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target",
                  "target_kind", "backlash_um", "backlash_u_um", "backlash_U_um")
 
 
-def _parameters() -> dict:
-    """The constraints of ``targets``' parameters (scikit-learn's constraint language), built
-    on first use: the CLI reads the workflow records on every start."""
-    import pandas as pd
-
-    from pipeline.workflows.constraints import StrOptions
-
-    return {
-        "data": [str, os.PathLike, pd.DataFrame],
-        "format": [StrOptions(set(schema.FORMATS))],
-        "target": [StrOptions({"auto", "paper", "iso"})],
-        "uncertainty": [str, os.PathLike, dict, unc.UncertaintyBudget, None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "data": readings(),
+    "format": FORMAT,
+    "out": Param((str, os.PathLike, None), "output folder: write targets.csv", output="folder"),
+    "target": TARGET,
+    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add backlash_U_um (the expanded "
+                         "uncertainty of each point's backlash)", metavar="BUDGET.toml"),
+}
 
 
 @dataclass
@@ -133,16 +125,10 @@ def targets(data, *, format: str = "auto", target: str = "auto",
     from features.targets import backlash_targets
 
     values = {"data": data, "format": format, "target": target, "uncertainty": uncertainty}
-    check_params(_parameters(), values, "targets")
+    check_params(PARAMETERS, values, "targets")
     budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     readings = readings_of(data, format)
     points = backlash_targets(readings, target, budget)
     return TargetsResult(points, points.attrs["target_kind"], points.attrs["target_reason"],
                          source_of(data, readings),
                          None if budget is None else budget.coverage_factor, values)
-
-
-WORKFLOW = Workflow(
-    name="targets", function=targets, inputs=("data", "uncertainty"),
-    summary=("Backlash per point (pendulum minus linear or the ISO reversal value) with its "
-             "uncertainty; with --uncertainty also its expanded uncertainty from a budget."))

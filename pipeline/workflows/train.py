@@ -14,16 +14,37 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from features.readings.errors import InputError, note
-from features.uncertainty import UncertaintyBudget
 from models import registry
 from pipeline.results import Result
-from pipeline.steps.model_data import DATA_PARAMETERS, SPLITS, model_data
-from pipeline.workflows import Workflow, check_params
-from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows import check_params
+from pipeline.workflows.parameters import (
+    BUDGET,
+    FEATURES,
+    FORMAT,
+    RANDOM_SEED,
+    SPLIT,
+    TARGET,
+    TRUTH,
+    Param,
+    readings,
+)
 
-PARAMETERS = {**DATA_PARAMETERS, "model": [str, None],  # names checked by the registry
-              "split": [StrOptions(set(SPLITS))],
-              "uncertainty": [str, os.PathLike, dict, UncertaintyBudget, None]}
+PARAMETERS = {
+    "data": readings(),
+    "format": FORMAT,
+    "target": TARGET,
+    "features": FEATURES,
+    "split": SPLIT,
+    "truth": TRUTH,
+    "seed": RANDOM_SEED,
+    "out": Param((str, os.PathLike, None), "model directory to write", required=True,
+                 output="folder"),
+    "model": Param((str, None),  # names checked by the registry
+                   f"predictor (default: {registry.RECOMMENDED}): {', '.join(registry.names())}"
+                   "; backlash compare lists what each does", metavar="NAME"),
+    "uncertainty": Param(BUDGET, "ISO/TR 230-9 uncertainty budget: score the test error "
+                         "against U(B), what the measurement can resolve", metavar="BUDGET.toml"),
+}
 
 
 @dataclass
@@ -169,6 +190,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     """
     from features.uncertainty import checked_budget
     from models.training import fit_model, since_adjustment
+    from pipeline.steps.model_data import model_data
 
     check_params(PARAMETERS, {"data": data, "model": model, "format": format, "target": target,
                               "features": features, "split": split, "truth": truth,
@@ -252,10 +274,3 @@ def load_model(path):
     """A model directory written by ``train`` (``TrainResult.write``), checked before anything
     is built (``models.registry.load_model``); ``predict`` takes it."""
     return registry.load_model(path)
-
-
-WORKFLOW = Workflow(
-    name="train", function=train,
-    summary="Train a backlash predictor on paired tests and save it (default: the recommended "
-            "model).",
-    inputs=("data", "truth", "uncertainty"), tracked=True)

@@ -15,20 +15,36 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.steps.model_data import DATA_PARAMETERS, model_data
-from pipeline.workflows import Workflow, check_params
+from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import (
+    FEATURES,
+    FORMAT,
+    RANDOM_SEED,
+    TARGET,
+    Param,
+    python_only,
+    readings,
+)
 
 DEFAULT_STUDY = "backlash-network"  # the default study name: this, then the data's digest
+_COUNT = Interval(Integral, 1, None, closed="left")
 PARAMETERS = {
-    **{k: v for k, v in DATA_PARAMETERS.items() if k != "truth"},
-    "trials": [Interval(Integral, 1, None, closed="left")],
-    "storage": [str, None],
-    "study": [str, None],
-    "workers": [Interval(Integral, 1, None, closed="left")],
-    "folds": [Interval(Integral, 2, None, closed="left")],
-    "heartbeat_s": [Interval(Integral, 1, None, closed="left")],
-    "track": ["boolean"],
+    "data": readings(),
+    "format": FORMAT,
+    "target": TARGET,
+    "features": FEATURES,
+    "seed": RANDOM_SEED,
+    "trials": Param((_COUNT,), "trials to run in total"),
+    "storage": Param((str, None), "Optuna storage URL, e.g. postgresql://user@host/db "
+                     "(default: sqlite:///optuna.db)"),
+    "study": Param((str, None), f"study name (default {DEFAULT_STUDY}-DIGEST, DIGEST the first "
+                   "12 hex digits of the data's SHA-256: one study per data)"),
+    "workers": Param((_COUNT,), "worker processes sharing the study"),
+    "folds": Param((Interval(Integral, 2, None, closed="left"),), "cross-validation folds"),
+    "heartbeat_s": Param((_COUNT,), "running trials report every S seconds; a trial silent for "
+                         "2 S (its worker was killed) is marked failed", metavar="S"),
+    "track": python_only("boolean"),  # the runner's: the command line's --no-track
 }
 
 
@@ -161,6 +177,7 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     """
     from models import tuning
     from pipeline import tracking
+    from pipeline.steps.model_data import model_data
 
     check_params(PARAMETERS, {"data": data, "trials": trials, "storage": storage,
                               "study": study, "workers": workers, "folds": folds,
@@ -307,10 +324,3 @@ def _close_killed_runs(study, stale: list[int]) -> list[str]:
 def safe_url(url: str) -> str:
     """The storage URL without a password."""
     return re.sub(r"://([^:/@]+):[^@]*@", r"://\1:***@", url)
-
-
-WORKFLOW = Workflow(
-    name="tune", function=tune,
-    summary="Tune the network (hidden sizes, activation, trainer, regularisation) by "
-            "cross-validation with Optuna.",
-    inputs=("data",), tracked=True)

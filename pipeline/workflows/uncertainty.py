@@ -20,21 +20,18 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows.parameters import Param
 
-
-def _parameters() -> dict:
-    """The constraints of ``uncertainty``'s parameters, built on first use (importing
-    scikit-learn would slow every command's start)."""
-    from pipeline.workflows.constraints import StrOptions
-
-    return {
-        "budget": [str, os.PathLike, dict, unc.UncertaintyBudget],
-        "arithmetic": [StrOptions(set(unc.ARITHMETICS)), None],
-    }
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "budget": Param((str, os.PathLike, dict, unc.UncertaintyBudget),
+                    "uncertainty budget (e.g. experiments/data/paper_uncertainty.toml)",
+                    flag="BUDGET.toml"),
+    "arithmetic": Param((StrOptions(unc.ARITHMETICS), None), "arithmetic reported first "
+                        "(default: the budget's 'arithmetic', else iso); the other is shown "
+                        "beside it"),
+}
 
 
 @dataclass
@@ -127,7 +124,7 @@ def uncertainty(budget, *, arithmetic: str | None = None) -> UncertaintyResult:
     InputError
         A missing or negative contributor, a unit in the wrong place, an unknown key.
     """
-    check_params(_parameters(), {"budget": budget, "arithmetic": arithmetic}, "uncertainty")
+    check_params(PARAMETERS, {"budget": budget, "arithmetic": arithmetic}, "uncertainty")
     source = str(budget) if isinstance(budget, (str, os.PathLike)) else "<budget>"
     read = unc.read_budget(budget)
     chosen = arithmetic or read.arithmetic
@@ -140,9 +137,3 @@ def uncertainty(budget, *, arithmetic: str | None = None) -> UncertaintyResult:
                      "length) is reported first; the ISO arithmetic is shown beside it")
     return UncertaintyResult(budget=read, values=values, other=other, source=source,
                              parameters={"arithmetic": arithmetic}, notes=notes)
-
-
-WORKFLOW = Workflow(
-    name="uncertainty", function=uncertainty, inputs=("budget",),
-    summary="ISO/TR 230-9 measurement-uncertainty budget of a positioning test: each "
-            "contributor, u_P and the expanded uncertainties of A, E, M, R, R+/R- and B.")

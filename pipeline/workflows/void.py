@@ -11,20 +11,23 @@ restores the tests. See ``docs/store.md``.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.parameters import STORE, Param
 
-
-def _parameters() -> dict:
-    return {"store": [str, os.PathLike], "machine": [str], "axis": [str],
-            "visit": [str, None], "test_id": [str, None], "reason": [str], "undo": ["boolean"]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "store": STORE,
+    "machine": Param((str,), "the machine", metavar="ID", required=True),
+    "axis": Param((str,), "the axis", metavar="AXIS", required=True),
+    "visit": Param((str, None), "only the tests of this visit", metavar="VISIT"),
+    "test_id": Param((str, None), "only this test", metavar="TEST"),
+    "reason": Param((str,), "why (kept in the store's audit table with the time and the user)",
+                    metavar="TEXT", required=True),
+    "undo": Param(("boolean",), "restore the voided tests instead"),
+}
 
 
 @dataclass
@@ -83,9 +86,8 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
         An empty reason, no matching test (no matching voided test with ``undo``), a store
         that cannot be opened or written: nothing is changed.
     """
-    check_params(_parameters(), {"store": store, "machine": machine, "axis": axis,
-                                 "visit": visit, "test_id": test_id, "reason": reason,
-                                 "undo": undo}, "void")
+    check_params(PARAMETERS, {"store": store, "machine": machine, "axis": axis, "visit": visit,
+                              "test_id": test_id, "reason": reason, "undo": undo}, "void")
     if not reason.strip():
         raise InputError("is empty; say why the tests are voided", parameter="reason")
     from pipeline.store import open_store, redact
@@ -103,9 +105,3 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
     result.notes.append(text)
     note(text)
     return result
-
-
-WORKFLOW = Workflow(
-    name="void", function=void,
-    summary="Retire tests of a fleet store from every reader, kept with when, who and why "
-            "in its audit table (--undo restores them).")

@@ -15,13 +15,16 @@ and the four ISO 230-6 body diagonals are measured before and after [Chen2022]_.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from pathlib import Path
 
 from pipeline.results import Result
-from pipeline.workflows import Constraints, Workflow, check_params
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval
+from pipeline.workflows.parameters import SEED, Param
 
-MAX_SEED = 2**32 - 1
 # The seed paper's Table 1 [um]: the extreme deviation before and after compensation
 PAPER_TABLE1 = {
     "diagonals": {"NPP": {"before_um": -62.5, "traditional_um": -17.4,
@@ -42,18 +45,15 @@ PAPER_TABLE1 = {
 CIRCLE_PLANES = ("XY", "YZ", "ZX")
 
 
-def _parameters() -> dict:
-    """The constraints of ``volumetric``'s parameters, built on first use."""
-    from numbers import Integral, Real
-
-    from pipeline.workflows.constraints import Interval
-
-    return {"seed": [Interval(Integral, 0, MAX_SEED, closed="both")],
-            "targets": [Interval(Integral, 5, 101, closed="both")],
-            "radius_mm": [Interval(Real, 0, 500, closed="right")]}
-
-
-PARAMETERS = Constraints(_parameters)
+PARAMETERS = {
+    "seed": Param(SEED, "random seed of the measurement noise"),
+    "targets": Param((Interval(Integral, 5, 101, closed="both"),), "targets along each axis and "
+                     "diagonal, 5 to 101 (default 11, as the paper)"),
+    "radius_mm": Param((Interval(Real, 0, 500, closed="right"),), "radius of the circular "
+                       "tests in circles.csv [mm]", metavar="MM"),
+    "out": Param((str, os.PathLike, None), "folder for volumetric.json, diagonals.csv (every "
+                 "reading) and circles.csv (ISO 230-4, SCHEMA section 11)", output="folder"),
+}
 
 
 @dataclass
@@ -137,7 +137,7 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0
     ----------
     .. [Chen2022] G. Chen et al. (seed 001), Table 1; ISO 230-6 (body diagonals).
     """
-    check_params(_parameters(), {"seed": seed, "targets": targets, "radius_mm": radius_mm},
+    check_params(PARAMETERS, {"seed": seed, "targets": targets, "radius_mm": radius_mm},
                  "volumetric")
     import pandas as pd
 
@@ -159,10 +159,3 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0
         result.notes.append(f"the Abbe-aware model did not leave less than the traditional one "
                             f"on {', '.join(missed)}")
     return result
-
-
-WORKFLOW = Workflow(
-    name="volumetric", function=volumetric,
-    summary="The seed paper's volumetric compensation on the machine twin: the 21 geometric "
-            "errors identified off the tool point, compensated with the traditional and the "
-            "Abbe-aware model, the four body diagonals before and after.")
