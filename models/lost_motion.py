@@ -276,6 +276,7 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     from scipy.linalg import solveh_banded
 
     q = dense.shape[1]
+    dense = [np.ascontiguousarray(dense[:, j]) for j in range(q)]  # columns, contiguous
     starts = np.flatnonzero(np.r_[True, np.diff(day) != 0])  # day is sorted
     present = day[starts]
     n_day = np.add.reduceat(weight, starts).astype(int)  # samples per day
@@ -284,24 +285,27 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     offset = np.r_[0, np.cumsum(k_day)[:-1]]
     lo, hi = np.minimum.reduceat(x, starts), np.maximum.reduceat(x, starts)
     span = np.where(hi > lo, hi - lo, 1.0)
-    first, values = _rows((x - lo[slot]) / span[slot], k_day[slot])
+    first, values = _rows((x - lo[slot]) / span[slot], k_day, slot)
     col = offset[slot] + first  # the first non-zero column of each row in the whole system
     total, width = int(k_day.sum()), values.shape[1]
+    # each row's columns and basis values, contiguous: every sum below runs over them
+    cols = [col + a for a in range(width)]
+    values = [np.ascontiguousarray(values[:, a]) for a in range(width)]
 
     def spline_t(w):  # B' w: (n,) -> (total,)
-        return sum(np.bincount(col + a, weights=values[:, a] * (weight * w), minlength=total)
+        return sum(np.bincount(cols[a], weights=values[a] * (weight * w), minlength=total)
                    for a in range(width))
 
     def per_day(w):  # weighted sum of w over each day's rows
         return np.add.reduceat(weight * w, starts)
 
-    a_dense = np.stack([np.stack([per_day(dense[:, j] * dense[:, m]) for m in range(q)], -1)
+    a_dense = np.stack([np.stack([per_day(dense[j] * dense[m]) for m in range(q)], -1)
                         for j in range(q)], 1)  # (D, q, q)
-    cross = np.stack([spline_t(dense[:, j]) for j in range(q)], axis=1)  # (total, q)
+    cross = np.stack([spline_t(dense[j]) for j in range(q)], axis=1)  # (total, q)
     band = np.concatenate([_penalty_band(int(k), width) * (SMOOTHING * n)
                            for k, n in zip(k_day, n_day)], axis=1)
     for o in range(width):  # C[j, j + o], summed from the samples
-        diag = sum(np.bincount(col + a, weights=weight * values[:, a] * values[:, a + o],
+        diag = sum(np.bincount(cols[a], weights=weight * values[a] * values[a + o],
                                minlength=total) for a in range(width - o))
         band[width - 1 - o, o:] += diag[:total - o]
     # a floor of 1e-12 of the largest diagonal keeps both blocks positive definite when the
@@ -316,7 +320,7 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
         return np.add.reduceat(u[:, :, None] * v[:, None, :], bounds)
 
     schur = a_dense - block_t(cross, solved[:, :q])
-    rhs_dense = np.stack([per_day(dense[:, j] * y) for j in range(q)], -1)  # (D, q)
+    rhs_dense = np.stack([per_day(dense[j] * y) for j in range(q)], -1)  # (D, q)
     unit = np.zeros_like(rhs_dense)
     unit[:, 0] = 1.0  # the first row of the inverse: L's lever on each sample
     cross_rhs = block_t(cross, solved[:, q:])[:, :, 0]
@@ -328,9 +332,9 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
     def fitted(which):  # X z for the coefficients ``which`` (0: beta, 1: the lever)
         out = np.zeros(len(y))
         for j in range(q):
-            out += dense[:, j] * z_dense[slot, j, which]
+            out += dense[j] * z_dense[slot, j, which]
         for a in range(width):
-            out += values[:, a] * z_spline[col + a, which]
+            out += values[a] * z_spline[cols[a], which]
         return out
 
     scores = weight * fitted(1) * (y - fitted(0))
@@ -344,12 +348,17 @@ def _fit(x, y, dense, clusters, day, weight) -> dict:
             for i, d in enumerate(present)}
 
 
-def _rows(t: np.ndarray, k: np.ndarray):
+def _rows(t: np.ndarray, k_day: np.ndarray, slot: np.ndarray):
     """``features.statistics.bspline_rows`` for a different number of control points per
-    sample (one per day): each distinct number evaluated once."""
+    day (``k_day``, sample i on day ``slot[i]``): each distinct number evaluated once, and
+    without selecting rows when every day has the same (the rule's cap, on long days)."""
+    sizes = np.unique(k_day)
+    if len(sizes) == 1:
+        return bspline_rows(t, int(sizes[0]), DEGREE)
+    k = k_day[slot]
     first = np.empty(len(t), int)
     values = np.empty((len(t), DEGREE + 1))
-    for size in np.unique(k):
+    for size in sizes:
         rows = k == size
         first[rows], values[rows] = bspline_rows(t[rows], int(size), DEGREE)
     return first, values
@@ -402,7 +411,7 @@ def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
     """
     from features.traces.io import DAY_NS, groups
 
-    rows = []
+    frames = []
     # One BLAS thread: the matrices are small, where threads only wait for each other, and
     # an engine already runs one partition per core.
     with _blas().limit(limits=1, user_api="blas"):
@@ -421,13 +430,29 @@ def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
                 fits += fit_days(t_s[a:b] - t_s[a], day[a:b] - day[a],
                                  *(v[a:b] for v in channels), weight[a:b], take_up=take_up,
                                  settle_s=settle_s)
-            axis = str(part["axis"].iloc[0])
-            scale = deviation_scale(axis)
-            rows += [(str(part["machine_id"].iloc[0]), axis, deviation_unit(axis),
-                      pd.Timestamp(int(date) * DAY_NS, tz="UTC").date().isoformat(),
-                      f.lost_motion * scale, f.lost_motion_u * scale, f.reversals, f.samples,
-                      f.lag_s, f.control_points) for date, f in zip(dates, fits)]
-    return pd.DataFrame(rows, columns=list(DAILY_COLUMNS))
+            frames.append(_day_rows(str(part["machine_id"].iloc[0]),
+                                    str(part["axis"].iloc[0]), dates, fits))
+    if not frames:
+        return pd.DataFrame(columns=list(DAILY_COLUMNS))
+    return frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
+
+
+def _day_rows(machine: str, axis: str, dates: np.ndarray, fits: list[DayFit]) -> pd.DataFrame:
+    """One machine axis's rows of ``daily_lost_motion``: its days (UTC day numbers) and fits,
+    lost motion in um or arcsec."""
+    scale = deviation_scale(axis)
+    n = len(fits)
+    field = {name: np.array([getattr(f, name) for f in fits], dtype)
+             for name, dtype in (("lost_motion", float), ("lost_motion_u", float),
+                                 ("reversals", np.int64), ("samples", np.int64),
+                                 ("lag_s", float), ("control_points", np.int64))}
+    iso = np.datetime_as_string(np.asarray(dates, "datetime64[D]"), unit="D")
+    return pd.DataFrame({
+        "machine_id": [machine] * n, "axis": [axis] * n, "unit": [deviation_unit(axis)] * n,
+        "date": list(iso), "lost_motion_um": field["lost_motion"] * scale,
+        "lost_motion_u_um": field["lost_motion_u"] * scale, "reversals": field["reversals"],
+        "samples": field["samples"], "lag_s": field["lag_s"],
+        "control_points": field["control_points"]}, columns=list(DAILY_COLUMNS))
 
 
 def _runs(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

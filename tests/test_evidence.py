@@ -88,7 +88,7 @@ def evidence(tmp_path_factory):
 
 
 def test_the_offsets_to_the_laser_are_the_known_ones_within_their_uncertainty(evidence):
-    store, _ = evidence
+    store, truth = evidence
     view = bl.fleet(store, as_of="2026-12-31")
     axes = {v.axis: v.to_json() for v in view.axes}
     x, y = axes["X"], axes["Y"]
@@ -102,11 +102,19 @@ def test_the_offsets_to_the_laser_are_the_known_ones_within_their_uncertainty(ev
     assert y["offsets_um"]["trace"] is None and y["evidence"]["trace"] == []
     assert len(x["evidence"]["trace"]) == 16 and len(x["evidence"]["ballbar"]) == 3
     assert {p["plane"] for p in x["evidence"]["ballbar"]} == {"XY"}
-    # the laser's own keys are those of a fleet without evidence
+    # the laser's own keys are those of a fleet without evidence; X's analysis (trend, change
+    # points, forecast) uses its trace days too, Y's (no trace) the laser alone
     plain = {v.axis: v.to_json() for v in bl.fleet(bl.read(store), as_of="2026-12-31").axes}
-    for key in ("backlash_um", "crossing_date", "history", "change_points"):
+    for key in ("backlash_um", "history", "visits", "last_visit"):
         assert x[key] == plain["X"][key]
+    assert y == {**plain["Y"], "offsets_um": y["offsets_um"], "evidence": y["evidence"],
+                 "page": y["page"]}
     assert plain["X"]["offsets_um"] == {"trace": None, "ballbar": None}
+    assert plain["X"]["forecast_uses"] == y["forecast_uses"] == ["laser"]
+    assert x["forecast_uses"] == ["laser", "trace"]
+    assert x["forecast_offset_um"] == {"trace": trace} and y["forecast_offset_um"] is None
+    assert plain["X"]["change_points"] == [] and x["change_points"] == [
+        f"trace {truth['adjusted']}"]
 
 
 def test_drift_with_the_traces_dates_an_adjustment_the_laser_never_saw(evidence):

@@ -136,7 +136,8 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "days_overdue": (int, type(None)),
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
-         "page": str, "voided_tests": list, "evidence": dict, "offsets_um": dict}
+         "page": str, "voided_tests": list, "evidence": dict, "offsets_um": dict,
+         "forecast_uses": list, "forecast_offset_um": (dict, type(None))}
 
 
 def test_json_keys_and_types(mixed):
@@ -158,6 +159,7 @@ def test_json_keys_and_types(mixed):
         assert set(a["history"]) == {"visits", "dates", "backlash_um", "backlash_u_um"}
         assert a["evidence"] == {"trace": [], "ballbar": []}  # a file: no trace or ballbar
         assert a["offsets_um"] == {"trace": None, "ballbar": None}
+        assert a["forecast_uses"] == ["laser"] and a["forecast_offset_um"] is None
         assert len(a["history"]["backlash_um"]) == a["visits"]
         assert a["history"]["backlash_um"][-1] == a["backlash_um"]
     assert data["n_alerts"] == sum(len(a["alerts"]) for a in data["axes"])

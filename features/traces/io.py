@@ -169,16 +169,23 @@ def groups(trace: pd.DataFrame, by_day: bool = False) -> list[pd.DataFrame]:
     """The machine axes (and with ``by_day`` their UTC days) of a validated trace, each a
     frame in time order. A trace written axis after axis is cut into slices without copying
     or sorting; otherwise its rows are put in order once."""
-    key = trace["machine_id"].cat.codes.to_numpy(np.int64) * 64 \
-        + trace["axis"].cat.codes.to_numpy(np.int64)
+    machine = trace["machine_id"].array.codes
+    axis = trace["axis"].array.codes
+    step = (machine[1:] != machine[:-1]) | (axis[1:] != axis[:-1])  # on the small codes
     if by_day:
-        key = key * 1_000_000 + trace[c.TIME].to_numpy().view(np.int64) // DAY_NS
-    cuts = np.flatnonzero(np.diff(key)) + 1
-    if len(cuts) + 1 != len(np.unique(key[np.r_[0, cuts]])):  # a key in two blocks: sort once
-        order = np.argsort(key, kind="stable")
-        trace, key = trace.iloc[order], key[order]
-        cuts = np.flatnonzero(np.diff(key)) + 1
-    bounds = [0, *cuts.tolist(), len(key)]
+        day = trace[c.TIME].to_numpy().view(np.int64) // DAY_NS
+        step |= day[1:] != day[:-1]
+    cuts = np.flatnonzero(step) + 1
+
+    def key(rows):  # one number per machine axis (and day) at the given rows
+        out = machine[rows].astype(np.int64) * 64 + axis[rows]
+        return out * 1_000_000 + day[rows] if by_day else out
+
+    if len(cuts) + 1 != len(np.unique(key(np.r_[0, cuts]))):  # a key in two blocks: sort once
+        order = np.argsort(key(slice(None)), kind="stable")
+        trace = trace.iloc[order]
+        cuts = np.flatnonzero(np.diff(key(order))) + 1
+    bounds = [0, *cuts.tolist(), len(trace)]
     return [trace.iloc[a:b] for a, b in itertools.pairwise(bounds)]
 
 

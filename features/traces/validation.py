@@ -88,8 +88,10 @@ def _named(frame: pd.DataFrame, source) -> pd.DataFrame:
 
 def _labels(series: pd.Series, source, col: str, row_base: int) -> pd.Series:
     """A label column as a categorical, each distinct value checked once (``to_label``)."""
-    if isinstance(series.dtype, pd.CategoricalDtype) and not series.isna().any():
-        codes, uniques = series.cat.codes.to_numpy(), series.cat.categories.to_numpy(object)
+    codes = series.array.codes if isinstance(series.dtype, pd.CategoricalDtype) \
+        else None
+    if codes is not None and codes.min() >= 0:  # no missing label (code -1)
+        uniques = series.cat.categories.to_numpy(object)
     else:
         codes, uniques = pd.factorize(series, use_na_sentinel=False)
     present, first = _first_rows(np.asarray(codes))  # a dictionary may hold unused values
@@ -99,13 +101,16 @@ def _labels(series: pd.Series, source, col: str, row_base: int) -> pd.Series:
                       pd.Series(first + row_base))
     if col == "axis":
         labels = labels.str.upper()
-    return pd.Series(pd.Categorical.from_codes(*_recoded(codes, labels.to_numpy())))
+    codes, categories = _recoded(codes, labels.to_numpy())
+    # the codes index the categories by construction: no second pass to check them
+    return pd.Series(pd.Categorical.from_codes(codes, categories, validate=False))
 
 
 def _first_rows(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The distinct codes, sorted, and the row where each first occurs: found among the starts
     of the runs of equal codes (a label repeats over long runs), without sorting every row."""
-    starts = np.r_[0, np.flatnonzero(np.diff(codes)) + 1] if len(codes) else np.zeros(0, int)
+    starts = np.r_[0, np.flatnonzero(codes[1:] != codes[:-1]) + 1] if len(codes) \
+        else np.zeros(0, int)
     present, at = np.unique(codes[starts], return_index=True)
     return present, starts[at]
 
@@ -131,11 +136,12 @@ def _times(series: pd.Series, source, row_base: int) -> np.ndarray:
     else:
         times = to_datetime(series.reset_index(drop=True), source, c.TIME,
                             pd.Series(np.arange(len(series)) + row_base))
-    missing = times.isna().to_numpy()
+    out = times.to_numpy(dtype="datetime64[ns]")
+    missing = np.isnat(out)
     if missing.any():
         raise InputError("missing value; expected an ISO 8601 date-time (UTC)", file=source,
                          row=row_base + int(np.flatnonzero(missing)[0]), column=c.TIME)
-    return times.to_numpy(dtype="datetime64[ns]")
+    return out
 
 
 def _channel(series: pd.Series, source, col: str, row_base: int, optional: bool) -> np.ndarray:
@@ -143,7 +149,9 @@ def _channel(series: pd.Series, source, col: str, row_base: int, optional: bool)
     ``to_float``, whose messages name the first bad row."""
     if pd.api.types.is_float_dtype(series.dtype) or pd.api.types.is_integer_dtype(series.dtype):
         values = series.to_numpy(dtype=float, na_value=np.nan)
-        if np.isfinite(values).all():
+        # a NaN or an infinity makes the sum one; a finite sum is all finite numbers (only
+        # values near 1e308 overflow it, and then the samples are checked one by one)
+        if np.isfinite(values.sum()) or np.isfinite(values).all():
             return values
     return to_float(series.reset_index(drop=True), source, col, row_base,
                     allow_nan=optional).to_numpy()
@@ -161,14 +169,14 @@ def _check_deg_names(frame: pd.DataFrame, axis: pd.Series, source, row_base: int
 
 def _check_order(frame: pd.DataFrame, source, row_base: int) -> None:
     """Time never goes back within a machine axis (rows of other axes may interleave)."""
-    machine = frame["machine_id"].cat.codes.to_numpy()
-    axis = frame["axis"].cat.codes.to_numpy()
+    machine = frame["machine_id"].array.codes
+    axis = frame["axis"].array.codes
     t = frame[c.TIME].to_numpy().view(np.int64)
     step = (machine[1:] != machine[:-1]) | (axis[1:] != axis[:-1])
     starts = np.r_[0, np.flatnonzero(step) + 1]
     pairs = machine[starts].astype(np.int64) * 64 + axis[starts]
     if len(pairs) == len(np.unique(pairs)):  # each axis in one block: no sort
-        back = np.diff(t) < 0
+        back = t[1:] < t[:-1]
         back &= ~step
         rows = np.flatnonzero(back) + 1
     else:

@@ -113,11 +113,13 @@ def _history(view) -> dict:
     """The series as the charts take it: days since the first visit, values, change days."""
     from features.visits import DAYS_PER_MONTH
 
-    v = view.series.visits
+    v, b = view.series.visits, view.basis  # the change points of the series the trend uses
     days = v["t_month"].to_numpy(float) * DAYS_PER_MONTH
+    shift = (b.origin - view.series.origin).total_seconds() / 86400.0
+    b_days = b.visits["t_month"].to_numpy(float) * DAYS_PER_MONTH + shift
     return {"days": days, "backlash_um": v["backlash_um"].to_numpy(float),
             "sigma_um": v["sigma_um"].to_numpy(float),
-            "change_days": [float(days[c["index"]]) for c in view.series.change_points]}
+            "change_days": [float(b_days[c["index"]]) for c in b.change_points]}
 
 
 def _crossing_text(j: dict) -> str:
@@ -300,7 +302,18 @@ def _summary(view, j: dict) -> str:
 {trend}. Change points: {_esc(changes or 'none')}.<br>
 Threshold crossing{_threshold_text(j, unit)}: {_crossing_text(j)}.<br>
 Next visit due: <strong>{_esc(j['next_visit_due'])}</strong>
-({_esc(REASONS[j['next_visit_reason']])}){_overdue_text(view, j)}.</p></div>"""
+({_esc(REASONS[j['next_visit_reason']])}){_overdue_text(view, j)}.<br>
+{_esc(_uses_text(j, unit))}</p></div>"""
+
+
+def _uses_text(j: dict, unit: str) -> str:
+    """Which points the trend, crossing and forecast used, and the trace days' offset."""
+    off = (j["forecast_offset_um"] or {}).get("trace")
+    if off is None:
+        return "Trend and forecast from the laser visits."
+    return (f"Trend and forecast from the laser visits and the trace days, shifted onto the "
+            f"laser's backlash by {-off['value']:+.3f} ± {off['u']:.3f} {unit} (offset from "
+            f"{off['days_in_common']} day(s) in common), weighted by their uncertainty.")
 
 
 def _overdue_text(view, j: dict) -> str:

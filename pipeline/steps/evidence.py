@@ -16,6 +16,9 @@ import pandas as pd
 from features.readings.errors import InputError
 from models.evidence import EVIDENCE_COLUMNS, OFFSET_WINDOW_DAYS, SOURCES, offsets
 
+# Days a source must share with the laser before the fleet's forecast leans on it: fewer
+# pairs give an offset whose scatter (the Birge ratio) cannot be judged.
+MIN_FORECAST_DAYS = 3
 # Per source: its value and uncertainty keys in the records and in ``fleet --json``.
 KEYS = {"trace": ("lost_motion_um", "lost_motion_u_um"),
         "ballbar": ("backlash_um", "backlash_u_um")}
@@ -110,12 +113,15 @@ def read_evidence(store) -> dict:
 
 
 def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=None,
-                  coverage_factor: float | None = None) -> tuple[pd.DataFrame, dict, list]:
+                  coverage_factor: float | None = None,
+                  min_days: int = 1) -> tuple[pd.DataFrame, dict, list]:
     """The laser visits of every machine axis with the points of the other ``sources``
     shifted onto the laser's definition (``models.evidence.combined``), the offsets per
     machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
     a point of another source gets ``backlash_U_um`` = k u and ``backlash_u_visit_um`` = u
-    (all of its uncertainty changes from day to day)."""
+    (all of its uncertainty changes from day to day). A source sharing fewer than
+    ``min_days`` days with the laser stays out of the axis's series; its offset is still
+    returned."""
     from features.visits import SERIES_KEYS
     from models.evidence import combined
 
@@ -125,7 +131,9 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
         evidence = evidence_frame(records, key, as_of)
         found, more = axis_offsets(group, evidence)
         found_all[key], notes = found, notes + more
-        frames.append(combined(group, evidence, found, sources))
+        frames.append(combined(group, evidence, {
+            s: o for s, o in found.items() if o is not None and o["days_in_common"] >= min_days},
+            sources))
     out = pd.concat(frames, ignore_index=True)
     if coverage_factor is not None:
         other = out["source"] != "laser"

@@ -138,6 +138,11 @@ class AxisView:
     voided : list of dict
         The axis's voided tests in a store (``visit``, ``test_id``, ``at``, ``user_name``,
         ``reason``: ``backlash void``); no reader reads them.
+    analysis : models.drift.DriftSeries or None
+        With trace days in a store sharing ``MIN_FORECAST_DAYS`` days with the laser: the
+        analysis of the laser visits with the trace days shifted onto the laser's definition
+        (``trace_analyses``), which the trend, change points, crossing, alerts, next visit and
+        forecast come from; None when they come from the laser visits alone (``series``).
     """
 
     series: object
@@ -157,6 +162,17 @@ class AxisView:
     offsets: dict = field(default_factory=dict)
     evidence_notes: list = field(default_factory=list)
     voided: list = field(default_factory=list)
+    analysis: object = None
+
+    @property
+    def basis(self):
+        """The series the trend, crossing, alerts and forecast come from."""
+        return self.analysis if self.analysis is not None else self.series
+
+    @property
+    def forecast_uses(self) -> list[str]:
+        """The sources of the points the forecast used: ``laser``, and ``trace``."""
+        return ["laser", "trace"] if self.analysis is not None else ["laser"]
 
     @property
     def machine_id(self) -> str:
@@ -173,7 +189,7 @@ class AxisView:
 
     @property
     def alerts(self) -> list[dict]:
-        return self.series.alerts
+        return self.basis.alerts
 
     @property
     def days_overdue(self) -> int | None:
@@ -186,15 +202,17 @@ class AxisView:
         """Crossing (date, early, late) in days since the first visit, None where unknown."""
         from features.visits import DAYS_PER_MONTH
 
-        return tuple(None if t is None else t * DAYS_PER_MONTH for t in self.series.crossing)
+        shift = _days_between(self.series.origin, self.basis.origin)
+        return tuple(None if t is None else t * DAYS_PER_MONTH + shift
+                     for t in self.basis.crossing)
 
     def to_json(self) -> dict:
         """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
         from features.visits import DAYS_PER_MONTH
         from pipeline.store.records import summary
 
-        s, v = self.series, self.series.visits
-        trend = s.trend
+        s, v, b = self.series, self.series.visits, self.basis
+        trend = b.trend
         return {
             "machine_id": s.machine_id, "axis": s.axis, "unit": s.unit, "visits": len(v),
             "first_visit_date": _day(v["date"].iloc[0]).isoformat(),
@@ -204,19 +222,22 @@ class AxisView:
             "backlash_u_um": _round(self.last["backlash_u_um"]),
             "slope_um_per_month": _round(trend.get("slope")),
             "slope_interval": [_round(trend.get("low")), _round(trend.get("high"))],
-            "trend_since_visit": str(v["visit"].iloc[s.segment_start]),
-            "change_points": [str(v["visit"].iloc[c["index"]]) for c in s.change_points],
-            "change_jumps_um": [_round(c["jump_um"]) for c in s.change_points],
+            "trend_since_visit": str(b.visits["visit"].iloc[b.segment_start]),
+            "change_points": [str(b.visits["visit"].iloc[c["index"]])
+                              for c in b.change_points],
+            "change_jumps_um": [_round(c["jump_um"]) for c in b.change_points],
             "threshold_um": s.threshold_um,
-            "crossing_date": s.date_at(s.crossing[0]),
-            "crossing_interval": [s.date_at(s.crossing[1]), s.date_at(s.crossing[2])],
+            "crossing_date": b.date_at(b.crossing[0]),
+            "crossing_interval": [b.date_at(b.crossing[1]), b.date_at(b.crossing[2])],
+            "forecast_uses": self.forecast_uses,
+            "forecast_offset_um": self.forecast_offset(),
             "next_visit_due": self.next_visit_due.isoformat(),
             "next_visit_reason": self.next_visit_reason,
             "days_overdue": self.days_overdue,
             "fleet_wear_rate_per_month": None if self.fleet_rate is None else _round(
                 self.fleet_rate["per_day"] * DAYS_PER_MONTH, 5),
-            "alerts": [a["kind"] for a in s.alerts],
-            "alert_messages": [a["message"] for a in s.alerts],
+            "alerts": [a["kind"] for a in self.alerts],
+            "alert_messages": [a["message"] for a in self.alerts],
             "last_forecast": summary(self.forecasts[-1]) if self.forecasts else None,
             "last_compensation": summary(self.compensations[-1]) if self.compensations else None,
             "history": {"visits": v["visit"].astype(str).tolist(),
@@ -228,6 +249,14 @@ class AxisView:
                              for t in self.voided],
             **self.evidence_json(),
         }
+
+    def forecast_offset(self) -> dict | None:
+        """The offset [um] the trace days were shifted by onto the laser's definition, with
+        its standard uncertainty and the days it comes from; None for a laser-only forecast."""
+        off = self.offsets.get("trace") if self.analysis is not None else None
+        return None if off is None else {"trace": {
+            "value": _round(off["value"]), "u": _round(off["u"]),
+            "days_in_common": off["days_in_common"]}}
 
     def evidence_json(self) -> dict:
         """``evidence`` and ``offsets_um`` (docs/fleet.md): empty lists and nulls for a
@@ -314,7 +343,7 @@ class FleetResult(Result):
         for v in self.axes:
             key = f"{v.machine_id}_{v.axis}"  # any id: the adapter makes valid metric names
             metrics[f"backlash_um_{key}"] = float(v.last["backlash_um"])
-            metrics[f"slope_um_per_month_{key}"] = v.series.trend.get("slope", float("nan"))
+            metrics[f"slope_um_per_month_{key}"] = v.basis.trend.get("slope", float("nan"))
             metrics[f"days_to_next_visit_{key}"] = float(
                 (v.next_visit_due - _day(v.last["date"])).days)
         return TrackingRecord("fleet", f"fleet {os.path.basename(self.source)}", params=params,
@@ -403,10 +432,16 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     notes += [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
               if len(s.visits) < 2]
     notes += two_visit_notes(series)
+    records = store_records(data if store is None else store)
+    analyses, more = trace_analyses(visits, records, day, threshold_um=threshold_um,
+                                    threshold_arcsec=threshold_arcsec, limits=per_axis,
+                                    alpha=alpha, min_jump_sigma=min_jump_sigma,
+                                    warn_months=warn_months)
+    notes += more
     for text in notes:
         note(text)
-    views = axis_views(series, readings, parts, interval_days,
-                       store_records(data if store is None else store), as_of=day)
+    views = axis_views(series, readings, parts, interval_days, records, as_of=day,
+                       analyses=analyses)
     for text in (n for v in views for n in v.evidence_notes):
         notes.append(text)
         note(text)
@@ -437,6 +472,30 @@ def store_records(data) -> dict:
     return records
 
 
+def trace_analyses(visits, records: dict, as_of: dt.date, **options) -> tuple[dict, list]:
+    """The drift analysis (``models.drift.analyse_visits`` with ``options``) of each machine
+    axis whose store holds trace days sharing ``MIN_FORECAST_DAYS`` days or more with its laser
+    visits: the laser visits with the trace days shifted onto the laser's definition and
+    weighted by their uncertainty, as ``drift --evidence laser,trace``
+    (``pipeline.steps.evidence.with_evidence``). Returns {(machine_id, axis): DriftSeries}
+    and the notes of the axes whose trace days are too few to be used."""
+    if not records.get("trace"):
+        return {}, []
+    from models.drift import analyse_visits
+    from pipeline.steps.evidence import MIN_FORECAST_DAYS, with_evidence
+
+    joined, found, _ = with_evidence(visits, records, ("laser", "trace"), as_of,
+                                     min_days=MIN_FORECAST_DAYS)
+    shared = {key: off["trace"]["days_in_common"] for key, off in found.items()
+              if off.get("trace") is not None}
+    used = {key for key, n in shared.items() if n >= MIN_FORECAST_DAYS}
+    notes = [f"{m} axis {a}: its trace days share {n} day(s) with its laser visits, fewer "
+             f"than {MIN_FORECAST_DAYS}: its forecast uses the laser visits alone"
+             for (m, a), n in shared.items() if n < MIN_FORECAST_DAYS]
+    series = analyse_visits(joined, min_visits=1, **options) if used else []
+    return {(s.machine_id, s.axis): s for s in series if (s.machine_id, s.axis) in used}, notes
+
+
 def fleet_parts(readings, stats) -> _Parts:
     """The readings' per-target ISO statistics ``stats`` (``features.iso230.per_target``),
     their backlash points and per-test figures, computed once for the series and the pages."""
@@ -448,19 +507,24 @@ def fleet_parts(readings, stats) -> _Parts:
 
 
 def axis_views(series: list, readings, parts: _Parts, interval_days: float,
-               records: dict | None = None, as_of: dt.date | None = None) -> list[AxisView]:
+               records: dict | None = None, as_of: dt.date | None = None,
+               analyses: dict | None = None) -> list[AxisView]:
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``parts``
     the readings' statistics, points and figures (``fleet_parts``), ``records`` what
-    ``store_records`` found; with ``as_of`` the alerts of that day (``as_of_alerts``)."""
+    ``store_records`` found, ``analyses`` the axes' analyses with their trace days
+    (``trace_analyses``); with ``as_of`` the alerts of that day (``as_of_alerts``)."""
     from models.wear.wear_clock import usage_rates
 
     rates = fleet_wear_rates(series, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
-    views = [_view(s, parts, interval_days, records or {}, _rate_of(s, rates, usage), as_of)
-             for s in series]
+    views = []
+    for s in series:
+        analysis = (analyses or {}).get((s.machine_id, s.axis))
+        views.append(_view(s, parts, interval_days, records or {},
+                           _rate_of(analysis or s, rates, usage), as_of, analysis))
     for view in views if as_of is not None else ():
         view.as_of = as_of
-        view.series.alerts += as_of_alerts(view, as_of)
+        view.basis.alerts += as_of_alerts(view, as_of)
     views.sort(key=worst_first)
     for view, name in zip(views, page_names(views)):
         view.page = name
@@ -468,16 +532,23 @@ def axis_views(series: list, readings, parts: _Parts, interval_days: float,
 
 
 def _view(s, parts: _Parts, interval_days: float, records: dict,
-          fleet_rate: dict | None = None, as_of: dt.date | None = None) -> AxisView:
-    due, reason = next_visit(s, interval_days, fleet_rate)
-    end = _forecast_end(s, interval_days)
+          fleet_rate: dict | None = None, as_of: dt.date | None = None,
+          analysis=None) -> AxisView:
+    """The view of laser series ``s``; its trend, crossing and forecast from ``analysis``
+    (the laser visits with the trace days, ``trace_analyses``) when given."""
+    basis = analysis or s
+    due, reason = next_visit(s, interval_days, fleet_rate, by=basis)
+    end = _forecast_end(basis, interval_days)
     wear, why = wear_map(s, parts)
     key = (s.machine_id, s.axis)
     forecasts = [dated(f, s, parts) for f in records.get("forecast", {}).get(key, [])]
-    view = AxisView(s, due, reason, forecast(s, end), trend_line(s, end), wear, why,
+    shift = _days_between(s.origin, basis.origin)
+    view = AxisView(s, due, reason, _shifted(forecast(basis, end), shift),
+                    _shifted(trend_line(basis, end), shift), wear, why,
                     last_iso(s, parts), forecasts=forecasts,
                     compensations=records.get("compensation", {}).get(key, []),
-                    fleet_rate=fleet_rate, voided=records.get("voided", {}).get(key, []))
+                    fleet_rate=fleet_rate, voided=records.get("voided", {}).get(key, []),
+                    analysis=analysis)
     if records:  # a store: the other evidence of the axis's backlash
         from pipeline.steps.evidence import axis_offsets, evidence_frame
 
@@ -558,7 +629,7 @@ def as_of_alerts(view: AxisView, as_of: dt.date) -> list[dict]:
     and ``overdue`` when the next visit was due before it, with the days."""
     from models.drift import limit_passed_alert
 
-    alerts = [a for a in [limit_passed_alert(view.series, as_of)] if a is not None]
+    alerts = [a for a in [limit_passed_alert(view.basis, as_of)] if a is not None]
     late = (as_of - view.next_visit_due).days
     if late > 0:  # (view.days_overdue)
         alerts.append({"kind": "overdue", "message": (
@@ -575,7 +646,7 @@ def worst_first(view: AxisView) -> tuple:
     kinds = {a["kind"] for a in view.alerts}
     group = (0 if "above_threshold" in kinds else 1 if "limit_passed_unmeasured" in kinds
              else 2 if kinds else 3)
-    crossing = view.series.crossing[0]
+    crossing = view.crossing_days[0]
     return (group, view.next_visit_due, crossing is None, crossing or 0.0,
             -float(view.last["backlash_um"]), view.machine_id, view.axis)
 
@@ -595,12 +666,14 @@ def page_names(views: list[AxisView]) -> list[str]:
 
 
 # --------------------------------------------------------------------------- per-axis rules
-def next_visit(s, interval_days: float, fleet_rate: dict | None = None) -> tuple[dt.date, str]:
+def next_visit(s, interval_days: float, fleet_rate: dict | None = None,
+               by=None) -> tuple[dt.date, str]:
     """When the axis is next due and which rule set it (module docstring): ``above_threshold``
     (the last visit's date: due now), ``crossing`` (the early end of the crossing interval,
     before the interval ends), ``fleet_rate`` (the day the last level plus the fleet's wear
     rate ``fleet_rate`` reaches the threshold, before the interval ends) or ``interval``
-    (last visit + ``interval_days``)."""
+    (last visit + ``interval_days``). The crossing is ``by``'s (the analysis with the trace
+    days) when given; the last visit is always the laser's."""
     import pandas as pd
 
     last = s.visits["date"].iloc[-1]
@@ -612,9 +685,10 @@ def next_visit(s, interval_days: float, fleet_rate: dict | None = None) -> tuple
         when = _day(last + pd.Timedelta(days=(s.threshold_um - level) / fleet_rate["per_day"]))
         if when < by_interval:
             return when, "fleet_rate"
-    early = s.crossing[1] if s.crossing[1] is not None else s.crossing[0]
+    by = by or s
+    early = by.crossing[1] if by.crossing[1] is not None else by.crossing[0]
     if early is not None:
-        when = max(dt.date.fromisoformat(s.date_at(early)), _day(last))
+        when = max(dt.date.fromisoformat(by.date_at(early)), _day(last))
         if when < by_interval:
             return when, "crossing"
     return by_interval, "interval"
@@ -631,6 +705,19 @@ def _forecast_end(s, interval_days: float) -> float:
     if s.crossing[0] is not None:
         end = max(end, min(s.crossing[0], t_last + FORECAST_CAP_MONTHS))
     return end
+
+
+def _days_between(origin, later) -> float:
+    """Days [d] from ``origin`` to ``later`` (two timestamps)."""
+    return (later - origin).total_seconds() / 86400.0
+
+
+def _shifted(curve: dict | None, days: float) -> dict | None:
+    """A forecast or trend line drawn from another origin, ``days`` after the laser's first
+    visit: its days counted from the laser's first visit."""
+    if curve is None or days == 0:
+        return curve
+    return {**curve, "days": curve["days"] + days}
 
 
 def _segment(s):

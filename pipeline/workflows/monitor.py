@@ -332,22 +332,24 @@ def _check_each_day_once(daily) -> None:
 
 def _axis_monitor(days, threshold_um) -> AxisMonitor:
     """The drift analysis of one axis's days with a lost motion (``models.drift``)."""
+    import numpy as np
     import pandas as pd
 
     from features.visits import DAYS_PER_MONTH
     from models.drift import analyse_series
 
     first = days.iloc[0]
-    known = days.dropna(subset=["lost_motion_um"])
+    value = days["lost_motion_um"].to_numpy()
+    known = ~np.isnan(value)
     out = AxisMonitor(str(first.machine_id), str(first.axis), str(first.unit),
                       days.reset_index(drop=True))
-    if len(known) < 2:
+    if known.sum() < 2:
         return out
-    visits = pd.DataFrame({"machine_id": out.machine_id, "axis": out.axis,
-                           "visit": known["date"].to_numpy(),
-                           "date": pd.to_datetime(known["date"]).to_numpy(),
-                           "backlash_um": known["lost_motion_um"].to_numpy(),
-                           "backlash_u_um": known["lost_motion_u_um"].to_numpy()})
+    date = days["date"].to_numpy()[known]  # ISO dates, parsed as such by numpy
+    visits = pd.DataFrame({"machine_id": out.machine_id, "axis": out.axis, "visit": date,
+                           "date": date.astype("datetime64[D]").astype("datetime64[us]"),
+                           "backlash_um": value[known],
+                           "backlash_u_um": days["lost_motion_u_um"].to_numpy()[known]})
     s = analyse_series(visits, threshold_um=threshold_um)
     out.series = s
     out.change_points = [str(s.visits["visit"].iloc[c["index"]]) for c in s.change_points]
