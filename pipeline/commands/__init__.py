@@ -25,3 +25,32 @@ def command_of(name: str):
     from pipeline.commands.default import command
 
     return command(name)
+
+
+def synopsis(name: str) -> str:
+    """How command ``name`` is called, in short: its positional arguments and required options
+    (from its job's table), then ``[options]``; a command module may say it itself
+    (``SYNOPSIS``)."""
+    from pipeline.workflows import workflow
+
+    own = getattr(command_of(name), "SYNOPSIS", None)
+    if own is not None:
+        return own
+    words = [f"backlash {name}"]
+    for option, param in workflow(name).parameters.items():
+        if param.on_cli and param.positional:
+            words.append(param.flag + ("..." if param.nargs else ""))
+        elif param.on_cli and param.required:
+            words.append(f"{param.option(option)} {param.metavar or option.upper()}")
+    return " ".join(words) + " [options]"
+
+
+def commands_table() -> str:
+    """The docs' table of commands (``docs/index.md``, filled in by ``docs/hooks.py`` as the
+    site is built): per job its synopsis, its record's summary and its page."""
+    from pipeline.workflows import WORKFLOWS
+
+    rows = ["| command | does |", "|---|---|"]
+    rows += [f"| `{synopsis(w.name).replace('|', chr(92) + '|')}` | {w.summary} "
+             f"[more]({w.name}.md) |" for w in WORKFLOWS]
+    return "\n".join(rows)

@@ -9,6 +9,7 @@ from pipeline.workflows.parameters import JSON_HELP
 
 # Exit code when the check finds a problem it did not mend.
 PROBLEMS_EXIT = 1
+SYNOPSIS = "backlash store check STORE [options]"  # the action comes before the job's STORE
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -62,10 +62,6 @@ PARAMETERS = {
 }
 
 
-def _parameters() -> dict:  # until the body's check names PARAMETERS itself
-    return PARAMETERS
-
-
 LOAD_NEEDED = "lost motion needs a load-side position (column load_mm)"
 
 
@@ -200,7 +196,7 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
         axis neither named nor given (``features.traces.logs``), ``channels`` on a trace.
     """
-    check_params(_parameters(), {"traces": traces, "engine": engine, "address": address,
+    check_params(PARAMETERS, {"traces": traces, "engine": engine, "address": address,
                                  "threshold_um": threshold_um, "take_up_mm": take_up_mm,
                                  "settle_s": settle_s, "store": store, "format": format,
                                  "channels": channels, "machine": machine, "axis": axis,

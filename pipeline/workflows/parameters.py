@@ -5,7 +5,7 @@ table does two things, so that a parameter means the same wherever it is given:
 
 * the runner checks every call against it (``pipeline.workflows.check_params``: the
   signature bound, exact names, the constraints of scikit-learn's ``_parameter_constraints``);
-* the CLI generates the job's options from it (``pipeline.commands.options.add_parameters``):
+* the CLI generates the job's options from it (``pipeline.commands.parameters.add_parameters``):
   the option's name, type, choices, default (the workflow's own, from its signature) and
   help; ``run_job`` hands every option back to the runner under its Python name.
 
@@ -200,7 +200,7 @@ def parameters_table(job: str) -> str:
         if not param.on_cli:
             continue
         default = signature[name].default if name in signature else None
-        shown = "" if default in (None, inspect.Parameter.empty) else f"`{default!r}`"
+        shown = "" if default in (None, inspect.Parameter.empty) else f"`{_shown(default)}`"
         option = param.option(name)
         option = f"`{option}`" + (f" {param.metavar}" if param.metavar else "")
         rows.append(f"| `{name}` | {option} | {shown} | {param.help.replace('|', '/')} |")
@@ -216,3 +216,12 @@ SPLIT = Param((StrOptions(SPLITS),), "hold-out: random 15 % (paper) or the later
 TRUTH = Param((*READINGS, None), "twin truth table (backlash simulate): also score against the "
               "true backlash", metavar="FILE")
 RANDOM_SEED = Param(SEED, "random seed")
+
+
+def _shown(default) -> str:
+    """A default as the docs show it: a path of the product relative to its folder (the same
+    in every checkout), anything else as Python writes it."""
+    if isinstance(default, os.PathLike):
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        return os.path.relpath(default, root)
+    return repr(default)
