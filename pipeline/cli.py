@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", BacklashWarning)
-            created = check_outputs(args.command, args)
+            created = check_outputs(args.command, command_of(args.command), args)
             with common_settings(args):
                 code = args._run(args)
     except (InputError, ValueError) as err:
@@ -157,7 +157,7 @@ def _flag_namer(command: str):
     """Python parameter -> the option that sets it (``option_names``), else ``--name``."""
     from pipeline.commands.common import option_names
 
-    flags = option_names(command)
+    flags = option_names(command, command_of(command))
     return lambda name: flags.get(name, f"--{name.replace('_', '-')}")
 
 

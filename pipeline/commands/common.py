@@ -24,13 +24,12 @@ def parse_list(text: str | None, parameter: str) -> list[str] | None:
     return each_once(names, parameter)
 
 
-def check_outputs(command: str, args) -> list[Path]:
-    """Refuse output paths that cannot work before any work is done; return the folders
-    this run will create (removed again if the run ends in a user error)."""
+def check_outputs(command: str, module, args) -> list[Path]:
+    """Refuse output paths that cannot work before any work is done (the job's table's, and
+    ``OUTPUTS`` of its command ``module``); return the folders this run will create (removed
+    again if the run ends in a user error)."""
     from features.readings.fileio import check_output
-    from pipeline.commands import command_of
 
-    module = command_of(command)
     outputs = {dest: (kind, f"--{dest.replace('_', '-')}")
                for dest, kind in getattr(module, "OUTPUTS", {}).items()}
     for name, param in _table(command).items():
@@ -56,12 +55,10 @@ def _table(command: str) -> dict:
     return {name: p for name, p in table.items() if hasattr(p, "output")}
 
 
-def option_names(command: str) -> dict:
+def option_names(command: str, module) -> dict:
     """Python parameter -> the option or argument that gives it on the command line: from the
-    job's table, and a command's own ``FLAGS`` (its options that are no job parameter)."""
-    from pipeline.commands import command_of
-
-    module = command_of(command)
+    job's table, and its command ``module``'s own ``FLAGS`` (its options that are no job
+    parameter)."""
     names = {name: param.option(name) for name, param in _table(command).items()}
     return {**names, **getattr(module, "FLAGS", {})}
 
