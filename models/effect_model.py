@@ -1,5 +1,5 @@
 """The effect-model baseline: least squares of the twin's lost-motion effects, built from the
-effect records (``models.physics.effects.RECORDS``).
+effect records (``models.physics.effects.EFFECTS``).
 
 Its terms are the lost-motion records whose ``inputs`` the feature table supplies, each
 evaluated with unit amplitude so the fit is linear, plus wear growing with operating hours:
@@ -66,7 +66,7 @@ class EffectModelBaseline(RegressorMixin, BaseEstimator):
         return [None] * n_columns
 
     def _terms(self, available: set) -> list[str]:
-        terms = [name for name, record in effects.RECORDS.items()
+        terms = [name for name, record in effects.EFFECTS.items()
                  if record.kind == "lost_motion" and set(record.inputs) <= available]
         return terms + ([WEAR_INPUT] if WEAR_INPUT in available else [])
 
@@ -78,7 +78,7 @@ class EffectModelBaseline(RegressorMixin, BaseEstimator):
             if term == WEAR_INPUT:
                 cols.append(columns[WEAR_INPUT] / 1000.0)
                 continue
-            record = effects.RECORDS[term]
+            record = effects.EFFECTS[term]
             params = {record.amplitude: 1.0}
             if term == "backlash_position":
                 params.update(center_mm=center_mm, width_mm=width_mm)

@@ -111,12 +111,12 @@ def _cell(value) -> str:
 
 
 def layout_table() -> str:
-    """The input formats page's table, rendered from ``features.readings.layouts.RECORDS``."""
-    from features.readings.layouts import RECORDS
+    """The input formats page's table, rendered from ``features.readings.layouts.LAYOUTS``."""
+    from features.readings.layouts import LAYOUTS
 
     rows = ["| format | suffixes | help text | a file of it holds |", "|---|---|---|---|"]
     rows += [f"| `{r.name}` | {', '.join(f'`{s}`' for s in r.suffixes)} | {_cell(r.help)} | "
-             f"{_cell(r.expected)} |" for r in RECORDS]
+             f"{_cell(r.expected)} |" for r in LAYOUTS]
     return "\n".join(rows) + "\n"
 
 
@@ -135,13 +135,13 @@ def predictor_table() -> str:
 
 
 def test_the_input_formats_table_is_the_records():
-    from features.readings.layouts import RECORDS
+    from features.readings.layouts import LAYOUTS
 
     text = (DOCS / "input-formats.md").read_text(encoding="utf-8")
     assert layout_table() in text, (
         "docs/input-formats.md: paste tests.test_docs.layout_table()\n" + layout_table())
     contract = (DOCS / "data-contract.md").read_text(encoding="utf-8")
-    missing = [r.name for r in RECORDS if f"- **{r.name}**:" not in contract]
+    missing = [r.name for r in LAYOUTS if f"- **{r.name}**:" not in contract]
     assert not missing, f"data-contract.md section 2 lacks a bullet for {missing}"
 
 

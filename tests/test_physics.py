@@ -119,9 +119,9 @@ def test_every_effect_matches_its_formula():
 def test_records_cover_the_public_vocabulary_and_drive_the_twin():
     from features.readings import schema
 
-    assert set(schema.EFFECTS) | {schema.NO_EFFECT} == set(effects.RECORDS) | {"none"}
-    assert len(schema.EFFECTS) == len(set(schema.EFFECTS))
-    for name, record in effects.RECORDS.items():
+    assert set(schema.EFFECT_NAMES) | {schema.NO_EFFECT} == set(effects.EFFECTS) | {"none"}
+    assert len(schema.EFFECT_NAMES) == len(set(schema.EFFECT_NAMES))
+    for name, record in effects.EFFECTS.items():
         assert record.name == name and record.kind in ("lost_motion", "position")
         assert record.function.__doc__ and "References" in record.function.__doc__
         assert record.separating_test and record.reading and record.reference

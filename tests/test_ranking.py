@@ -62,15 +62,15 @@ def test_final_rank_and_influence_follow_the_truth(truth):
 def test_physical_readings_come_from_the_effect_records(truth):
     """The physics of each verdict is the effect records' reading (models.influence)."""
     from models.influence import conditional_influence
-    from models.physics.effects import RECORDS
+    from models.physics.effects import EFFECTS
 
     X, y, result = truth
     table = conditional_influence(X, y, association=result.table["influence"], n_boot=20).table
     assert "no measurable influence" in table.loc["humidity_pct", "physical_reading"]
     assert "backlash_feed" in table.loc["feed_mm_min", "physical_reading"]
-    assert RECORDS["backlash_feed"].reading in table.loc["feed_mm_min", "physical_reading"]
+    assert EFFECTS["backlash_feed"].reading in table.loc["feed_mm_min", "physical_reading"]
     assert "worn" in table.loc["target", "physical_reading"]  # local wear of screw and nut
-    assert RECORDS["backlash_position"].reading in table.loc["target", "physical_reading"]
+    assert EFFECTS["backlash_position"].reading in table.loc["target", "physical_reading"]
     assert "air_refraction" in table.loc["humidity_pct", "physical_reading"]
     assert list(table.loc[list(DRIVERS), "verdict"]) == ["driver", "driver"]
     assert set(table.loc[list(NON_DRIVERS), "verdict"]) == {"none"}

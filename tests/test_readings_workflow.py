@@ -40,9 +40,9 @@ READINGS_HELP = readings().help
 
 
 def test_every_format_option_and_readings_help_come_from_the_records():
-    names = tuple(record.name for record in layouts.RECORDS)
+    names = tuple(record.name for record in layouts.LAYOUTS)
     assert "rtl" in names and schema.FORMATS == ("auto", *names)
-    for record in layouts.RECORDS:
+    for record in layouts.LAYOUTS:
         assert record.help in schema.DATA_HELP
         assert record.expected in layouts.UNKNOWN_FORMAT
         assert record.suffixes and record.reader.count(":") == 1
@@ -59,7 +59,7 @@ def test_every_format_option_and_readings_help_come_from_the_records():
         for action in sub._actions:
             text = action.help or ""
             if not action.option_strings and any(r.help in text or "ecmc" in text
-                                                  for r in layouts.RECORDS):
+                                                  for r in layouts.LAYOUTS):
                 assert text == READINGS_HELP, (command, text)
     assert with_format >= 10
     for command in ("convert", "iso"):  # the readings, as every job that reads them says
@@ -70,7 +70,7 @@ def test_every_format_option_and_readings_help_come_from_the_records():
 def test_help_text_names_every_layout(capsys):
     assert main(["convert", "--help"]) == 0
     help_text = " ".join(capsys.readouterr().out.split())
-    for record in layouts.RECORDS:
+    for record in layouts.LAYOUTS:
         assert record.name in help_text and record.help in help_text
 
 
@@ -99,7 +99,7 @@ def test_unknown_layout_names_every_record(tmp_path, capsys):
     path.write_text("time,value\n1,2\n")
     assert main(["iso", str(path)]) == 2
     line = one_error_line(capsys, "iso")
-    assert "unknown format" in line and all(r.expected in line for r in layouts.RECORDS)
+    assert "unknown format" in line and all(r.expected in line for r in layouts.LAYOUTS)
 
 
 def test_records_module_stays_light():

@@ -28,7 +28,7 @@ def test_reversal_profile_is_half_the_reversal_value_of_either_sign():
     # defaults R = (4, 4, 0, -4, -4): r(0) = 4, r(175) = (4 + 16 + 0 - 16 - 4) / 16 = 0, r(350) = -4
     np.testing.assert_allclose(effects.contribution("reversal_profile", x, d, {}),
                                [2.0, 0.0, -2.0, 2.0], atol=1e-12)
-    record = effects.RECORDS["reversal_profile"]
+    record = effects.EFFECTS["reversal_profile"]
     assert record.kind == "position" and "b(x) >= 0" in record.separating_test
 
 

@@ -111,7 +111,7 @@ def test_one_definition_per_idea():
 def test_every_effect_record_has_typed_nuisance_parameters():
     from models.discovery import terms
 
-    kinds = {n.kind for name in terms.RECORDS for n in terms.nuisances(name)}
+    kinds = {n.kind for name in terms.EFFECTS for n in terms.nuisances(name)}
     assert kinds <= {"data", "targets", "ends", "period", "values", "quadrature", "profile"}
     pitch, phase = terms.nuisances("lead_error_periodic")
     assert (pitch.kind, pitch.values, pitch.searched) == ("period", (4.0, 20.0), True)

@@ -22,7 +22,7 @@ def read_readings(path, format: str = "auto", **options) -> pd.DataFrame:
     path : str or path-like
         The readings file.
     format : str
-        A layout name of ``features.readings.layouts.RECORDS``, or ``"auto"`` to recognise
+        A layout name of ``features.readings.layouts.LAYOUTS``, or ``"auto"`` to recognise
         it from the file.
     **options
         Options of a raw log's reader (``channels``, ``reference_scale`` of the ``camonitor``

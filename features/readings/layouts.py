@@ -3,13 +3,13 @@
 A record names the layout (the ``--format`` choice), says how a file of it is recognised and
 where its reader lives, and carries the words the help texts and the docs' table show. The
 CLI's ``--format`` choices (``schema.FORMATS``), the help text of every readings argument
-(``schema.DATA_HELP``) and the "unknown format" error are generated from ``RECORDS``, so a
+(``schema.DATA_HELP``) and the "unknown format" error are generated from ``LAYOUTS``, so a
 new layout is one record here plus its reader (see ``docs/extending.md``).
 
 This module is light (no pandas): ``backlash --help`` reads it. Readers are imported on
 first use from their ``reader`` path.
 
-Recognition (``detect_format``) runs in two passes over ``RECORDS``: first each layout's
+Recognition (``detect_format``) runs in two passes over ``LAYOUTS``: first each layout's
 ``signature`` (a file suffix or marker text decisive on its own), then each ``header`` (the
 column names of a CSV's first line). The first match wins.
 """
@@ -115,7 +115,7 @@ class Layout:
         given = {name: value for name, value in options.items() if value is not None}
         extra = [name for name in given if name not in self.options]
         if extra:
-            takers = _or_list([r.name for r in RECORDS if extra[0] in r.options])
+            takers = _or_list([r.name for r in LAYOUTS if extra[0] in r.options])
             raise InputError(f"applies to {takers} files only; this file is {self.name!r}",
                              file=path, parameter=extra[0])
         module, _, function = self.reader.partition(":")
@@ -139,7 +139,7 @@ def _camonitor_signature(probe: Probe) -> bool:
     return looks_like_camonitor(probe.text)
 
 
-RECORDS: tuple[Layout, ...] = (
+LAYOUTS: tuple[Layout, ...] = (
     Layout(
         name="canonical", help="canonical CSV or Parquet",
         expected="a readings table (columns machine_id, axis, test_id, method, target, "
@@ -169,7 +169,7 @@ RECORDS: tuple[Layout, ...] = (
         reader="features.readings.approaches:read_camonitor_readings",
         signature=_camonitor_signature, options=("channels", "reference_scale", "unit")),
 )
-BY_NAME = {record.name: record for record in RECORDS}
+BY_NAME = {record.name: record for record in LAYOUTS}
 # The ``--format`` choices: detection first, then every layout.
 FORMATS = ("auto", *BY_NAME)
 
@@ -179,9 +179,9 @@ def _or_list(words: list[str]) -> str:
 
 
 # Help text of every readings (DATA) argument.
-DATA_HELP = "readings file: " + _or_list([record.help for record in RECORDS])
+DATA_HELP = "readings file: " + _or_list([record.help for record in LAYOUTS])
 # The "unknown format" error: what an accepted file holds.
-UNKNOWN_FORMAT = "unknown format: expected " + _or_list([r.expected for r in RECORDS])
+UNKNOWN_FORMAT = "unknown format: expected " + _or_list([r.expected for r in LAYOUTS])
 
 
 def layout(name: str) -> Layout:
@@ -202,14 +202,14 @@ def detect_format(path: Path, text: str | None = None) -> str:
         known layout.
     """
     probe = Probe(Path(path), text)
-    for record in RECORDS:
+    for record in LAYOUTS:
         if record.signature is not None and record.signature(probe):
             return record.name
     if probe.text is None:
         raise probe.error
     if not probe.text.strip():
         raise InputError("empty file; expected a header row and readings", file=path)
-    for record in RECORDS:
+    for record in LAYOUTS:
         if record.header is not None and record.header(probe.names):
             return record.name
     check_delimiter(probe.header, path)

@@ -52,9 +52,9 @@ DIRECTION_ALIASES = {
 }
 METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "pend": "pendulum"}
 
-# Named physical effects (docs/data-contract.md, section 4); models.physics.effects.RECORDS has one record
+# Named physical effects (docs/data-contract.md, section 4); models.physics.effects.EFFECTS has one record
 # per name (a test checks they agree).
-EFFECTS = (
+EFFECT_NAMES = (
     "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
     "lead_error_linear", "lead_error_periodic", "lead_error_profile", "thermal_expansion",
     "thermal_drift", "air_refraction", "abbe", "dwell_settling", "reversal_profile",

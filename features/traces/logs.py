@@ -23,7 +23,7 @@ from features.readings.schema import LINEAR_AXES, ROTARY_AXES
 from features.traces import contract as c
 from features.traces.validation import check_trace
 
-FORMATS = ("camonitor", "halsampler")
+LOG_FORMATS = ("camonitor", "halsampler")
 # Channel name -> trace column: the contract's channels without their unit suffix.
 COLUMNS = {name.rsplit("_", 1)[0]: name for name in c.CHANNELS}
 REQUIRED = ("commanded", "motor")
@@ -63,8 +63,8 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
         not have, a machine or axis neither named nor given.
     """
     path = Path(path)
-    if format not in FORMATS:
-        raise InputError(f"unknown log format {format!r}; expected {' or '.join(FORMATS)}",
+    if format not in LOG_FORMATS:
+        raise InputError(f"unknown log format {format!r}; expected {' or '.join(LOG_FORMATS)}",
                          parameter="format")
     channels = _channels(channels, format)
     if format == "camonitor":

@@ -96,9 +96,9 @@ def _check(spec: Scenarios, file) -> None:
 
     def known(names, column):
         for name in names:
-            if name not in effects.RECORDS:
+            if name not in effects.EFFECTS:
                 raise InputError(f"unknown effect {name!r}; expected one of "
-                                 f"{', '.join(effects.RECORDS)}", file=file, column=column)
+                                 f"{', '.join(effects.EFFECTS)}", file=file, column=column)
 
     if not spec.designs:
         raise InputError("no [designs.*]: a benchmark needs at least one design", file=file)
@@ -227,7 +227,7 @@ def run(scenarios: list[dict], generate=twin_readings, progress=None,
                      "ambiguous": ";".join(",".join(g) for g in result.ambiguous),
                      "not_identified": ",".join(not_identified),
                      "outcome": outcome(sc, result.named, result.ambiguous),
-                     "separating_test": any(effects.RECORDS[h].separating_test in note
+                     "separating_test": any(effects.EFFECTS[h].separating_test in note
                                             for h in sc["hidden"] for note in result.notes),
                      "rmse_before_um": result.rmse_before_um,
                      "rmse_after_um": result.rmse_after_um,

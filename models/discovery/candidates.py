@@ -21,8 +21,8 @@ from models.discovery.design import (
 )
 from models.discovery.system import SYSTEM_P
 from models.discovery.terms import (
+    EFFECTS,
     PROFILES,
-    RECORDS,
     control_counts,
     nuisance_grid,
     profile_basis,
@@ -89,7 +89,7 @@ def candidates(design: Design, model: dict, skipped: dict, noise: float,
     n, k0 = len(y), rank(base)
     cv0 = cv_rmse(base, y, design.fold)
     rows = []
-    for name in RECORDS:
+    for name in EFFECTS:
         if name in model or name in skipped:
             continue
         for form in forms(design, name):
@@ -145,7 +145,7 @@ def evaluate(design, model, base, name, form: Form, sse0, n, k0, noise) -> dict 
     chosen, (amp, ok) = min(plausible, key=lambda p: p[0].sse) if plausible else judged[0]
     return {"effect": name, "form": form.kind, "nuisance": chosen.nuisance, "coef": amp,
             "amplitude": ("peak_um" if "n_control" in chosen.nuisance
-                          else RECORDS[name].amplitude),
+                          else EFFECTS[name].amplitude),
             "delta_bic": chosen.bic - bic(sse0, n, k0), "plausible": ok, "sse": chosen.sse,
             "not_identified": not_identified, "family": len(family_fits)}
 
@@ -192,7 +192,7 @@ def _undersampled(design: Design, name: str, nuisance: dict,
         return {}
     values = sorted({round(f.nuisance[key], 3) for f in family_fits})
     return {key: {"range": [values[0], values[-1]], "values": values[:12],
-                  "test": RECORDS[name].separating_test}}
+                  "test": EFFECTS[name].separating_test}}
 
 
 def search_penalty(family: list, n: int) -> float:
@@ -230,7 +230,7 @@ def amplitude(design, model, base_coef, name, nuisance, coef, noise) -> tuple[fl
     """The fitted amplitude and whether it is physically plausible. Profiles report their
     largest departure from a straight line over the targets (a straight line is the lead error
     and the offsets); lost motion must stay >= 0 along the axis."""
-    record = RECORDS[name]
+    record = EFFECTS[name]
     if "n_control" in nuisance:
         targets = np.unique(design.x)
         profile = profile_basis(targets, nuisance["n_control"]) @ coef
@@ -285,7 +285,7 @@ def _lost_motion_shape(design, name, nuisance, coef) -> np.ndarray:
     """The candidate's lost motion at the measured targets and conditions [um]."""
     if "n_control" in nuisance:
         return profile_basis(np.unique(design.x), nuisance["n_control"]) @ coef
-    record = RECORDS[name]
+    record = EFFECTS[name]
     params = {**nuisance, record.amplitude: float(coef[0])}
     return effects.contribution(name, design.x, 0, design.cond, **params)
 
@@ -305,4 +305,4 @@ def _not_identified(name: str, family: list[dict], equivalent: list[dict]) -> di
     values = [grid[i] for i in idx]
     return {key: {"range": [float(min(values)), float(max(values))],
                   "values": [float(v) for v in values][:12],
-                  "test": RECORDS[name].separating_test}}
+                  "test": EFFECTS[name].separating_test}}

@@ -27,8 +27,8 @@ from models.discovery.structure import (
 )
 from models.discovery.system import measuring_system
 from models.discovery.terms import (
+    EFFECTS,
     PROFILES,
-    RECORDS,
     control_counts,
     missing_inputs,
     nuisance_grid,
@@ -159,7 +159,7 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
         winner, group, stand_in = choose(design, model, passing, sse0)
         if len(group) > 1:
             result.ambiguous.append(sorted(group))
-            tests = sorted({RECORDS[g].separating_test for g in group})
+            tests = sorted({EFFECTS[g].separating_test for g in group})
             result.notes.append(f"{', '.join(sorted(group))} explain the gap equally well on "
                                 f"this design: {'; '.join(tests)}")
             break
@@ -171,11 +171,11 @@ def discover(readings: pd.DataFrame, baseline=DEFAULT_BASELINE, max_steps: int =
             break
         name = winner["effect"]
         if stand_in:  # what is left is the shape difference, not another effect
-            barred.update({stand_in, *(e for e in RECORDS if nested(e, stand_in))})
+            barred.update({stand_in, *(e for e in EFFECTS if nested(e, stand_in))})
             result.notes.append(
                 f"{name} named rather than the general {stand_in} form, which fits slightly "
                 f"better (the effect's shape differs a little from the record's): "
-                f"{RECORDS[name].separating_test}")
+                f"{EFFECTS[name].separating_test}")
         model[name] = winner["nuisance"]
         _refit_nuisances(design, model, result)
         X = stack(design, model)
@@ -240,11 +240,11 @@ def check_baseline(baseline, source: str = "readings") -> list[str]:
     names = [b.strip() for b in (baseline.split(",") if isinstance(baseline, str) else baseline)]
     if not any(names):
         raise InputError("empty; expected comma-separated effect names from "
-                         f"{', '.join(RECORDS)}", parameter="baseline")
+                         f"{', '.join(EFFECTS)}", parameter="baseline")
     for name in names:
-        if name not in RECORDS:
+        if name not in EFFECTS:
             raise InputError(f"unknown effect {name!r}; expected names from "
-                             f"{', '.join(RECORDS)}", parameter="baseline")
+                             f"{', '.join(EFFECTS)}", parameter="baseline")
     if len(set(names)) < len(names):
         raise InputError("an effect is listed twice", parameter="baseline")
     return names
@@ -253,7 +253,7 @@ def check_baseline(baseline, source: str = "readings") -> list[str]:
 def _skipped(design: Design, baseline: list, source: str, result: Discovery) -> dict:
     """Effects whose inputs the readings lack (a baseline effect among them is an error)."""
     skipped = {}
-    for name in RECORDS:
+    for name in EFFECTS:
         missing = missing_inputs(name, design.cond)
         if missing:
             skipped[name] = missing
@@ -280,7 +280,7 @@ def _choose_system(design: Design, model: dict, readings: pd.DataFrame,
         result.measuring_system = test.to_json()
         result.notes.append(test.note())
         return
-    if not any(RECORDS[m].kind == "lost_motion" for m in model):
+    if not any(EFFECTS[m].kind == "lost_motion" for m in model):
         return
     sse = {}
     for system in ("indirect", "direct"):

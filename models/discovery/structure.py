@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from models.discovery.design import Design, max_corr, projector, residualise, stack
-from models.discovery.terms import PROFILES, RECORDS, nuisance_grid, nuisances
+from models.discovery.terms import EFFECTS, PROFILES, nuisance_grid, nuisances
 
 COLLINEAR = 0.95
 STOP_RATIO = 1.05   # residual within 5 % of the repeatability: nothing measurable left
@@ -27,7 +27,7 @@ def confounding_notes(design: Design, model: dict, skipped: dict, result) -> Non
     notes and ambiguous groups added to ``result`` (a ``Discovery``)."""
     base = stack(design, model)
     proj = projector(base)
-    for name in RECORDS:
+    for name in EFFECTS:
         if name in model or name in skipped or name in PROFILES:
             continue
         key, grid = nuisance_grid(name, design.x)
@@ -40,7 +40,7 @@ def confounding_notes(design: Design, model: dict, skipped: dict, result) -> Non
         if left < 1e-3:
             twins = [m for m in model if max_corr(col, design.column(m, model[m])) > COLLINEAR]
             result.notes.append(f"{name} cannot be told apart from {', '.join(twins) or 'the model'}"
-                                f" on this design: {RECORDS[name].separating_test}")
+                                f" on this design: {EFFECTS[name].separating_test}")
             if twins:
                 add_group(result.ambiguous, {name, *twins})
     spacing = np.diff(np.unique(design.x))
@@ -55,7 +55,7 @@ def confounding_notes(design: Design, model: dict, skipped: dict, result) -> Non
             result.notes.append(
                 "lead_error_periodic with a pitch of " + ", ".join(f"{p:g}" for p in aliased)
                 + " mm is invisible at this target spacing on this design: "
-                + RECORDS["lead_error_periodic"].separating_test)
+                + EFFECTS["lead_error_periodic"].separating_test)
             add_group(result.ambiguous, {"lead_error_periodic"})
 
 
@@ -117,7 +117,7 @@ def acts_along(name: str) -> set[str]:
     """The residual factors an effect acts along: those whose input (``FACTOR_INPUTS``) it
     reads, the direction for lost motion, and run x position when it reads the target and a
     condition that changes from run to run."""
-    record = RECORDS[name]
+    record = EFFECTS[name]
     inputs = set(record.inputs) | ({"direction"} if record.kind == "lost_motion" else set())
     factors = {f for f, column in FACTOR_INPUTS.items()
                if column in inputs and f != "run x position"}
@@ -165,7 +165,7 @@ def unexplained(design: Design, resid: np.ndarray, result, single_noise: bool) -
         column = FACTOR_INPUTS[top["against"]]
         out["strongest"] = top["against"]
         out["verdict"] = "structure"
-        out["candidates"] = [n for n, r in RECORDS.items()
+        out["candidates"] = [n for n, r in EFFECTS.items()
                              if (column in r.inputs or (column == "direction"
                                                         and r.kind == "lost_motion"))
                              and n not in result.named]

@@ -12,7 +12,7 @@ import pandas as pd
 from features.readings import schema
 from models.physics import effects
 
-RECORDS = effects.RECORDS
+EFFECTS = effects.EFFECTS
 MAX_CONTROL = 15    # control points of a general smooth form, at most (and one per target)
 # readings columns -> the condition arrays derived from them
 CONDITION_OF = {"measured_at": "elapsed_s"}
@@ -93,7 +93,7 @@ def parse_nuisance(key: str, spec, amplitude: str) -> Nuisance:
 @functools.cache
 def nuisances(name: str) -> tuple[Nuisance, ...]:
     """The nuisance parameters of effect ``name``, typed, in the record's order."""
-    record = RECORDS[name]
+    record = EFFECTS[name]
     return tuple(parse_nuisance(k, v, record.amplitude) for k, v in record.nuisance.items())
 
 
@@ -115,13 +115,13 @@ def quadrature_pairs(name: str) -> list[tuple[str, str]]:
 
 
 # Effects whose natural form is a general profile along the axis (complexity by BIC).
-PROFILES = tuple(name for name in RECORDS if any(n.kind == "profile" for n in nuisances(name)))
+PROFILES = tuple(name for name in EFFECTS if any(n.kind == "profile" for n in nuisances(name)))
 
 
 def signed_by_approach(name: str) -> bool:
     """A profile along the axis that reads the approach direction: its general smooth form is
     the half-difference between the directions (``reversal_profile``), not a common one."""
-    return name in PROFILES and "direction" in RECORDS[name].inputs
+    return name in PROFILES and "direction" in EFFECTS[name].inputs
 
 
 # ------------------------------------------------------------------------------ data
@@ -139,7 +139,7 @@ def conditions_of(readings: pd.DataFrame) -> dict:
 def missing_inputs(name: str, cond: dict) -> list[str]:
     """Inputs of the effect's record that the readings lack (or hold gaps in)."""
     missing = []
-    for column in RECORDS[name].inputs:
+    for column in EFFECTS[name].inputs:
         if column in ALWAYS_PRESENT:
             continue
         key = CONDITION_OF.get(column, column)
@@ -185,7 +185,7 @@ def effect_column(name: str, x, d, cond, nuisance: dict | None = None,
     ``nuisance`` may hold ``n_control`` (a general smooth form: one column per control point);
     ``reversal`` (direct measuring system) keeps lost motion on the readings that follow a
     reversal only."""
-    record = RECORDS[name]
+    record = EFFECTS[name]
     nuisance = dict(nuisance or {})
     if "n_control" in nuisance:
         value = profile_basis(x, int(nuisance["n_control"]))

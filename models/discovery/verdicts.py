@@ -18,7 +18,7 @@ from models.discovery.design import (
     residualise,
     stack,
 )
-from models.discovery.terms import RECORDS, data_value, quadrature_pairs, signed_by_approach
+from models.discovery.terms import EFFECTS, data_value, quadrature_pairs, signed_by_approach
 
 BOOT_SAMPLES = 40
 BOOT_AGREEMENT = 0.8
@@ -69,7 +69,7 @@ def clearance_first(passing: pd.DataFrame) -> pd.DataFrame:
     are the same columns)."""
     if passing.empty:
         return passing
-    lost = [RECORDS[e].kind == "lost_motion" for e in passing["effect"]]
+    lost = [EFFECTS[e].kind == "lost_motion" for e in passing["effect"]]
     if not any(lost):
         return passing
     best = float(passing.loc[lost, "delta_bic"].min())
@@ -88,7 +88,7 @@ def target_cv(design: Design, model: dict, candidate) -> float:
 
 def nested(specific: str, general: str) -> bool:
     """A specific effect the general smooth form can represent: same kind, same inputs."""
-    a, b = RECORDS[specific], RECORDS[general]
+    a, b = EFFECTS[specific], EFFECTS[general]
     return a.kind == b.kind and set(a.inputs) == set(b.inputs)
 
 

@@ -31,7 +31,7 @@ def effect_paths(inputs) -> dict[str, Path]:
     """Per input: the lost-motion effects that read it (a physical path to backlash) and the
     position effects that read it (a path to the measured position only).
 
-    Source: ``models.physics.effects.RECORDS`` (``kind``, ``inputs``, ``reading``). Operating
+    Source: ``models.physics.effects.EFFECTS`` (``kind``, ``inputs``, ``reading``). Operating
     hours act through wear of screw and nut (the twin's ``wear_um_per_1000h``) unless a record
     already lists them.
     """
@@ -48,7 +48,7 @@ def effect_paths(inputs) -> dict[str, Path]:
 
 def _records():
     """(name, kind, inputs, reading) of every effect record."""
-    from models.physics.effects import RECORDS
+    from models.physics.effects import EFFECTS
 
-    return [(r.name, r.kind, tuple(r.inputs), r.reading) for r in RECORDS.values()]
+    return [(r.name, r.kind, tuple(r.inputs), r.reading) for r in EFFECTS.values()]
 

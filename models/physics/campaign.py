@@ -229,9 +229,9 @@ def _check(config: Campaign, where) -> None:
 
     plan, fleet, env = config.plan, config.fleet, config.environment
     for name, params in config.effects.items():
-        if name not in effects.RECORDS:
+        if name not in effects.EFFECTS:
             bad(f"effects.{name}", f"unknown effect {name!r}; expected one of "
-                                   f"{', '.join(effects.RECORDS)}")
+                                   f"{', '.join(effects.EFFECTS)}")
         unknown = set(params) - set(effects.DEFAULTS[name])
         if unknown:
             bad(f"effects.{name}", f"unknown parameter {min(unknown)!r} of {name}; expected "

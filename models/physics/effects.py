@@ -2,7 +2,7 @@
 
 Every name of the vocabulary (``docs/data-contract.md``, section 4, except ``none``) has a pure
 function of arrays, in the manner of pvlib's ``temperature.py``: inputs with units in their
-names, parameters with physically plausible defaults, output in um. ``RECORDS`` holds, per
+names, parameters with physically plausible defaults, output in um. ``EFFECTS`` holds, per
 effect, everything the rest of the product needs to know about it (in the spirit of pvlib's
 ``TEMPERATURE_MODEL_PARAMETERS``): the function, its kind and unit, which parameter is the
 amplitude and its plausible range, the nuisance parameters and the grids they are searched
@@ -491,7 +491,7 @@ def _record(function, **fields) -> Effect:
 
 
 
-RECORDS: dict[str, Effect] = {r.name: r for r in (
+EFFECTS: dict[str, Effect] = {r.name: r for r in (
     _record(backlash, kind="lost_motion", unit="um", amplitude="b0_um", plausible=(0.0, 50.0),
             inputs=(), reference=BACKLASH_PAPER,
             separating_test="compare linear and pendulum tests, or repeat with the indicator "
@@ -581,13 +581,13 @@ RECORDS: dict[str, Effect] = {r.name: r for r in (
 )}
 
 # Derived views the twin reads.
-LOST_MOTION = tuple(name for name, r in RECORDS.items() if r.kind == "lost_motion")
-DEFAULTS = {name: dict(r.defaults) for name, r in RECORDS.items()}
+LOST_MOTION = tuple(name for name, r in EFFECTS.items() if r.kind == "lost_motion")
+DEFAULTS = {name: dict(r.defaults) for name, r in EFFECTS.items()}
 
 
 def contribution(name: str, position_mm, direction, conditions, **params) -> np.ndarray:
     """The named effect with its defaults overridden by ``params`` [um]."""
-    record = RECORDS[name]
+    record = EFFECTS[name]
     return np.asarray(record.function(position_mm, direction, conditions,
                                       **{**record.defaults, **params}), float)
 

@@ -54,7 +54,7 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
         A readings file, a store folder or a ``postgresql://`` store URL (``docs/store.md``).
     format : str
         ``"auto"`` (recognise the layout from the file) or a layout name of
-        ``features.readings.layouts.RECORDS`` (``schema.FORMATS``); a store takes ``"auto"``.
+        ``features.readings.layouts.LAYOUTS`` (``schema.FORMATS``); a store takes ``"auto"``.
     machine : str or list of str, optional
         Only the tests of these machines (a str is one machine id).
     axis : str or list of str, optional

@@ -133,7 +133,7 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     format : str, default 'auto'
         Input layout of a file.
     baseline : str or list of str, default 'backlash,lead_error_linear'
-        Effects of the simulation model (names of ``models.physics.effects.RECORDS``;
+        Effects of the simulation model (names of ``models.physics.effects.EFFECTS``;
         comma-separated text allowed).
     seed : int, default 0
         Seed of the bootstrap that checks each named effect is stable.
