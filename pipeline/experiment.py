@@ -343,7 +343,7 @@ def execute(experiment: Experiment, progress: Progress | None = None) -> Experim
         The first failing step's error, as one line naming the step. What that step wrote is
         removed, and so is every folder the experiment created that is left empty.
     """
-    from pipeline import tracking
+    from pipeline.tracking import runs as tracking
 
     outcome = ExperimentResult(experiment=experiment, tracking_uri=tracking.tracking_uri())
     before = snapshot(experiment)
@@ -369,8 +369,8 @@ def execute(experiment: Experiment, progress: Progress | None = None) -> Experim
 def _run_step(step: Step, experiment: Experiment) -> StepResult:
     """Call the step's workflow, write its result and log it; a failure removes what the
     step wrote and is re-raised as one line naming the step."""
-    from pipeline import tracking
     from pipeline.runner import run
+    from pipeline.tracking import runs as tracking
 
     mlflow = tracking.mlflow_module()
     where = f"step {step.index} ({step.job})"
@@ -449,7 +449,7 @@ def log_outputs(experiment: Experiment, before: dict[Path, tuple]) -> None:
 
 
 def _mlflow():
-    from pipeline import tracking
+    from pipeline.tracking import runs as tracking
 
     return tracking.mlflow_module()
 

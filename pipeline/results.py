@@ -1,7 +1,7 @@
 """Result objects: what a workflow returns to the CLI, an experiment or a Python user.
 
 A result holds frames, figures and notes; it knows which files it writes (``write``), what it
-logs to MLflow (``tracking_record``, logged by the one adapter ``pipeline.tracking.log_result``)
+logs to MLflow (``tracking_record``, logged by the one adapter ``pipeline.tracking.runs.log_result``)
 and its machine-readable form (``to_json``). It never prints: the CLI decides what to show.
 """
 

@@ -212,7 +212,7 @@ class _Tracked(_Untracked):
     def __enter__(self):
         import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
 
-        from pipeline import tracking
+        from pipeline.tracking import runs as tracking
         from pipeline.tracking.background import BackgroundRun
 
         self.logged, self._tracking, self._run = {}, tracking, None

@@ -132,7 +132,7 @@ def test_a_tracked_job_is_logged_nested_in_the_experiments_run(tmp_path, monkeyp
     the experiment's; an untracked job's is not logged."""
     import dataclasses
 
-    from pipeline import tracking
+    from pipeline.tracking import runs as tracking
 
     logged = []
     monkeypatch.setattr(tracking, "log_result", lambda result, **kw: logged.append(kw) or {})

@@ -15,8 +15,8 @@ import pytest
 import backlash as bl
 from features.readings.errors import BacklashWarning, InputError
 from models import persistence, registry
-from pipeline import tracking
 from pipeline.cli import main
+from pipeline.tracking import runs as tracking
 
 REPO = Path(__file__).resolve().parents[1]
 TWIN = REPO / "experiments" / "data" / "twin"

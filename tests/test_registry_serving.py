@@ -23,8 +23,8 @@ import pandas as pd
 import pytest
 
 import backlash as bl
-from pipeline import tracking
 from pipeline.tracking import model_registry
+from pipeline.tracking import runs as tracking
 
 NAME = model_registry.REGISTERED_NAME
 # a small fleet: 2 machines x 2 axes, 6 visits, one feed and dwell, 3 cycles (under a second)

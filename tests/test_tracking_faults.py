@@ -15,9 +15,9 @@ import pytest
 from mlflow.utils.validation import _validate_metric_name
 from test_drift import visit_readings
 
-from pipeline import tracking
 from pipeline.cli import main
 from pipeline.tracking import model_registry
+from pipeline.tracking import runs as tracking
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -52,7 +52,7 @@ def test_two_processes_create_a_fresh_store_at_once(tmp_path):
     env = {**os.environ, "MLFLOW_TRACKING_URI": uri}
     body = """
         import mlflow
-        from pipeline import tracking
+        from pipeline.tracking import runs as tracking
         # --- start
         with tracking.run("train", "concurrent"):
             mlflow.log_metric("x", 1.0)
@@ -75,7 +75,7 @@ def test_two_processes_create_a_fresh_postgres_store_at_once(postgres_url, tmp_p
     uri = create_database(postgres_url, "fresh_tracking")
     body = """
         import mlflow
-        from pipeline import tracking
+        from pipeline.tracking import runs as tracking
         # --- start
         with tracking.run("train", "concurrent"):
             mlflow.log_metric("x", 1.0)

@@ -8,7 +8,7 @@ import sys
 from pipeline.commands.parameters import add_parameters
 from pipeline.workflows.parameters import JSON_HELP
 
-REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.REGISTERED_NAME
+REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.runs.REGISTERED_NAME
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "train")

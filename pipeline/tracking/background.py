@@ -85,7 +85,7 @@ class BackgroundRun:
         self._started = True
         if self._pid is not None:
             return self._send({"run_name": run_name})
-        from pipeline import tracking
+        from pipeline.tracking import runs as tracking
 
         stack = contextlib.ExitStack()
         active = stack.enter_context(tracking.run(self._experiment, run_name))
@@ -254,7 +254,7 @@ def _reply_and_exit(outbox, body) -> None:
 
 
 def _serve(inbox, experiment: str, log, prepare) -> dict:
-    from pipeline import tracking
+    from pipeline.tracking import runs as tracking
 
     tracking.import_store()
     if prepare is not None:

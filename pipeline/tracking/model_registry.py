@@ -1,8 +1,8 @@
 """What MLflow logs of a trained predictor, as plain data: its estimator parameters, per-epoch
 history, model directory, signature, input example, the registered version's tags and the
 forecasting skill from a backtest (``model_record``), logged and registered as
-``backlash-predictor`` by ``pipeline.tracking.log_result``; the best model on a data set holds
-the registry alias ``champion`` (``pipeline.tracking.promote_if_best``).
+``backlash-predictor`` by ``pipeline.tracking.runs.log_result``; the best model on a data set holds
+the registry alias ``champion`` (``pipeline.tracking.runs.promote_if_best``).
 
 Version tags (``version_tags``): ``predictor``, ``target_kind``, ``data_sha256``,
 ``machines``, ``axes`` (``M1/X,M1/Y,...``, cut with a count), ``n_axes`` and
@@ -16,7 +16,7 @@ import json
 import math
 from pathlib import Path
 
-from pipeline.tracking import (
+from pipeline.tracking.runs import (
     CHAMPION,
     CHAMPION_LOCK,
     MODEL_FIGURES,
@@ -34,7 +34,7 @@ __all__ = ["CHAMPION", "CHAMPION_LOCK", "FIGURES", "REGISTERED_NAME", "REQUIREME
 
 
 def model_record(fit, model_dir: Path) -> dict:
-    """What ``pipeline.tracking.log_model`` logs of a fit saved in ``model_dir``, as plain JSON
+    """What ``pipeline.tracking.runs.log_model`` logs of a fit saved in ``model_dir``, as plain JSON
     data: another process that has neither the fit nor its libraries may log it
     (``pipeline.tracking.background``).
 

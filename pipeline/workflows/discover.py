@@ -108,7 +108,7 @@ class DiscoveryResult(Result):
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``discover``: baseline, effects named, the gap, the report."""
-        from pipeline.tracking import data_hash
+        from pipeline.tracking.runs import data_hash
 
         d = self.discovery
         return TrackingRecord(

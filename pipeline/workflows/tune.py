@@ -97,7 +97,7 @@ class TuneResult(Result):
         logged it while it ran."""
         if self.logged:
             return None
-        from pipeline.tracking import RunRecord
+        from pipeline.tracking.runs import RunRecord
 
         return RunRecord(experiment="tune", run_name=f"tune {self.params['study']}",
                          params={**self.params, **{f"best_{k}": v
@@ -107,7 +107,7 @@ class TuneResult(Result):
 
 def trial_record(study, trial) -> TrackingRecord:
     """What MLflow keeps of one finished Optuna trial."""
-    from pipeline.tracking import RunRecord
+    from pipeline.tracking.runs import RunRecord
 
     attrs = trial.user_attrs
     return RunRecord(
@@ -129,7 +129,7 @@ class TrialLogger:
 
     def __call__(self, study, trial) -> None:
         from models.tuning import STOP, stopped
-        from pipeline.tracking import log_child
+        from pipeline.tracking.runs import log_child
 
         log_child(self.experiment_id, self.parent_run_id, trial_record(study, trial))
         stopped(STOP)  # a SIGTERM arrived while this trial was being stored
@@ -150,7 +150,7 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
         Trials to run in total (shared among the workers).
     storage : str, optional
         Optuna storage URL (``sqlite:///FILE``, ``postgresql://USER@HOST/DB``); default
-        ``optuna.db`` in the tracking folder (``pipeline.tracking.study_storage``: the working
+        ``optuna.db`` in the tracking folder (``pipeline.tracking.runs.study_storage``: the working
         directory unless ``BACKLASH_TRACKING_DIR`` names another).
     study : str, optional
         Study name; a study that exists is continued (a note says so, with its trials).
@@ -167,7 +167,7 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     track : bool
         Log to MLflow while the search runs: the search's run first, then each trial as soon as
         it finishes (so a killed search keeps its finished trials), and end the runs of killed
-        searches as KILLED. Otherwise ``pipeline.tracking.log_result`` logs the result.
+        searches as KILLED. Otherwise ``pipeline.tracking.runs.log_result`` logs the result.
     progress : callable, optional
         ``progress(done, total, what)`` after each trial (one worker only).
 
@@ -176,8 +176,8 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     TuneResult
     """
     from models import tuning
-    from pipeline import tracking
     from pipeline.steps.model_data import model_data
+    from pipeline.tracking import runs as tracking
 
     check_params(PARAMETERS, {"data": data, "trials": trials, "storage": storage,
                               "study": study, "workers": workers, "folds": folds,
@@ -304,7 +304,7 @@ def open_study(name: str, storage: str, seed: int, heartbeat_s: int):
 def _close_killed_runs(study, stale: list[int]) -> list[str]:
     """The MLflow runs of the searches whose trials went stale, still RUNNING because their
     process was killed, are ended as KILLED."""
-    from pipeline import tracking
+    from pipeline.tracking import runs as tracking
 
     tags = {t.user_attrs.get("tag") for t in study.trials if t.number in stale} - {None}
     if not tags:
