@@ -167,7 +167,7 @@ def _one_line(text: str) -> str:
 
 def program() -> None:
     """The ``backlash`` executable: ``main`` plus what only a whole process may do."""
-    from pipeline.tracking.background import allow_fork
+    from pipeline.tracking import allow_fork
 
     allow_fork()
     code = main()

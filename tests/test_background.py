@@ -85,7 +85,7 @@ SCRIPT = """
 import json
 import sys
 from features.readings.errors import InputError
-from pipeline.tracking import background
+from pipeline.tracking import allow_fork, background
 
 def log(record):
     if record.get("fail") == "input":
@@ -94,7 +94,7 @@ def log(record):
         raise KeyError("oops")
     return {"seen": record["n"]}
 
-background.allow_fork()
+allow_fork()
 with background.BackgroundRun("child-test", log) as run:
     assert run._pid is not None, "expected a forked child"
     run.start("case " + sys.argv[1])

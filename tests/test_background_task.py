@@ -8,6 +8,7 @@ import os
 import pytest
 
 from features.readings.errors import InputError
+from pipeline import tracking
 from pipeline.tracking import background
 from pipeline.tracking.background import BackgroundTask
 
@@ -16,7 +17,7 @@ from pipeline.tracking.background import BackgroundTask
 def forking(request, monkeypatch):
     """Whether the task runs in a child: allowed here, and possible in this test process
     (another test may have left a thread running, and a process with threads never forks)."""
-    monkeypatch.setattr(background, "_allowed", request.param)
+    monkeypatch.setitem(tracking._fork, "allowed", request.param)
     return background._can_fork(mlflow_free=False)
 
 
@@ -44,7 +45,7 @@ def test_a_bug_is_raised_with_its_traceback(forking):
 
 
 def test_leaving_on_an_error_stops_the_child(tmp_path, monkeypatch):
-    monkeypatch.setattr(background, "_allowed", True)
+    monkeypatch.setitem(tracking._fork, "allowed", True)
     marker = tmp_path / "late"
 
     def work():

@@ -19,15 +19,18 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from features import standards
-from features import uncertainty as unc
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
 from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import StrOptions
 from pipeline.workflows.parameters import BUDGET, FORMAT, READINGS, Param, readings
+
+if TYPE_CHECKING:  # a budget is read when one is given: the module stays light for --help
+    from features.uncertainty import UncertaintyBudget
 
 # Keys of each test's object in the JSON form (``backlash iso --json``): a public contract.
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
@@ -37,7 +40,6 @@ PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R
 TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
 # Expanded uncertainties [um] added to the figures, the JSON objects and the table when a
 # budget is given, by the figure of ``features.uncertainty.expanded_parameters_um`` they take.
-UNCERTAINTY_KEYS = unc.TEST_UNCERTAINTY_KEYS
 
 
 # the iso job's table (pipeline.workflows.iso); report shares its data and standard
@@ -61,7 +63,8 @@ class IsoResult(Result):
         One row per test and target (``features.iso230.per_target``).
     figures : DataFrame
         One row per test: A, E, M, R, B and their directional parts
-        (``features.iso230.axis_figures``); with a budget also ``UNCERTAINTY_KEYS``, the
+        (``features.iso230.axis_figures``); with a budget also
+        ``features.uncertainty.TEST_UNCERTAINTY_KEYS``, the
         expanded uncertainties [um] of A, E, M, R and B.
     outliers : DataFrame
         The readings flagged as outliers (``features.iso230.outliers``), whether dropped or
@@ -82,20 +85,23 @@ class IsoResult(Result):
     figures: object
     outliers: object
     dropped: bool = False
-    budget: unc.UncertaintyBudget | None = None
+    budget: UncertaintyBudget | None = None
     standard: standards.Standard = standards.ISO230_2
     readings: object = None
     sources: dict = field(default_factory=dict)
 
     def _extra(self) -> list[str]:
         """The uncertainty columns the figures carry (none without a budget)."""
-        return [k for k in UNCERTAINTY_KEYS if k in self.figures.columns]
+        from features.uncertainty import TEST_UNCERTAINTY_KEYS
+
+        return [k for k in TEST_UNCERTAINTY_KEYS if k in self.figures.columns]
 
     def repr_items(self) -> dict[str, str]:
         return {"tests": str(len(self.figures)), **super().repr_items()}
 
     def to_json(self) -> list[dict]:
-        """One object per test with ``JSON_KEYS`` (and, with a budget, ``UNCERTAINTY_KEYS``)
+        """One object per test with ``JSON_KEYS`` (and, with a budget,
+        ``features.uncertainty.TEST_UNCERTAINTY_KEYS``)
         and its ``per_target`` rows (``PER_TARGET_KEYS``); NaN becomes None."""
         from features.readings.fileio import clean_nan
 
@@ -237,6 +243,8 @@ def iso(data, format: str = "auto", drop_outliers: bool = False,
     check_params(PARAMETERS, {"data": data, "format": format, "drop_outliers": drop_outliers,
                               "uncertainty": uncertainty, "standard": standard}, "iso")
     record = standards.standard(standard)
+    from features import uncertainty as unc
+
     budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     readings, sources = read_tests(data, format)
     flagged = iso230.outliers(readings)

@@ -36,18 +36,11 @@ from collections.abc import Callable
 from typing import Self
 
 from features.readings.errors import InputError
-
-_allowed = False  # set by the ``backlash`` program; library callers and tests stay in-process
-
-
-def allow_fork() -> None:
-    """Let runs started from now on use a child process (called by ``pipeline.cli.program``)."""
-    global _allowed
-    _allowed = True
+from pipeline.tracking import fork_allowed
 
 
 def _can_fork(mlflow_free: bool = True) -> bool:
-    return (_allowed and hasattr(os, "fork") and threading.active_count() == 1
+    return (fork_allowed() and hasattr(os, "fork") and threading.active_count() == 1
             and not (mlflow_free and "mlflow" in sys.modules))
 
 
