@@ -18,6 +18,7 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
 
     from features.readings.selection import FILTERS
     from pipeline.workflows import workflow
+    from pipeline.workflows.parameters import SELECTION_GROUP
 
     record = workflow(job)
     signature = inspect.signature(record.function).parameters
@@ -29,8 +30,8 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
         default = signature[name].default if name in signature else None
         default = None if default is inspect.Parameter.empty else default
         where.add_argument(*_names(name, param), **_keywords(name, param, default))
-        if param.reads_readings and "selection" not in groups:
-            group = _group(parser, groups, "test selection (a store or a file)")
+        if param.reads_readings and SELECTION_GROUP not in groups:
+            group = _group(parser, groups, SELECTION_GROUP)
             for f in FILTERS:
                 if f.name not in record.parameters:
                     group.add_argument(f"--{f.name}", metavar=f.metavar, help=f.help)
@@ -39,8 +40,6 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
 def _group(parser, groups: dict, title: str):
     if title not in groups:
         groups[title] = parser.add_argument_group(title)
-        if title.startswith("test selection"):
-            groups["selection"] = groups[title]
     return groups[title]
 
 

@@ -23,7 +23,15 @@ from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
 from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-from pipeline.workflows.parameters import BUDGET, FORMAT, PROGRESS, Param, comma_list, readings
+from pipeline.workflows.parameters import (
+    BUDGET,
+    FORMAT,
+    PROGRESS,
+    SELECTION_GROUP,
+    Param,
+    comma_list,
+    readings,
+)
 
 
 def controller_help() -> str:
@@ -47,7 +55,7 @@ PARAMETERS = {
                   "axis's tests of DATA or a wear map's axes"),
     "machine": Param((None, str, list, tuple), "only the tests of these machines, or their "
                      "axes of a wear map", metavar="ID[,ID...]", parse=comma_list,
-                     group="test selection (a store or a file)"),
+                     group=SELECTION_GROUP),
     "at_hours": Param((None, Interval(Real, 0, None, closed="left")), "wear map: forecast the "
                       "table for this reading of the axis's operating-hours counter (default: "
                       "the middle of the next maintenance interval)", metavar="H"),

@@ -133,6 +133,7 @@ def _format() -> Param:
 
 
 READINGS = (str, os.PathLike, "pandas.DataFrame")  # a file, a fleet store or a frame
+SELECTION_GROUP = "test selection (a store or a file)"  # the help section of the filters
 STORE_HELP = "; or a fleet store: a folder or a postgresql:// URL (backlash ingest)"
 
 
