@@ -155,12 +155,12 @@ def test_the_predictor_table_is_the_registry():
 def test_every_job_page_shows_its_parameter_table(job):
     """The table of options and Python names on a job's page is its parameter table, as
     the command line generates its options from it."""
-    from pipeline.workflows.parameters import parameters_table
+    from pipeline.steps.parameters import parameters_table
 
     table = parameters_table(job)
     text = (DOCS / f"{job}.md").read_text(encoding="utf-8")
     assert f"<!-- parameters -->\n{table}\n<!-- /parameters -->" in text, (
-        f"docs/{job}.md: paste pipeline.workflows.parameters.parameters_table({job!r})\n"
+        f"docs/{job}.md: paste pipeline.steps.parameters.parameters_table({job!r})\n"
         + table)
 
 

@@ -15,7 +15,7 @@ from features import iso230
 from features.readings import layouts, schema
 from features.readings.errors import BacklashWarning, InputError
 from pipeline.cli import build_parser, main
-from pipeline.workflows.parameters import readings
+from pipeline.steps.parameters import readings
 
 
 def small_table(cycles: int = 3) -> pd.DataFrame:

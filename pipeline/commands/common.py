@@ -47,7 +47,7 @@ def check_outputs(command: str, module, args) -> list[Path]:
 
 
 def _table(command: str) -> dict:
-    """A job's parameter table (``pipeline.workflows.parameters``); the experiment runner's
+    """A job's parameter table (``pipeline.steps.parameters``); the experiment runner's
     command has none."""
     from pipeline.workflows import NAMES, workflow
 

@@ -7,7 +7,7 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.parameters import JSON_HELP
+from pipeline.steps.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,4 +1,4 @@
-"""A job's options, generated from its parameter table (``pipeline.workflows.parameters``):
+"""A job's options, generated from its parameter table (``pipeline.steps.parameters``):
 the option's name, type, choices, default and help come from the table and the workflow's
 signature, so a parameter means the same on the command line as in Python."""
 
@@ -11,14 +11,14 @@ from pipeline.commands.options import count, finite_float, non_empty, seed, whol
 
 def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, ...] = ()) -> None:
     """The options of job ``job``, generated from its parameter table (``Workflow.parameters``,
-    ``pipeline.workflows.parameters``): one per parameter the command line gives, with the
+    ``pipeline.steps.parameters``): one per parameter the command line gives, with the
     workflow's own default; a job that reads readings also gets the test selection
     (``features.readings.selection.FILTERS``) it does not declare itself."""
     import inspect
 
     from features.readings.selection import FILTERS
+    from pipeline.steps.parameters import SELECTION_GROUP
     from pipeline.workflows import workflow
-    from pipeline.workflows.parameters import SELECTION_GROUP
 
     record = workflow(job)
     signature = inspect.signature(record.function).parameters

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.parameters import JSON_HELP
+from pipeline.steps.parameters import JSON_HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.parameters import JSON_HELP
+from pipeline.steps.parameters import JSON_HELP
 
 # Exit code when the check finds a problem it did not mend.
 PROBLEMS_EXIT = 1

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from pipeline.commands.parameters import add_parameters
-from pipeline.workflows.parameters import JSON_HELP
+from pipeline.steps.parameters import JSON_HELP
 
 REGISTERED_NAME = "backlash-predictor"  # pipeline.tracking.runs.REGISTERED_NAME
 

@@ -25,9 +25,9 @@ from features import standards
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
+from pipeline.steps.parameters import BUDGET, FORMAT, READINGS, Param, readings
 from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.parameters import BUDGET, FORMAT, READINGS, Param, readings
 
 if TYPE_CHECKING:  # a budget is read when one is given: the module stays light for --help
     from features.uncertainty import UncertaintyBudget

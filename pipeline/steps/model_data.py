@@ -1,7 +1,7 @@
 """A model job's data: readings -> checked feature table, noise floor, truth table.
 
 ``train``, ``compare`` (and its backtest) and ``tune`` read their data the same way, with the
-same parameters (``pipeline.workflows.parameters``: ``TARGET``, ``FEATURES``, ``TRUTH``...).
+same parameters (``pipeline.steps.parameters``: ``TARGET``, ``FEATURES``, ``TRUTH``...).
 """
 
 from __future__ import annotations

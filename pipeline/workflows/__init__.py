@@ -229,7 +229,7 @@ class Workflow:
     @property
     def parameters(self) -> Mapping:
         """The job's parameter table (``PARAMETERS`` of its module:
-        ``pipeline.workflows.parameters``): the runner checks calls against it, the CLI
+        ``pipeline.steps.parameters``): the runner checks calls against it, the CLI
         generates its options from it."""
         return self.module.PARAMETERS
 

@@ -21,9 +21,9 @@ from numbers import Real
 from pathlib import Path
 
 from pipeline.results import Result
+from pipeline.steps.parameters import Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import Param
 
 PARAMETERS = {
     "data": Param((str, os.PathLike, "pandas.DataFrame"), "circular-test table, CSV or Parquet "

@@ -15,9 +15,7 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, Progress, note, report
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import check_params, each_once
-from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
     RANDOM_SEED,
@@ -29,6 +27,8 @@ from pipeline.workflows.parameters import (
     comma_list,
     readings,
 )
+from pipeline.workflows import check_params, each_once
+from pipeline.workflows.constraints import StrOptions
 
 if TYPE_CHECKING:
     import pandas as pd

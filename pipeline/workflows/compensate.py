@@ -21,9 +21,7 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
-from pipeline.workflows import check_params, readings_of
-from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     BUDGET,
     FORMAT,
     PROGRESS,
@@ -32,6 +30,8 @@ from pipeline.workflows.parameters import (
     comma_list,
     readings,
 )
+from pipeline.workflows import check_params, readings_of
+from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
 
 def controller_help() -> str:

@@ -18,9 +18,9 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError
 from pipeline.results import Result
+from pipeline.steps.parameters import FORMAT, Param, python_only, readings, scale_offset
 from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.parameters import FORMAT, Param, python_only, readings, scale_offset
 
 _RAW = "a raw log (--format camonitor)"  # the help section of a camonitor log's options
 # convert's table; read, validate and write check their parameters (path, source) in it too

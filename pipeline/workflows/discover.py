@@ -14,8 +14,8 @@ from pathlib import Path
 
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.parameters import FORMAT, SEED, Param, readings
 from pipeline.workflows import check_params, readings_of, source_of
-from pipeline.workflows.parameters import FORMAT, SEED, Param, readings
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 

@@ -15,8 +15,7 @@ from pathlib import Path
 from features import uncertainty as unc
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import check_params, readings_of, source_of
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     ALPHA,
     AS_OF,
     BUDGET,
@@ -30,6 +29,7 @@ from pipeline.workflows.parameters import (
     Param,
     readings,
 )
+from pipeline.workflows import check_params, readings_of, source_of
 
 PARAMETERS = {
     "data": readings("readings with several visits (visit, started_at)"),

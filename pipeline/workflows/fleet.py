@@ -40,9 +40,7 @@ from pathlib import Path
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.workflows import check_params, readings_of, source_of
-from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     ALPHA,
     AS_OF,
     FORMAT,
@@ -55,6 +53,8 @@ from pipeline.workflows.parameters import (
     python_only,
     readings,
 )
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.constraints import Interval
 
 DEFAULT_INTERVAL_DAYS = 90.0
 # The forecast is drawn one visit interval ahead, further up to the crossing date but never

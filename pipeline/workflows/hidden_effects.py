@@ -16,9 +16,9 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.parameters import PROGRESS, Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import HasMethods, Interval
-from pipeline.workflows.parameters import PROGRESS, Param
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "experiments" / "hidden_effect_scenarios.toml"
 FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "score": "score.json"}

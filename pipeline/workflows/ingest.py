@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
+from pipeline.steps.parameters import FORMAT, READINGS, Param, readings
 from pipeline.workflows import check_params, readings_of
-from pipeline.workflows.parameters import FORMAT, READINGS, Param, readings
 
 PARAMETERS = {
     "files": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),

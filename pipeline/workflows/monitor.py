@@ -24,9 +24,9 @@ from pathlib import Path
 from features.readings.errors import InputError, note
 from pipeline.engines import ENGINES
 from pipeline.results import Result, axis_alerts
+from pipeline.steps.parameters import PROGRESS, Param, python_only
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
-from pipeline.workflows.parameters import PROGRESS, Param, python_only
 
 _RAW = "raw controller logs (--log-format camonitor or halsampler)"
 _POSITIVE = Interval(Real, 0, None, closed="neither")

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, note
 from models.registry import TrainedModel
 from pipeline.results import Result
+from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only, readings
 from pipeline.workflows import check_params, readings_of, source_of
-from pipeline.workflows.parameters import FORMAT, READINGS, Param, python_only, readings
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -16,9 +16,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import check_params, readings_of, source_of
-from pipeline.workflows.constraints import Interval, StrOptions
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
     MODEL,
@@ -27,6 +25,8 @@ from pipeline.workflows.parameters import (
     Param,
     readings,
 )
+from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows.constraints import Interval, StrOptions
 
 PARAMETERS = {
     "data": readings(),

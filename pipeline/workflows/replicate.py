@@ -15,9 +15,9 @@ from pathlib import Path
 
 from features.readings.errors import Progress
 from pipeline.results import Result
+from pipeline.steps.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
 from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
 
 PARAMETERS = {
     "data": readings("readings file with paired linear and pendulum tests"),

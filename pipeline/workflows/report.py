@@ -23,8 +23,8 @@ from features import uncertainty as unc
 from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
 from pipeline.steps import iso as iso_workflow
+from pipeline.steps.parameters import BUDGET, FORMAT, Param
 from pipeline.workflows import check_params
-from pipeline.workflows.parameters import BUDGET, FORMAT, Param
 
 PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
     "data": iso_workflow.PARAMETERS["data"],

@@ -16,9 +16,9 @@ from pathlib import Path
 from features.readings.errors import InputError
 from models.physics import PRESETS
 from pipeline.results import Result
+from pipeline.steps.parameters import SEED, Param, python_only
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import SEED, Param, python_only
 
 PARAMETERS = {
     "preset": Param((str, None), f"shipped campaign: {', '.join(PRESETS)} (default paper: the "

@@ -17,8 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.results import Result
+from pipeline.steps.parameters import STORE, Param
 from pipeline.workflows import check_params
-from pipeline.workflows.parameters import STORE, Param
 
 PARAMETERS = {
     "store": STORE,

@@ -16,8 +16,7 @@ from pathlib import Path
 from features.readings.errors import InputError, note
 from models import registry
 from pipeline.results import Result
-from pipeline.workflows import check_params
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     BUDGET,
     FEATURES,
     FORMAT,
@@ -28,6 +27,7 @@ from pipeline.workflows.parameters import (
     Param,
     readings,
 )
+from pipeline.workflows import check_params
 
 PARAMETERS = {
     "data": readings(),

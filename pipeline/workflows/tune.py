@@ -15,9 +15,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
-from pipeline.workflows import check_params
-from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import (
+from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
     RANDOM_SEED,
@@ -26,6 +24,8 @@ from pipeline.workflows.parameters import (
     python_only,
     readings,
 )
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval
 
 DEFAULT_STUDY = "backlash-network"  # the default study name: this, then the data's digest
 _COUNT = Interval(Integral, 1, None, closed="left")

@@ -20,9 +20,9 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from pipeline.results import Result
+from pipeline.steps.parameters import Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import StrOptions
-from pipeline.workflows.parameters import Param
 
 PARAMETERS = {
     "budget": Param((str, os.PathLike, dict, unc.UncertaintyBudget),

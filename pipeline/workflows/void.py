@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 from features.readings.errors import InputError, note
 from pipeline.results import Result
+from pipeline.steps.parameters import STORE, Param
 from pipeline.workflows import check_params
-from pipeline.workflows.parameters import STORE, Param
 
 PARAMETERS = {
     "store": STORE,

@@ -21,9 +21,9 @@ from numbers import Integral, Real
 from pathlib import Path
 
 from pipeline.results import Result
+from pipeline.steps.parameters import SEED, Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
-from pipeline.workflows.parameters import SEED, Param
 
 # The seed paper's Table 1 [um]: the extreme deviation before and after compensation
 PAPER_TABLE1 = {
