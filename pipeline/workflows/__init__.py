@@ -278,7 +278,7 @@ WORKFLOWS = (
              'Train every predictor (network, physics baselines, comparators) on one split; compare.',
              inputs=('data', 'truth'), tracked=True),
     Workflow('tune',
-             'Tune the network (hidden sizes, activation, trainer, regularisation) by cross- '
+             'Tune the network (hidden sizes, activation, trainer, regularisation) by cross-'
              'validation with Optuna.',
              inputs=('data',), tracked=True),
     Workflow('rank',
