@@ -124,3 +124,21 @@ def test_the_axis_page_says_which_points_the_forecast_used(case, tmp_path):
     assert "Trend and forecast from the laser visits and the trace days" in x_page
     assert "day(s) in common), weighted by their uncertainty" in x_page
     assert "Trend and forecast from the laser visits." in y_page
+
+
+def test_drift_leaves_out_trace_days_sharing_too_few_days_with_the_laser(case):
+    """One rule for drift and the fleet: the axis whose traces share 2 days with the laser
+    keeps the laser's series in ``drift --evidence laser,trace`` too, with the note; the axis
+    sharing more gets its trace days."""
+    store, as_of, threshold, _ = case
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        both = bl.drift(store, as_of=as_of, evidence="laser,trace", track=False).to_json()
+        laser = bl.drift(store, as_of=as_of, track=False).to_json()
+    notes = [str(w.message) for w in caught]
+    series = {s["axis"]: s for s in both["series"]}
+    plain = {s["axis"]: s for s in laser["series"]}
+    assert set(series["Y"].get("source", ["laser"])) == {"laser"}
+    assert set(series["X"]["source"]) == {"laser", "trace"}
+    assert series["Y"]["backlash_um"] == plain["Y"]["backlash_um"]
+    assert any("M1 axis Y" in n and "share 2 day(s)" in n for n in notes), notes

@@ -16,9 +16,9 @@ import pandas as pd
 from features.readings.errors import InputError
 from models.evidence import EVIDENCE_COLUMNS, OFFSET_WINDOW_DAYS, SOURCES, offsets
 
-# Days a source must share with the laser before the fleet's forecast leans on it: fewer
-# pairs give an offset whose scatter (the Birge ratio) cannot be judged.
-MIN_FORECAST_DAYS = 3
+# Days a source must share with the laser before a series (drift's, the fleet's forecast)
+# leans on it: fewer pairs give an offset whose scatter (the Birge ratio) cannot be judged.
+MIN_SHARED_DAYS = 3
 # Per source: its value and uncertainty keys in the records and in ``fleet --json``.
 KEYS = {"trace": ("lost_motion_um", "lost_motion_u_um"),
         "ballbar": ("backlash_um", "backlash_u_um")}
@@ -56,6 +56,13 @@ def laser_frame(visits: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"date": visits["date"].to_numpy(),
                          "value_um": visits["backlash_um"].to_numpy(float),
                          "u_um": visits["backlash_u_um"].to_numpy(float)})
+
+
+def few_days_note(key: tuple, source: str, days: int, min_days: int = MIN_SHARED_DAYS) -> str:
+    """The note of a machine axis whose ``source`` shares too few days with its laser visits
+    for its series to lean on it."""
+    return (f"{key[0]} axis {key[1]}: its {source} days share {days} day(s) with its laser "
+            f"visits, fewer than {min_days}: its series uses the laser visits alone")
 
 
 def axis_offsets(visits: pd.DataFrame, evidence: pd.DataFrame) -> tuple[dict, list[str]]:
@@ -114,14 +121,14 @@ def read_evidence(store) -> dict:
 
 def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=None,
                   coverage_factor: float | None = None,
-                  min_days: int = 1) -> tuple[pd.DataFrame, dict, list]:
+                  min_days: int = MIN_SHARED_DAYS) -> tuple[pd.DataFrame, dict, list]:
     """The laser visits of every machine axis with the points of the other ``sources``
     shifted onto the laser's definition (``models.evidence.combined``), the offsets per
     machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
     a point of another source gets ``backlash_U_um`` = k u and ``backlash_u_visit_um`` = u
     (all of its uncertainty changes from day to day). A source sharing fewer than
-    ``min_days`` days with the laser stays out of the axis's series; its offset is still
-    returned."""
+    ``min_days`` days with the laser stays out of the axis's series, with a note; its offset
+    is still returned."""
     from features.visits import SERIES_KEYS
     from models.evidence import combined
 
@@ -130,10 +137,12 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
         key = tuple(map(str, key))
         evidence = evidence_frame(records, key, as_of)
         found, more = axis_offsets(group, evidence)
-        found_all[key], notes = found, notes + more
+        few = {s: o["days_in_common"] for s, o in found.items()
+               if o is not None and s in sources and o["days_in_common"] < min_days}
+        notes += more + [few_days_note(key, s, n, min_days) for s, n in few.items()]
+        found_all[key] = found
         frames.append(combined(group, evidence, {
-            s: o for s, o in found.items() if o is not None and o["days_in_common"] >= min_days},
-            sources))
+            s: o for s, o in found.items() if o is not None and s not in few}, sources))
     out = pd.concat(frames, ignore_index=True)
     if coverage_factor is not None:
         other = out["source"] != "laser"

@@ -139,7 +139,7 @@ class AxisView:
         The axis's voided tests in a store (``visit``, ``test_id``, ``at``, ``user_name``,
         ``reason``: ``backlash void``); no reader reads them.
     analysis : models.drift.DriftSeries or None
-        With trace days in a store sharing ``MIN_FORECAST_DAYS`` days with the laser: the
+        With trace days in a store sharing ``MIN_SHARED_DAYS`` days with the laser: the
         analysis of the laser visits with the trace days shifted onto the laser's definition
         (``trace_analyses``), which the trend, change points, crossing, alerts, next visit and
         forecast come from; None when they come from the laser visits alone (``series``).
@@ -474,7 +474,7 @@ def store_records(data) -> dict:
 
 def trace_analyses(visits, records: dict, as_of: dt.date, **options) -> tuple[dict, list]:
     """The drift analysis (``models.drift.analyse_visits`` with ``options``) of each machine
-    axis whose store holds trace days sharing ``MIN_FORECAST_DAYS`` days or more with its laser
+    axis whose store holds trace days sharing ``MIN_SHARED_DAYS`` days or more with its laser
     visits: the laser visits with the trace days shifted onto the laser's definition and
     weighted by their uncertainty, as ``drift --evidence laser,trace``
     (``pipeline.steps.evidence.with_evidence``). Returns {(machine_id, axis): DriftSeries}
@@ -482,16 +482,13 @@ def trace_analyses(visits, records: dict, as_of: dt.date, **options) -> tuple[di
     if not records.get("trace"):
         return {}, []
     from models.drift import analyse_visits
-    from pipeline.steps.evidence import MIN_FORECAST_DAYS, with_evidence
+    from pipeline.steps.evidence import MIN_SHARED_DAYS, few_days_note, with_evidence
 
-    joined, found, _ = with_evidence(visits, records, ("laser", "trace"), as_of,
-                                     min_days=MIN_FORECAST_DAYS)
+    joined, found, _ = with_evidence(visits, records, ("laser", "trace"), as_of)
     shared = {key: off["trace"]["days_in_common"] for key, off in found.items()
               if off.get("trace") is not None}
-    used = {key for key, n in shared.items() if n >= MIN_FORECAST_DAYS}
-    notes = [f"{m} axis {a}: its trace days share {n} day(s) with its laser visits, fewer "
-             f"than {MIN_FORECAST_DAYS}: its forecast uses the laser visits alone"
-             for (m, a), n in shared.items() if n < MIN_FORECAST_DAYS]
+    used = {key for key, n in shared.items() if n >= MIN_SHARED_DAYS}
+    notes = [few_days_note(key, "trace", n) for key, n in shared.items() if n < MIN_SHARED_DAYS]
     series = analyse_visits(joined, min_visits=1, **options) if used else []
     return {(s.machine_id, s.axis): s for s in series if (s.machine_id, s.axis) in used}, notes
 
