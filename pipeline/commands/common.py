@@ -51,8 +51,7 @@ def _table(command: str) -> dict:
     command has none."""
     from pipeline.workflows import NAMES, workflow
 
-    table = workflow(command).parameters if command in NAMES else {}
-    return {name: p for name, p in table.items() if hasattr(p, "output")}
+    return dict(workflow(command).parameters) if command in NAMES else {}
 
 
 def option_names(command: str, module) -> dict:

@@ -33,7 +33,7 @@ def given(job: str, args) -> dict:
 
     params = {}
     for name, param in workflow(job).parameters.items():
-        if getattr(param, "on_cli", False) and hasattr(args, name):
+        if param.on_cli and hasattr(args, name):
             value = getattr(args, name)
             params[name] = one_or_all(value) if param.nargs and value is not None else value
     return params
