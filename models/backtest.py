@@ -9,8 +9,9 @@ the last adjustment before the origin (``models.wear.wear_map.latest_epoch``: a 
 hours, an ``event``, or, given the per-visit backlash series, a downward change point that the
 drift statistics find in the visits up to the origin, so nothing is learned from the future),
 and an origin whose next visit is itself a known adjustment (hours or event) is skipped
-(nothing before it says where the new clock starts). Predictors with ``predict_interval`` also report how often their 95 % interval covers
-the measured value and the truth.
+(nothing before it says where the new clock starts). Predictors with ``predict_interval`` also
+report how often their 95 % interval covers the measured value (``cover95_measured_pct``) and,
+on twin data, the true backlash (``cover95_true_pct``).
 """
 
 from __future__ import annotations
@@ -60,8 +61,9 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
              visits: pd.DataFrame | None = None,
              params: dict | None = None) -> pd.DataFrame:
     """One row per predictor and origin: ``model, origin, forecast_visit, n_train, n_test,
-    rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and ``coverage_pct`` /
-    ``truth_coverage_pct`` where known. ``progress(done, total, what)`` hears of each origin.
+    rmse_um, mae_um`` (against the measured target), ``truth_rmse_um`` and the share [%] of the
+    points whose 95 % interval holds the measured value (``cover95_measured_pct``) and the true
+    one (``cover95_true_pct``) where known. ``progress(done, total, what)`` hears of each origin.
     ``visits``: the per-visit backlash (``features.visits.visit_backlash``) whose downward
     change points up to each origin also restart the wear clock. ``params``: predictor name ->
     parameters every origin's fit takes (a trained model's choices, so the backtest scores
@@ -100,11 +102,12 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
                    **{f"{m}": v for m, v in evaluation.scores(y[test], predicted).items()
                       if m in ("rmse_um", "mae_um")}}
             if low is not None:
-                row["coverage_pct"] = float(100 * np.mean((low <= y[test]) & (y[test] <= high)))
+                row["cover95_measured_pct"] = float(100 * np.mean((low <= y[test])
+                                                                  & (y[test] <= high)))
             if true is not None and np.isfinite(true[test]).all():
                 row["truth_rmse_um"] = float(np.sqrt(np.mean((predicted - true[test]) ** 2)))
                 if low is not None:
-                    row["truth_coverage_pct"] = float(100 * np.mean(
+                    row["cover95_true_pct"] = float(100 * np.mean(
                         (low <= true[test]) & (true[test] <= high)))
             rows.append(row)
     report(progress, len(steps), len(steps), "origins")
@@ -129,7 +132,8 @@ def _forecast(table, name, train, test, random_state, params):
 
 def summary(results: pd.DataFrame) -> pd.DataFrame:
     """Per predictor, over all origins: RMSE pooled over points (measured and true), MAE,
-    interval coverage, and the skill against persistence (1 - RMSE / RMSE of persistence)."""
+    the 95 % intervals' coverage of the measured and the true values (``cover95_measured_pct``,
+    ``cover95_true_pct``), and the skill against persistence (1 - RMSE / RMSE of persistence)."""
     def pooled(frame, column):
         return float(np.sqrt(np.sum(frame[column] ** 2 * frame["n_test"]) / frame["n_test"].sum()))
 
@@ -139,7 +143,7 @@ def summary(results: pd.DataFrame) -> pd.DataFrame:
                "mae_um": float(np.average(frame["mae_um"], weights=frame["n_test"]))}
         if "truth_rmse_um" in frame and frame["truth_rmse_um"].notna().all():
             row["truth_rmse_um"] = pooled(frame, "truth_rmse_um")
-        for column in ("coverage_pct", "truth_coverage_pct"):
+        for column in ("cover95_measured_pct", "cover95_true_pct"):
             if column in frame and frame[column].notna().all():
                 row[column] = float(np.average(frame[column], weights=frame["n_test"]))
         rows.append(row)

@@ -57,3 +57,6 @@ def print_backtest(result, file) -> None:
           "earlier origin", file=file)
     print(result.summary[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"),
           file=file)
+    if any(c.startswith("cover95_") for c in cols):
+        print("cover95_measured_pct, cover95_true_pct: % of the forecast points whose 95 % "
+              "interval holds the measured value, the true value", file=file)

@@ -34,8 +34,10 @@ if TYPE_CHECKING:
     import pandas as pd
 
 COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "truth_rmse_um")
-BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "coverage_pct",
-                    "truth_coverage_pct", "skill_vs_persistence")
+# cover95_*_pct: the share of the forecast points whose 95 % interval holds the measured value
+# and, on twin data, the true one
+BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "cover95_measured_pct",
+                    "cover95_true_pct", "skill_vs_persistence")
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,
