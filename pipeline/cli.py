@@ -24,6 +24,7 @@ import contextlib
 import gc
 import importlib
 import os
+import re
 import sys
 import warnings
 
@@ -33,9 +34,20 @@ from pipeline.commands import command_of
 from pipeline.commands.common import check_outputs, remove_created
 from pipeline.tracking import TRACKING_DIR
 
+# A value that starts with a minus and is a number, or a comma list of numbers
+# (``--reference-scale -1.0036,50.3``: ecmc's gear ratios are negative). argparse's own rule
+# takes only a lone number as a value and reads anything else after a minus as an option.
+_NUMBER = r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+NEGATIVE_VALUE = re.compile(rf"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,{_NUMBER})*$")
+
 
 class Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (no usage block) and exit code 2."""
+    """argparse with a one-line error (no usage block) and exit code 2, that takes negative
+    numbers and comma lists of numbers as values (no option of ours looks like a number)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")

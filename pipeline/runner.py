@@ -42,7 +42,7 @@ from features.readings.selection import NAMES as SELECTION
 
 TRACK = True  # the one default of every entry point
 READINGS = ("data", "files")  # the parameter of a workflow that takes the readings
-RAW = ("channels", "reference_scale", "unit")  # a raw log's reader options (convert)
+RAW = ("channels", "reference_scale", "unit")  # a raw log's reader options (steps.RAW_LOG)
 
 
 def _record_compensation(store, result):
@@ -112,7 +112,7 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
 def _bound(record, declared, args: tuple, params: dict) -> dict:
     """The keyword parameters of the call, bound to the workflow's signature: an unknown
     name is an error naming it (nothing is skipped)."""
-    known = set(declared) | set(SELECTION)
+    known = set(declared) | set(SELECTION) | (set(RAW) & set(record.parameters))
     for name in params:
         if name not in known:
             raise InputError(f"is not a parameter of {record.name}; expected one of "
@@ -141,15 +141,18 @@ def _selected(job: str, declared, params: dict) -> dict:
     """``machine``, ``axis``, ``since``, ``until`` not taken by the workflow itself: its
     ``data`` read with only the selected tests (``pipeline.workflows.convert.read``)."""
     chosen = {k: params.pop(k) for k in SELECTION if k in params and k not in declared}
-    if not chosen:
+    # a raw log's reader options the workflow does not take itself (iso's, report's)
+    raw = {k: params.pop(k) for k in RAW if k in params and k not in declared}
+    raw = {k: v for k, v in raw.items() if v is not None}
+    if not chosen and not raw:
         return params
     name = next((n for n in READINGS if n in declared), None)
     if name is None or params.get(name) is None:
         raise InputError(f"selects tests of readings; {job} reads none",
-                         parameter=next(iter(chosen)))
+                         parameter=next(iter(chosen or raw)))
     data, fmt = params[name], params.get("format", "auto")
-    # a raw log's reader options (convert's) go to the reader: the workflow gets the frame
-    raw = {k: params.pop(k) for k in RAW if params.get(k) is not None}
+    # the reader takes the options (convert's own too): the workflow gets the frame
+    raw |= {k: params.pop(k) for k in RAW if params.get(k) is not None}
     if isinstance(data, (list, tuple)):
         params[name] = [_select(one, fmt, chosen, raw) for one in data]
     else:

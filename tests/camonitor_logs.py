@@ -10,11 +10,18 @@ PV's first line is its value at connection, stamped with its last change before 
 started (so older than the lines above it), as camonitor does. Some reference lines carry
 alarm fields (``HIGH MINOR``), as an encoder near a soft limit does.
 
-ecmc's linear ISO 230-2 cycle: for each cycle, park below the first target, test numbers
-``1cpp`` while approaching targets 1..N forward, park above the last, ``2cpp`` for targets
-N..1 backward; the test number is 0 between tests. The reading of an approach is the
-reference logged last before the test number changes: the writer makes that line hold the
-given value exactly.
+ecmc's linear ISO 230-2 cycle, as ecmc's test scripts run it and its extraction
+(``ecmcGetISO230DataFromCAFile.bash``, ``ecmcGetDataBeforeTrigg.bash``) reads it: for each
+cycle, park below the first target, approach targets 1..N forward, park above the last,
+approach N..1 backward. The test number ``d c 0 p`` (1101: forward, cycle 1, position 1) is
+set once the axis has settled at the target, then the axis moves on: the reading of an
+approach is the reference logged last, in the file's order, before the line where the test
+number takes its value, and the writer makes that line hold the given value exactly. The
+test number is a soft PV stamped by the host a few milliseconds after the controller's
+cycle, so the first samples of the next move, stamped by the controller, follow it in the
+file with earlier times (a reader sorting by time takes a sample of the move). After the
+run the axis may move again while the set point still holds the last target (ecmc's
+resolver test, ``tail_mm``).
 """
 
 from __future__ import annotations
@@ -45,33 +52,46 @@ def read_dat(path) -> tuple[dict, dict, dict]:
 
 class _Log:
     def __init__(self):
-        self.lines = []  # (seconds, order, text)
+        self.lines = []  # (file position, order, text)
 
-    def add(self, pv: str, seconds: float, value: str, alarm: str = "") -> None:
-        stamp = START + dt.timedelta(seconds=round(seconds, 6))
-        text = f"{pv:<30} {stamp:%Y-%m-%d %H:%M:%S.%f} {value}  {alarm}".rstrip() + "  "
+    def add(self, pv: str, seconds: float, value: str, alarm: str = "",
+            stamp: float | None = None) -> None:
+        """A line at file position ``seconds``, stamped ``stamp`` (default ``seconds``)."""
+        when = START + dt.timedelta(seconds=round(seconds if stamp is None else stamp, 6))
+        text = f"{pv:<30} {when:%Y-%m-%d %H:%M:%S.%f} {value}  {alarm}".rstrip() + "  "
         self.lines.append((seconds, len(self.lines), text))
 
     def text(self) -> str:
         return "\n".join(t for _, _, t in sorted(self.lines)) + "\n"
 
 
+# The host stamps the test number this long after the controller's cycle it follows [s].
+HOST_DELAY_S = 0.006
+
+
 def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 1.0,
               offset: float = 0.0, speed: float = 5.0, dwell: float = 2.0,
               overrun: float = 2.0, seed: int = 0, test_numbers: bool = True,
-              alarms: bool = True, rate: float = RATE_HZ) -> Path:
+              alarms: bool = True, rate: float = RATE_HZ, tail_mm: float = 0.0,
+              invalid: int = 0) -> Path:
     """Write the camonitor log of a linear ISO 230-2 run whose approach readings are
     ``readings[("FWD"|"BWD", i, j)]`` [mm, axis coordinates]; the reference PV logs
     ``(reading - offset) / scale`` (raw units), so a reader must map it back with ``scale`` and
     ``offset``. ``speed`` [mm/s], ``dwell`` [s] at each target, ``rate`` [Hz] of the encoder
-    and the set point."""
+    and the set point; ``tail_mm``: after the last approach the axis moves this far and back
+    with the set point held (ecmc's resolver test); ``invalid``: this many reference samples
+    during the dwells are dropouts logged with severity INVALID and a wild value."""
     rng = np.random.default_rng(seed)
     ref_pv, test_pv, set_pv = pvs["REF_PV"], pvs["TEST_PV"], pvs["TGT_SET_PV"]
     order = sorted(targets)
     cycles = sorted({j for _, _, j in readings})
-    log, t = _Log(), 1.0
+    width_p, width_c = len(str(max(order))), len(str(max(cycles)))
+    log = _Log()
     lo, hi = targets[order[0]] - overrun, targets[order[-1]] + overrun
     position = lo
+    dropouts = set(rng.choice(len(readings) * int(dwell * rate), invalid, replace=False)
+                   if invalid else [])
+    settled = 0
 
     def raw(x):
         return (x - offset) / scale
@@ -82,40 +102,53 @@ def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 
         log.add(ref_pv, seconds, f"{value:.10f}" if exact else f"{value:.8f}", alarm)
 
     def move(to, seconds):
+        """The first step in the cycle ``seconds`` (right after a test number), then one per
+        sample; returns the time of the last."""
         nonlocal position
         steps = max(int(abs(to - position) / speed * rate), 1)
         for k in range(1, steps + 1):
             x = position + (to - position) * k / steps
-            seconds += 1 / rate
             log.add(set_pv, seconds, f"{x:.6g}")
             ref(seconds + 0.002, x + rng.normal(0, 0.002))
+            seconds += 1 / rate
         position = to
-        return seconds
+        return seconds - 1 / rate
 
     def settle(value, seconds):
+        nonlocal settled
         for _ in range(int(dwell * rate) - 1):
             seconds += 1 / rate
-            ref(seconds + 0.002, value + rng.normal(0, 2e-4))
+            if settled in dropouts:  # a lost frame: the record holds no measurement
+                log.add(ref_pv, seconds + 0.002, f"{raw(value) * 1e3 + 7.7:.8f}", "READ INVALID")
+            else:
+                ref(seconds + 0.002, value + rng.normal(0, 2e-4))
+            settled += 1
         seconds += 1 / rate
-        ref(seconds + 0.002, value, exact=True)  # the last reference before the change
-        return seconds + 0.005
+        ref(seconds + 0.002, value, exact=True)  # the last reference before the test number
+        return seconds + 1 / rate
 
     # connection values, stamped with their last change before the log starts
     log.add(set_pv, -30.0, f"{position:.6g}")
     if test_numbers:
         log.add(test_pv, -40.0, "0")
     ref(0.01, position)
-    t = move(lo, t)
+    t = move(lo, 1.0) + 0.5
+    last = (cycles[-1], "BWD")
     for j in cycles:
         for way, sequence, park in (("FWD", order, hi), ("BWD", order[::-1], lo)):
             for i in sequence:
-                if test_numbers:
-                    log.add(test_pv, t, f"{(1 if way == 'FWD' else 2) * 1000 + j * 100 + i}")
-                t = move(targets[i], t + 0.05)
+                t = move(targets[i], t)
                 t = settle(readings[(way, i, j)], t)
-            if test_numbers:
-                log.add(test_pv, t, "0")
-            t = move(park, t + 0.05) + 0.5
+                if test_numbers:
+                    code = f"{1 if way == 'FWD' else 2}{j:0{width_c}d}0{i:0{width_p}d}"
+                    log.add(test_pv, t, code, stamp=t + HOST_DELAY_S)
+            if (j, way) != last or not tail_mm:
+                t = move(park, t) + 0.5
+    if tail_mm:  # the axis moves with the set point held: no stop, no reading
+        here = readings[("BWD", order[0], cycles[-1])]
+        for k in range(1, int(4 * rate)):
+            x = here + tail_mm * np.sin(np.pi * k / (4 * rate))
+            ref(t + k / rate + 0.002, x)
     Path(path).write_text(log.text())
     return Path(path)
 

@@ -216,11 +216,11 @@ def pendulum_log(path, axis_pv: str = "MC:Y", scale: float = 1.0):
     for j in (1, 2):
         for i, x in ((1, 10.0 * scale), (2, 20.0 * scale)):
             for d, sign in ((1, -1), (2, 1)):
-                t += 5
-                lines += [line("MC:TestNumber", t, d * 1000 + j * 100 + i),
-                          line(f"{axis_pv}-PosSet", t, x + sign * scale),
+                t += 5  # move past the target, come back, settle; then ecmc sets the number
+                lines += [line(f"{axis_pv}-PosSet", t, x + sign * scale),
                           line(f"{axis_pv}-PosSet", t + 1, x),
-                          line(f"{axis_pv}-Enc", t + 3, x + sign * 0.002 * scale, "HIGH MINOR")]
+                          line(f"{axis_pv}-Enc", t + 3, x + sign * 0.002 * scale, "HIGH MINOR"),
+                          line("MC:TestNumber", t + 4, d * 1000 + j * 100 + i)]
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -265,16 +265,18 @@ def _log(tmp_path, text: str):
 
 
 GOOD = ("MC:X-PosSet 2026-01-05 08:00:00.000000 1\n"
-        "MC:TestNumber 2026-01-05 08:00:00.100000 1101\n"
-        "MC:X-Enc 2026-01-05 08:00:01.000000 1.001\n")
+        "MC:X-Enc 2026-01-05 08:00:01.000000 1.001\n"
+        "MC:TestNumber 2026-01-05 08:00:01.100000 1101\n")
 CHANNELS = "target=MC:X-PosSet,reference=MC:X-Enc,test=MC:TestNumber"
 
 
 @pytest.mark.parametrize("text, channels, expected", [
     (GOOD + "MC:X-Enc 2026-01-05 07:59:59.000000 1.002\n", CHANNELS,
      "row 4: time goes back for PV MC:X-Enc"),
+    ("MC:X-PosSet 2026-01-05 08:00:00.000000 1\n" + GOOD.split("\n", 1)[1].replace(
+        "MC:X-Enc", "MC:Y-Enc"), CHANNELS, "is never logged"),
     (GOOD, "target=MC:X-PosSet,test=MC:TestNumber", "channel 'reference' is missing"),
-    (GOOD, CHANNELS + ",motor=MC:X-Act", "unknown channel 'motor'"),
+    (GOOD, CHANNELS + ",speed=MC:X-Vel", "unknown channel 'speed'"),
     (GOOD, "target=MC:X-PosSet,reference=MC:X-Scale,test=MC:TestNumber",
      "PV 'MC:X-Scale' (channel reference) is never logged"),
     (GOOD, "target=MC:X-PosSet,reference", "'reference' is not name=PV"),
@@ -285,6 +287,10 @@ CHANNELS = "target=MC:X-PosSet,reference=MC:X-Enc,test=MC:TestNumber"
      "row 4: PV MC:X-Enc (channel reference) logs 'n/a'; expected a finite number"),
     (GOOD + "MC:TestNumber 2026-01-05 08:00:03.000000 0\n"
      "MC:TestNumber 2026-01-05 08:00:04.000000 1101\n", CHANNELS, "test number 1101 is set twice"),
+    (("MC:X-PosSet 2026-01-05 08:00:00.000000 1\n"
+      "MC:TestNumber 2026-01-05 08:00:00.100000 1101\n"
+      "MC:X-Enc 2026-01-05 08:00:01.000000 1.001\n"), CHANNELS,
+     "row 2: test number 1101 is set before the set point and the reference are logged"),
     (GOOD.replace("1101", "7"), CHANNELS, "no ISO 230-2 test numbers"),
     ("", CHANNELS, "no value lines"),
 ])

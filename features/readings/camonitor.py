@@ -13,7 +13,8 @@ value it was last logged with. The first line of each PV is its value when ``cam
 connected, stamped with the time of its last change, so it may be older than lines above it:
 times run forward within each PV, not across PVs. Lines ``PV *** ...`` (``*** disconnected``,
 ``*** Not connected``) are connection events and ``PV <undefined> ...`` a PV never processed:
-neither holds a value, so they are left out with a note.
+neither holds a value, so they are left out with a note. A value logged with alarm
+severity ``INVALID`` is not a measurement either (``valid_values``): left out, counted.
 
 Two readers:
 
@@ -189,9 +190,9 @@ def read_camonitor(path, channels: dict[str, str], tz: str = "UTC",
     if len(by_pv) != len(channels):
         raise InputError("two channels name the same PV; expected one PV per channel",
                          file=path, parameter="channels")
-    mine = lines[lines["pv"].isin(list(by_pv))]
+    mine = valid_values(lines[lines["pv"].isin(list(by_pv))], path, by_pv)
     _check_numbers(mine, path, by_pv)
-    _check_time_order(mine, path)
+    check_time_order(mine, path)
     mine = mine.sort_values("time", kind="stable")
     out = pd.DataFrame({"time": mine["time"].array, "row": mine["row"].to_numpy()})
     pvs = mine["pv"].to_numpy()
@@ -204,6 +205,24 @@ def read_camonitor(path, channels: dict[str, str], tz: str = "UTC",
     return out
 
 
+def valid_values(lines: pd.DataFrame, path, by_pv: dict[str, str]) -> pd.DataFrame:
+    """``lines`` without the values logged with alarm severity ``INVALID``.
+
+    EPICS marks a value INVALID when the record could not read its input (a dropped
+    EtherCAT frame, a sensor out of range, a lost link): the number it carries is whatever
+    was left in the record, not a measurement. Such lines are dropped, counted per channel in
+    a note; the PV keeps its last valid value until its next valid line.
+    """
+    invalid = lines["severity"].to_numpy() == "INVALID"
+    if invalid.any():
+        counts = lines.loc[invalid, "pv"].value_counts()
+        each = ", ".join(f"{n} of {by_pv.get(pv, pv)} ({pv})" for pv, n in counts.items())
+        note(f"{path}: {int(invalid.sum())} values logged with alarm severity INVALID are not "
+             f"measurements; left out ({each})")
+        lines = lines[~invalid]
+    return lines
+
+
 def _check_numbers(lines: pd.DataFrame, path: Path, by_pv: dict[str, str]) -> None:
     bad = ~np.isfinite(lines["value"].to_numpy())
     if bad.any():
@@ -213,7 +232,7 @@ def _check_numbers(lines: pd.DataFrame, path: Path, by_pv: dict[str, str]) -> No
                          row=int(first["row"]))
 
 
-def _check_time_order(lines: pd.DataFrame, path: Path) -> None:
+def check_time_order(lines: pd.DataFrame, path: Path) -> None:
     """Times must not go back within one PV (across PVs they may: see the module)."""
     codes = pd.factorize(lines["pv"])[0]
     order = np.argsort(codes, kind="stable")

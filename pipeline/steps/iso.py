@@ -25,7 +25,7 @@ from features import standards
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.steps.parameters import BUDGET, FORMAT, READINGS, Param, readings
+from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, READINGS, Param, readings
 from pipeline.workflows import check_params, readings_of
 from pipeline.workflows.constraints import StrOptions
 
@@ -50,6 +50,7 @@ PARAMETERS = {
     "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add U_A_um ... U_B_um (expanded "
                          "uncertainties at each test's measuring length)", metavar="BUDGET.toml"),
     "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
+    **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
 }
 
 

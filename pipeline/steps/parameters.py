@@ -125,6 +125,25 @@ def scale_offset(text: str) -> tuple[float, float]:
     return numbers[0], numbers[1] if len(numbers) > 1 else 0.0
 
 
+RAW_LOG_GROUP = "a raw log (--format camonitor)"  # the help section of a raw log's reader
+# A raw log's reader options (features.readings.approaches): the jobs that read readings from
+# a raw ISO 230-2 log declare them; the runner hands them to the reader when the workflow
+# does not take them itself.
+RAW_LOG = {
+    "channels": Param((str, dict, None), "PVs of the set point, the reference, ecmc's test "
+                      "number and the motor side: target=PV,reference=PV[,test=PV][,motor=PV] "
+                      "(default: from ecmc's PV names)", metavar="NAME=PV,...",
+                      group=RAW_LOG_GROUP),
+    "reference_scale": Param((Real, tuple, list, None), "axis position = SCALE * reference + "
+                             "OFFSET, in the set point's unit, as ecmc's gear ratio and offset "
+                             "(negative allowed; default: fitted to the set points, reported "
+                             "in a note)", metavar="SCALE[,OFFSET]", parse=scale_offset,
+                             group=RAW_LOG_GROUP),
+    "unit": Param((StrOptions(("mm", "um", "deg")), None), "unit of the set point (default: "
+                  "deg when its PV names an axis A, B or C, else mm)", group=RAW_LOG_GROUP),
+}
+
+
 # --------------------------------------------------------------- parameters many jobs share
 def _format() -> Param:
     from features.readings.schema import FORMATS

@@ -12,32 +12,21 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from numbers import Real
 from pathlib import Path
 
 from features.readings import schema
 from features.readings.errors import InputError
 from pipeline.results import Result
-from pipeline.steps.parameters import FORMAT, Param, python_only, readings, scale_offset
+from pipeline.steps.parameters import FORMAT, RAW_LOG, Param, python_only, readings
 from pipeline.workflows import check_params, readings_of
-from pipeline.workflows.constraints import StrOptions
 
-_RAW = "a raw log (--format camonitor)"  # the help section of a camonitor log's options
 # convert's table; read, validate and write check their parameters (path, source) in it too
 PARAMETERS = {
     "data": readings(flag="FILE"),
     "format": FORMAT,
     "out": Param((str, os.PathLike), "output file, .csv or .parquet", required=True,
                  output="file"),
-    "channels": Param((str, dict, None), "PVs of the set point, the reference and ecmc's test "
-                      "number: target=PV,reference=PV[,test=PV] (default: from ecmc's PV names)",
-                      metavar="NAME=PV,...", group=_RAW),
-    "reference_scale": Param((Real, tuple, list, None), "axis position = SCALE * reference + "
-                             "OFFSET, in the set point's unit (default: fitted to the set "
-                             "points, reported in a note)", metavar="SCALE[,OFFSET]",
-                             parse=scale_offset, group=_RAW),
-    "unit": Param((StrOptions(("mm", "um", "deg")), None), "unit of the set point (default: "
-                  "deg when its PV names an axis A, B or C, else mm)", group=_RAW),
+    **RAW_LOG,
     "path": python_only(str, os.PathLike),
     "source": python_only(str, os.PathLike),
 }

@@ -23,7 +23,7 @@ from features import uncertainty as unc
 from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
 from pipeline.steps import iso as iso_workflow
-from pipeline.steps.parameters import BUDGET, FORMAT, Param
+from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, Param
 from pipeline.workflows import check_params
 
 PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
@@ -40,6 +40,7 @@ PARAMETERS = {  # iso's readings and standard; the report's own output and meta 
                   "sensors, remarks; printed on every page above the signature block",
                   metavar="META.toml"),
     "standard": iso_workflow.PARAMETERS["standard"],
+    **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
 }
 
 
