@@ -44,6 +44,12 @@ MIN_READINGS = 16
 MAX_DEVIATION_UM = 1000.0
 # The largest gap between readings of one run [deg]: beyond it the centre is not defined.
 MAX_GAP_DEG = 180.0
+# A ballbar reads to 0.1 um: a run whose deviations span less holds no measured path in um
+# (deviation_um in mm: every value 1000 times too small).
+RESOLUTION_UM = 0.1
+# A machine tool's circular test spans more than this [um] (its path and the pivot's set-up
+# offset); a run spanning less is noted: its column may be in mm.
+PLAUSIBLE_SPAN_UM = 1.0
 
 
 @dataclass(frozen=True)
@@ -121,7 +127,8 @@ def read_circles(data, parameter: str = "data") -> pd.DataFrame:
     from features.readings.validation import ROW
 
     if isinstance(data, pd.DataFrame):
-        frame, file, rows = data.copy(), None, pd.Series(data.index)
+        # positions inside, the caller's index labels in messages (a frame sliced from another)
+        frame, file, rows = data.reset_index(drop=True), None, pd.Series(data.index)
         if frame.empty:
             raise InputError("no readings: the frame is empty", parameter=parameter)
     else:
@@ -214,6 +221,13 @@ def _check_runs(frame: pd.DataFrame, file, rows) -> None:
             raise InputError(f"{where}: deviation_um holds the nominal radius {radius:g} mm or "
                              "close to it; expected the radial deviation in um (measured minus "
                              "nominal)", file=file, row=row_of(rows, first), column="deviation_um")
+        span = float(run["deviation_um"].max() - run["deviation_um"].min())
+        if span < RESOLUTION_UM:
+            raise InputError(f"{where}: deviation_um spans {span:.3g} um round the circle, less "
+                             f"than a ballbar's {RESOLUTION_UM:g} um resolution: the column is "
+                             "likely in mm (every value 1000 times too small); expected the "
+                             "radial deviation in um", file=file, row=row_of(rows, first),
+                             column="deviation_um")
         gap = largest_gap_deg(run["angle_deg"].to_numpy())
         if gap > MAX_GAP_DEG:
             raise InputError(f"{where} leaves a gap of {gap:.0f} deg without readings; "
@@ -229,6 +243,22 @@ def _check_runs(frame: pd.DataFrame, file, rows) -> None:
                     f"F {key[4]:g} mm/min) has {direction} runs {names[0]!r} and {names[1]!r}; "
                     "expected one run per direction (give repeats their own visit)",
                     file=file, row=row_of(rows, i), column="test_id")
+
+
+def small_span_note(frame: pd.DataFrame) -> str | None:
+    """A note on the runs of the checked table (``read_circles``) whose deviations span less
+    than ``PLAUSIBLE_SPAN_UM``: too little for a machine tool's circular test, as a column in
+    mm would be; None when every run spans more."""
+    spans = frame.groupby(["test_id", "direction"], sort=False)["deviation_um"].agg(
+        lambda v: v.max() - v.min())
+    small = spans[spans < PLAUSIBLE_SPAN_UM]
+    if small.empty:
+        return None
+    runs = ", ".join(f"{test!r} {direction} {span:.2f} um" for (test, direction), span
+                     in small.items())
+    return (f"deviation_um spans less than {PLAUSIBLE_SPAN_UM:g} um round the circle in {runs}: "
+            "less than a machine tool's circular test shows; if the column is in mm, every "
+            "figure is 1000 times too small")
 
 
 def largest_gap_deg(angle_deg: np.ndarray) -> float:

@@ -60,6 +60,12 @@ SPIKE_BASIS_DEG = (0.75, 1.5, 3.0, 6.0, 12.0)
 REVERSALS_DEG = ((0.0, 180.0), (90.0, 270.0))
 # Travel after a reversal [deg] over which a spike's peak is looked for.
 SPIKE_SPAN_DEG = 30.0
+# A play is reported negative when it lies below 0 by more than this many standard
+# uncertainties (an over-compensated axis, or CW and CCW swapped).
+NEGATIVE_K = 2.0
+# CW and CCW read as swapped when the fit with the labels exchanged leaves residuals this many
+# times smaller (root mean square): the steps and spikes then follow the reversals.
+SWAPPED_RMS_RATIO = 1.5
 
 
 @dataclass(frozen=True)
@@ -253,3 +259,28 @@ def diagnose(runs, radius_mm: float, feed_mm_min: float) -> Diagnosis:
             coef[part], cov[part, part], travel)
     return Diagnosis({t: value[t] for t in TERMS}, {t: u[t] for t in TERMS},
                      float(np.sqrt(np.mean(residual ** 2))))
+
+
+def negative_plays(diagnosis: Diagnosis, k: float = NEGATIVE_K) -> list[str]:
+    """The play terms (``backlash_1``, ``backlash_2``) below 0 by more than ``k`` standard
+    uncertainties."""
+    return [t for t in ("backlash_1", "backlash_2")
+            if diagnosis.value[t] + k * diagnosis.u[t] < 0]
+
+
+def exchanged(runs) -> list:
+    """The runs with CW and CCW exchanged."""
+    return [("CW" if direction == "CCW" else "CCW", theta, dev) for direction, theta, dev in runs]
+
+
+def swapped_fit(runs, radius_mm: float, feed_mm_min: float,
+                diagnosis: Diagnosis) -> Diagnosis | None:
+    """The diagnosis of ``runs`` with CW and CCW exchanged, when it explains them clearly
+    better than ``diagnosis`` (their own fit): its residuals ``SWAPPED_RMS_RATIO`` times
+    smaller. A swapped pair reads as negative plays, the steps taken up and the spikes placed
+    before the reversals; an over-compensated axis also reads as a negative play, but the
+    exchanged fit does not explain it better. None otherwise."""
+    other = diagnose(exchanged(runs), radius_mm, feed_mm_min)
+    if other.rms_residual_um * SWAPPED_RMS_RATIO <= diagnosis.rms_residual_um:
+        return other
+    return None

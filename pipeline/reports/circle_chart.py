@@ -77,7 +77,10 @@ def _box(item) -> str:
     lines += [f"G {d:<4}{g:8.2f}" for d, g in item.G_um.items() if g is not None]
     if item.H_um is not None:
         lines.append(f"H     {item.H_um:8.2f}")
-    if item.diagnosis is not None:
+    if item.diagnosis is None:  # one direction: what it cannot give, as the note says
+        lines += [f"only {next(iter(item.circle.runs))} was run:", "no H, no diagnosis",
+                  "(they need CW and CCW)"]
+    else:
         lines.append("diagnosis (± u)")
         for label, value, u in item.diagnosis_lines():
             lines.append(f"{label:<18}{value:8.2f} ± {u:.2f}")

@@ -255,6 +255,42 @@ def evaluate(circle) -> CircleFigures:
                          mc.diagnose(runs, circle.radius_mm, circle.feed_mm_min))
 
 
+def _name(circle) -> str:
+    return f"{circle.machine_id} {circle.plane} visit {circle.visit}"
+
+
+def _negative_play(item: CircleFigures, file) -> str | None:
+    """A diagnosed circle whose play comes out negative beyond its uncertainty: refused when
+    the runs fit the signatures clearly better with CW and CCW exchanged (the labels are
+    swapped), else a note (an over-compensated axis, or swapped labels the fit cannot tell)."""
+    from features.readings.errors import InputError
+    from models import circle as mc
+
+    c, d = item.circle, item.diagnosis
+    negative = mc.negative_plays(d)
+    if not negative:
+        return None
+    axes = dict(zip(("backlash_1", "backlash_2"), c.axes))
+    found = ", ".join(f"{axes[t]} {d.value[t]:.2f} ± {d.u[t]:.2f} um" for t in negative)
+    increasing = f"{c.plane}: from +{c.axes[0]} towards +{c.axes[1]}"
+    runs = [(direction, r.angle_deg, r.deviation_um) for direction, r in c.runs.items()]
+    other = mc.swapped_fit(runs, c.radius_mm, c.feed_mm_min, d)
+    if other is not None:
+        exchanged = ", ".join(f"{axes[t]} {other.value[t]:.2f} um" for t in axes)
+        where = {"file": file} if file is not None else {"parameter": "data"}
+        raise InputError(
+            f"{_name(c)}: the CW and CCW labels look swapped: as labelled the backlash comes out "
+            f"negative ({found}), and with the labels exchanged the runs fit "
+            f"{d.rms_residual_um / other.rms_residual_um:.1f} times closer (rms "
+            f"{other.rms_residual_um:.2f} against {d.rms_residual_um:.2f} um; backlash "
+            f"{exchanged}); CCW is the direction of increasing angle ({increasing})",
+            column="direction", **where)
+    return (f"{_name(c)}: negative backlash beyond {mc.NEGATIVE_K:g} standard uncertainties "
+            f"({found}): the axis is over-compensated (its backlash compensation exceeds its "
+            f"play), or the CW and CCW labels are swapped (CCW is the direction of increasing "
+            f"angle, {increasing})")
+
+
 def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResult:
     """Evaluate circular tests: ISO 230-4 G and H and the diagnosis of each circle.
 
@@ -298,12 +334,22 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
         from pipeline.store.records import open_for_records
 
         store = open_for_records(store)
+    from features.readings.errors import note
+
     frame = fc.read_circles(data)
     items = [evaluate(c) for c in fc.circles(frame)]
-    notes = [f"{i.circle.machine_id} {i.circle.plane} visit {i.circle.visit}: only "
-             f"{next(iter(i.circle.runs))} was run; H and the diagnosis need CW and CCW"
-             for i in items if i.diagnosis is None]
-    source = str(data) if isinstance(data, (str, os.PathLike)) else "<frame>"
+    file = data if isinstance(data, (str, os.PathLike)) else None
+    notes = [fc.small_span_note(frame)]
+    for item in items:
+        if item.diagnosis is None:
+            notes.append(f"{_name(item.circle)}: only {next(iter(item.circle.runs))} was run: G "
+                         "only, no H and no diagnosis (they need CW and CCW)")
+        else:
+            notes.append(_negative_play(item, file))
+    notes = [text for text in notes if text]
+    for text in notes:
+        note(text)
+    source = str(data) if file is not None else "<frame>"
     result = CircleResult(circles=items, source=source, tolerance_um=tolerance_um,
                           parameters={"tolerance_um": tolerance_um}, notes=notes)
     if store is not None:
