@@ -43,6 +43,7 @@ from features.readings.errors import InputError
 
 SQRT3 = math.sqrt(3.0)
 REFERENCE_TEMPERATURE_C = 20.0  # ISO 1: the temperature lengths are stated at
+KELVIN_AT_0_C = 273.15
 ARITHMETICS = ("iso", "paper")
 PARAMETERS = ("R_dir", "B", "R", "E", "M", "A")  # the figures of Table 4, in its order
 
@@ -395,12 +396,44 @@ class UncertaintyBudget:
             if abs(value) > MAX_VALUE:
                 raise InputError(f"must be at most {MAX_VALUE:g} in its unit; got {value:g}",
                                  file=file, column=key)
+        self._check_axis(file)
+        self._check_temperature(file)
         if self.misalignment.offset_mm > min(self.lengths("iso")[1], self.lengths()[1]):
             raise InputError("the offset cannot exceed the length it drifts over",
                              file=file, column="misalignment.offset_mm")
         if self.arithmetic == "paper" and self.paper is None:
             raise InputError("arithmetic 'paper' needs a [paper] table (the lengths its lines "
                              "use)", file=file, column="arithmetic")
+
+    def _check_axis(self, file) -> None:
+        """``axis``, when given, names a linear axis: a budget's contributors are lengths."""
+        from features.readings import schema
+
+        if not self.axis:
+            return
+        if schema.is_rotary(self.axis):
+            raise InputError(f"{self.axis!r} is a rotary axis: a budget's contributors are "
+                             "lengths (mm, um), not angles; give the budget of a linear axis "
+                             f"({', '.join(schema.LINEAR_AXES)})", file=file, column="axis")
+        if self.axis.upper() not in schema.LINEAR_AXES:
+            raise InputError(f"{self.axis!r} is not an axis; expected one of "
+                             f"{', '.join(schema.LINEAR_AXES)} (a linear axis)", file=file,
+                             column="axis")
+
+    def _check_temperature(self, file) -> None:
+        """``machine_temperature_c`` in the readings' plausible range of a machine temperature
+        in °C; a value that is one in kelvin is named as such."""
+        from features.readings.validation import PLAUSIBLE
+
+        low, high, _ = PLAUSIBLE["machine_temp_c"]
+        value = self.temperature.machine_temperature_c
+        if low <= value <= high:
+            return
+        celsius = value - KELVIN_AT_0_C
+        why = (f"a temperature in kelvin ({value:g} K = {celsius:.2f} °C), not in °C as the "
+               "key's _c says" if low <= celsius <= high else "not a machine temperature in °C")
+        raise InputError(f"{value:g} is {why}; expected °C between {low:g} and {high:g}",
+                         file=file, column="temperature.machine_temperature_c")
 
     def lengths(self, arithmetic: str | None = None) -> tuple[float, float, float]:
         """The lengths [mm] of the laser, misalignment and thermal lines."""
