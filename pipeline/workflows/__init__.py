@@ -325,6 +325,16 @@ WORKFLOWS = (
              'and the diagnosis per axis (backlash, reversal spike) and per plane (squareness, scale '
              'and servo mismatch), each with its uncertainty; polar plots.',
              inputs=('data',)),
+    Workflow('stiffness',
+             'Static stiffness from loaded double-ballbar (LDBB) circles: per centre the stiffness '
+             'in X and Y and the compliance with their uncertainty, a map over the workspace chosen '
+             'by cross-validation, and the deflection under given forces (--at).',
+             inputs=('data', 'at')),
+    Workflow('kinematics',
+             "Five-axis rotary axes from probed spheres: seed 003's 12 geometric errors of a dual "
+             'turntable with their uncertainty (inseparable ones named, never split), each '
+             "rotary axis's play and the error field over the workspace.",
+             inputs=('data', 'at')),
     Workflow('monitor',
              'Lost motion per machine axis and day from controller traces with motor- and load-side '
              'positions, with its uncertainty, change points and trend.',
