@@ -51,8 +51,14 @@ def _record_compensation(store, result):
     return record_compensation(store, result)
 
 
+def _record_probing(store, result):
+    from pipeline.store.records import probing_records, record
+
+    return record(store, "probing", probing_records(result))
+
+
 # job -> function(store, result) recording the result in an open fleet store
-RECORDERS = {"compensate": _record_compensation}
+RECORDERS = {"compensate": _record_compensation, "kinematics": _record_probing}
 
 
 def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=None,

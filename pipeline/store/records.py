@@ -218,8 +218,34 @@ def check_ballbar(record) -> dict:
     return record
 
 
+PROBING_KEYS = {"kind", "format", "machine_id", "axis", "date", "visit", "test_id",
+                "kinematics", "play_arcsec", "play_u_arcsec", "errors", "errors_u", "source"}
+
+
+def check_probing(record) -> dict:
+    """``record`` if it is one rotary axis's play [arcsec] and its six geometric errors [um,
+    urad; null where the probing cannot separate them] from probed spheres (``kinematics``)
+    this version can interpret, else one ``InputError``."""
+    kind = "probing record"
+    _head(record, kind, PROBING_KEYS)
+    if not schema.is_rotary(record["axis"]):
+        _fail(kind, f"axis {record['axis']} is not rotary")
+    _date(record.get("date"), "date", kind)
+    for key in ("visit", "test_id", "kinematics", "source"):
+        _text(record.get(key), key, kind)
+    _number(record.get("play_arcsec"), "play_arcsec", kind, optional=True)
+    _number(record.get("play_u_arcsec"), "play_u_arcsec", kind, optional=True, minimum=0)
+    for key in ("errors", "errors_u"):
+        values = record.get(key)
+        if not isinstance(values, dict) or len(values) != 6:
+            _fail(kind, f"{key} must map the axis's six error names to numbers or null")
+        for name, value in values.items():
+            _number(value, f"{key}.{name}", kind, optional=True)
+    return record
+
+
 CHECKS = {"forecast": check_forecast, "compensation": check_compensation,
-          "trace": check_trace, "ballbar": check_ballbar}
+          "trace": check_trace, "ballbar": check_ballbar, "probing": check_probing}
 
 
 def rows_of(kind: str, records: list[dict], recorded_at: str | None = None) -> list[tuple]:
@@ -485,4 +511,29 @@ def ballbar_records(items, dates: dict, source: str) -> list[dict]:
                         "radius_mm": float(c.radius_mm), "feed_mm_min": float(c.feed_mm_min),
                         "backlash_um": _plain(d.value[term]),
                         "backlash_u_um": _plain(d.u[term]), "source": source})
+    return out
+
+
+def probing_records(result) -> list[dict]:
+    """One probing record per rotary axis of every machine and visit of a kinematics result
+    (``pipeline.workflows.kinematics.KinematicsResult``): its play [arcsec] and its six
+    errors [um, urad] with standard uncertainties, null where inseparable, dated by the
+    earliest ``started_at`` of the visit (null when the table has none)."""
+    from features.probing import axes_of
+
+    out = []
+    for m in getattr(result, "machines", None) or []:
+        j = m.to_json()
+        for axis in axes_of(m.kinematics):
+            own = [n for n in j["errors"] if n.split("_")[2] == axis]
+            out.append({"kind": "probing", "format": RECORD_FORMAT, "machine_id": m.machine_id,
+                        "axis": axis, "date": m.date, "visit": m.visit, "test_id": m.test_id,
+                        "kinematics": m.kinematics, "play_arcsec": j["play_arcsec"][axis],
+                        "play_u_arcsec": j["play_u_arcsec"][axis],
+                        "errors": {n: j["errors"][n] for n in own},
+                        "errors_u": {n: j["errors_u"][n] for n in own},
+                        "source": getattr(result, "source", "") or "probing"})
+    if not out:
+        raise InputError("holds no machine; expected the result of kinematics",
+                         parameter="result")
     return out
