@@ -16,7 +16,8 @@ import datetime as dt
 TABLES = {"forecast": ("forecasts", "backlash_forecasts"),
           "compensation": ("compensations", "backlash_compensations"),
           "trace": ("trace_days", "backlash_trace_days"),
-          "ballbar": ("ballbar_runs", "backlash_ballbar_runs")}
+          "ballbar": ("ballbar_runs", "backlash_ballbar_runs"),
+          "probing": ("probing_runs", "backlash_probing_runs")}
 COLUMNS = ("machine_id", "axis", "sha256", "recorded_at", "record")
 VOIDED = ("voided", "backlash_voided")
 AUDIT = ("audit", "backlash_audit")
