@@ -183,7 +183,8 @@ def check_compensation(record) -> dict:
 
 
 TRACE_KEYS = {"kind", "format", "machine_id", "axis", "date", "lost_motion_um",
-              "lost_motion_u_um", "reversals", "source"}
+              "lost_motion_u_um", "reversals", "source",
+              "samples_expected", "samples_received", "coverage"}  # the last three: watch's gap
 BALLBAR_KEYS = {"kind", "format", "machine_id", "axis", "date", "plane", "visit", "radius_mm",
                 "feed_mm_min", "backlash_um", "backlash_u_um", "source"}
 
@@ -199,6 +200,8 @@ def check_trace(record) -> dict:
     _number(record.get("lost_motion_u_um"), "lost_motion_u_um", kind, minimum=0)
     _number(record.get("reversals"), "reversals", kind, minimum=0)
     _text(record.get("source"), "source", kind)
+    for key in ("samples_expected", "samples_received", "coverage"):
+        _number(record.get(key), key, kind, optional=True, minimum=0)
     return record
 
 
