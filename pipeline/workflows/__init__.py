@@ -339,6 +339,10 @@ WORKFLOWS = (
              'Lost motion per machine axis and day from controller traces with motor- and load-side '
              'positions, with its uncertainty, change points and trend.',
              inputs=('traces',)),
+    Workflow('watch',
+             "Lost motion per machine axis and day from a live controller feed (EPICS CA or PVA, "
+             "OPC UA, a growing camonitor log), recorded in a fleet store as each day ends.",
+             inputs=('config',)),
 )
 NAMES = tuple(w.name for w in WORKFLOWS)
 _BY_NAME = {w.name: w for w in WORKFLOWS}
