@@ -1,0 +1,153 @@
+"""The protocols: each source calls ``emit(name, ns, value)`` per channel update with the
+server's timestamp [ns since the epoch, UTC], reconnects with backoff when the server goes
+away, and raises ``InputError`` when it never answers at start (within ``timeout_s``).
+
+- ``log``: a camonitor file being appended to; follows rotation (a new file at the path) and
+  truncation (the file shorter than what was read), resuming at a saved offset;
+- ``ca``: EPICS Channel Access, caproto's pure-Python asyncio client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import os
+
+from features.readings.errors import InputError
+
+# Backoff between reconnection attempts [s]: doubled each time, up to the last.
+BACKOFF_S = (0.2, 0.5, 1.0, 2.0, 5.0)
+POLL_S = 0.05
+EPICS_EPOCH_S = 631_152_000  # 1990-01-01 in Unix seconds
+UNITS = {"linear": ("mm", ""), "rotary": ("deg", "degree", "degrees", "°", "")}
+
+
+class LogSource:
+    """A camonitor log as it grows (``offset``/``inode`` are its resumable state)."""
+
+    def __init__(self, config, emit, status):
+        self.path, self.emit, self.status = config.address, emit, status
+        self.names = {n for a in config.axes for n in a.channels.values()}
+        self.offset, self.inode, self.rest = 0, None, b""
+
+    def state(self) -> dict:
+        return {"offset": self.offset, "inode": self.inode}
+
+    def restore(self, state: dict) -> None:
+        self.offset, self.inode = int(state.get("offset", 0)), state.get("inode")
+
+    async def start(self, timeout_s: float) -> None:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while not os.path.exists(self.path):
+            if loop.time() > deadline:
+                raise InputError(f"the log {self.path} does not exist after {timeout_s:g} s; "
+                                 "expected a camonitor file being written", parameter="config")
+            await asyncio.sleep(POLL_S)
+
+    async def run(self) -> None:
+        while True:
+            self.poll()
+            await asyncio.sleep(POLL_S)
+
+    def poll(self) -> None:
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            return  # between a rotation's rename and the new file
+        if self.inode is not None and st.st_ino != self.inode:
+            self.status({"event": "log_rotated", "path": self.path})
+            self.offset, self.rest = 0, b""
+        elif st.st_size < self.offset:
+            self.status({"event": "log_truncated", "path": self.path})
+            self.offset, self.rest = 0, b""
+        self.inode = st.st_ino
+        if st.st_size == self.offset:
+            return
+        with open(self.path, "rb") as handle:
+            handle.seek(self.offset)
+            data = handle.read()
+        end = data.rfind(b"\n") + 1  # complete lines only: a line being written waits
+        for line in data[:end].decode("utf-8", "replace").splitlines():
+            self._line(line)
+        self.offset += end
+
+    def _line(self, line: str) -> None:
+        parts = line.split()
+        if len(parts) < 4 or parts[0] not in self.names or parts[1].startswith(("***", "<")):
+            return
+        if len(parts) >= 6 and parts[5] == "INVALID":
+            return  # not a measurement (features.readings.camonitor.valid_values)
+        try:
+            stamp = dt.datetime.strptime(f"{parts[1]} {parts[2]}", "%Y-%m-%d %H:%M:%S.%f")
+            value = float(parts[3])
+        except ValueError:
+            return
+        stamp = stamp.replace(tzinfo=dt.timezone.utc)
+        ns = (int(stamp.timestamp()) * 1_000_000 + stamp.microsecond) * 1000
+        self.emit(parts[0], ns, value)
+
+
+class CASource:
+    """EPICS Channel Access (caproto's asyncio client), server at ``host:port``."""
+
+    def __init__(self, config, emit, status):
+        self.config, self.emit, self.status = config, emit, status
+        self.names = sorted({n for a in config.axes for n in a.channels.values()})
+        self.kinds = {n: ("rotary" if a.axis in "ABC" else "linear")
+                      for a in config.axes for n in a.channels.values()}
+        self.context = self.pvs = None
+
+    def state(self) -> dict:
+        return {}
+
+    def restore(self, state: dict) -> None:
+        pass
+
+    async def start(self, timeout_s: float) -> None:
+        os.environ["EPICS_CA_ADDR_LIST"] = self.config.address
+        os.environ["EPICS_CA_AUTO_ADDR_LIST"] = "NO"
+        from caproto.asyncio.client import Context
+
+        self.context = Context()
+        self.pvs = await self.context.get_pvs(*self.names, timeout=timeout_s)
+        for pv in self.pvs:
+            try:
+                await pv.wait_for_connection(timeout=timeout_s)
+            except (TimeoutError, asyncio.TimeoutError):
+                raise InputError(f"PV {pv.name} does not answer at {self.config.address} "
+                                 f"within {timeout_s:g} s (no such PV, or no server)",
+                                 parameter="config") from None
+            reading = await pv.read(data_type="control", timeout=timeout_s)
+            unit = getattr(reading.metadata, "units", b"")
+            unit = unit.decode() if isinstance(unit, bytes) else str(unit)
+            if unit.strip() not in UNITS[self.kinds[pv.name]]:
+                raise InputError(f"PV {pv.name} is in {unit!r}; expected "
+                                 f"{UNITS[self.kinds[pv.name]][0]} (watch takes positions as "
+                                 "the axis's unit, as monitor does)", parameter="config")
+        for pv in self.pvs:
+            pv.subscribe(data_type="time").add_callback(self._callback)
+
+    def _callback(self, sub, response) -> None:
+        stamp = response.metadata.stamp
+        ns = ((stamp.secondsSinceEpoch + EPICS_EPOCH_S) * 1_000_000_000
+              + stamp.nanoSeconds)
+        self.emit(sub.pv.name, ns, float(response.data[0]))
+
+    async def run(self) -> None:
+        # caproto reconnects a lost circuit and renews the subscriptions itself; watch only
+        # reports the state of the channels
+        down = False
+        while True:
+            now_down = not all(pv.connected for pv in self.pvs)
+            if now_down != down:
+                self.status({"event": "source_down" if now_down else "source_up"})
+                down = now_down
+            await asyncio.sleep(0.2)
+
+    async def close(self) -> None:
+        if self.context is not None:
+            await self.context.disconnect()
+
+
+SOURCES = {"log": LogSource, "ca": CASource}

@@ -1,0 +1,154 @@
+"""Watch: a live controller feed into each machine axis's daily lost motion, between laser
+visits (docs/watch.md).
+
+>>> import backlash as bl
+>>> bl.watch("WATCH.toml", store="fleet/", seconds=3600)   # doctest: +SKIP
+
+A long-running job: the estimator is pure (``models.lost_motion_stream``: per move window the
+fit's statistics, per day one combiner, the same as ``monitor``'s), the I/O loop lives in
+``pipeline.live`` and the open days' state in the store (``pipeline.store.live``).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from dataclasses import dataclass, field
+from numbers import Real
+
+from features.readings.errors import InputError
+from pipeline.results import Result
+from pipeline.steps.parameters import Param, python_only
+from pipeline.workflows import check_params
+from pipeline.workflows.constraints import Interval
+
+_POSITIVE = Interval(Real, 0, None, closed="neither")
+PARAMETERS = {
+    "config": Param((str, os.PathLike), "WATCH.toml: the source (ca, pva, opcua or log) and "
+                    "the channels of each machine axis (docs/watch.md)", flag="WATCH"),
+    "store": Param((str, os.PathLike, "pipeline.store.base.Store"), "fleet store folder: where "
+                   "the days are recorded and the open days kept", metavar="STORE",
+                   required=True),
+    "until": Param((str, None), "stop at this time (ISO 8601, UTC unless it says), closing and "
+                   "recording the open days", metavar="TIME"),
+    "seconds": Param((_POSITIVE, None), "stop after this many seconds, closing and recording "
+                     "the open days (default: run until SIGTERM, which keeps them)",
+                     flag="--for", metavar="SECONDS"),
+    "take_up_mm": Param((_POSITIVE,), "travel after a reversal past which the play is taken "
+                        "up", metavar="X"),
+    "settle_s": python_only(Interval(Real, 0, None, closed="left")),
+    "status": python_only(None, callable),
+}
+
+
+@dataclass
+class WatchResult(Result):
+    """What one run of a watcher closed.
+
+    Attributes
+    ----------
+    days : list of dict
+        Per machine axis and day closed: ``lost_motion_um``, ``lost_motion_u_um`` (um, arcsec
+        on a rotary axis), ``reversals``, ``samples``, ``samples_expected``,
+        ``samples_received``, ``coverage``.
+    updates : int
+        Channel updates received.
+    """
+
+    days: list = field(default_factory=list)
+    updates: int = 0
+    config: str = ""
+
+    def to_json(self) -> dict:
+        return {"days": self.days, "updates": self.updates, "notes": list(self.notes)}
+
+    def __repr__(self) -> str:
+        return f"watch {self.config}: {len(self.days)} day(s) closed, {self.updates} updates"
+
+
+def watch(config, *, store, until: str | None = None, seconds: float | None = None,
+          take_up_mm: float = 0.05, settle_s: float = 0.1, status=None) -> WatchResult:
+    """Watch a live feed and record each machine axis's daily lost motion in ``store``.
+
+    Parameters
+    ----------
+    config : str or path-like
+        WATCH.toml (SCHEMA section 14).
+    store : str, path-like or Store
+        A fleet store folder (made by ``ingest``).
+    until : str, optional
+        Stop at this time (ISO 8601); the open days are closed and recorded.
+    seconds : float, optional
+        Stop after this many seconds; the open days are closed and recorded.
+    take_up_mm, settle_s : float
+        As ``monitor``.
+    status : callable, optional
+        ``status(line)`` per event (a dict: started, day_recorded, source_down, status, ...).
+
+    Returns
+    -------
+    WatchResult
+
+    Raises
+    ------
+    InputError
+        A bad WATCH.toml (a channel feeding two axes, no load channel, an unknown protocol), a
+        PV or node that does not exist or a source that does not answer within its
+        ``timeout_s``, a channel in another unit, a source whose clock runs backwards, a
+        store that cannot be written.
+    """
+    check_params(PARAMETERS, {"config": config, "store": store, "until": until,
+                              "seconds": seconds, "take_up_mm": take_up_mm,
+                              "settle_s": settle_s, "status": status}, "watch")
+    if until is not None and seconds is not None:
+        raise InputError("give --until or --for, not both", parameter="until")
+    if until is not None:
+        seconds = _seconds_until(until)
+    from pipeline.live.config import read_config
+    from pipeline.live.loop import run_watch
+    from pipeline.store.records import open_for_records
+
+    settings = read_config(config)
+    opened = open_for_records(store)
+    _check_writable(opened)
+    watcher = run_watch(settings, opened, seconds=seconds, take_up=float(take_up_mm),
+                        settle_s=float(settle_s), status=status)
+    days = [{k: _plain(v) for k, v in d.items()} for d in watcher.recorded]
+    return WatchResult(days=days, updates=watcher.updates, config=str(config))
+
+
+def _seconds_until(text: str) -> float:
+    try:
+        when = dt.datetime.fromisoformat(text)
+    except ValueError:
+        raise InputError(f"{text!r} is not a time; expected ISO 8601 (2026-03-02T18:00)",
+                         parameter="until") from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=dt.timezone.utc)
+    left = (when - dt.datetime.now(dt.timezone.utc)).total_seconds()
+    if left <= 0:
+        raise InputError(f"{text} has passed; expected a time to come", parameter="until")
+    return left
+
+
+def _check_writable(store) -> None:
+    """Refuse a store whose live folder cannot be written, before any work."""
+    from pipeline.store.live import live_folder
+
+    folder = live_folder(store)
+    try:
+        folder.mkdir(exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as err:
+        raise InputError(f"cannot write the watcher's state in the store ({err.strerror})",
+                         file=str(folder), parameter="store") from None
+
+
+def _plain(value):
+    import math
+
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value.item() if hasattr(value, "item") else value
