@@ -206,24 +206,64 @@ def point_inputs(readings: pd.DataFrame, methods: tuple[str, ...] | None = None)
 
 
 def check_features(X: pd.DataFrame, source: str = "features", allow_constant: bool = False,
-                   parameter: str | None = "features") -> None:
+                   parameter: str | None = "features", meta: pd.DataFrame | None = None,
+                   readings: pd.DataFrame | None = None) -> None:
     """Refuse inputs a network cannot learn from: NaN values and (for training) constant
     columns. ``parameter`` names the caller's parameter that chose the inputs (None when the
-    inputs are a fitted model's, not the caller's choice)."""
+    inputs are a fitted model's, not the caller's choice). With the table's ``meta`` (its
+    point keys, row by row) a NaN names the point's machine, axis, visit and target, and with
+    the ``readings`` also the tests it comes from (``point_tests``)."""
     if X.empty:
         raise InputError("no backlash points: nothing to train on", file=source)
     remedy = " (leave it out of the features)" if parameter else ""
     nan = X.isna()
     if nan.any().any():
         col = nan.any().idxmax()
-        row = int(np.flatnonzero(nan[col].to_numpy())[0])
-        raise InputError(f"NaN in feature at point {row + 1} of the feature table; every input "
-                         f"needs a value{remedy}", file=source, column=col, parameter=parameter)
+        rows = np.flatnonzero(nan[col].to_numpy())
+        row = int(rows[0])
+        where = "" if meta is None else f": {point_name(meta.iloc[row], col, readings)}"
+        count = f"{len(rows)} points of the feature table, the first" if len(rows) > 1 else \
+            "the feature table"
+        raise InputError(f"NaN in feature at {count} point {row + 1}{where}; every input needs "
+                         f"a value{remedy}", file=source, column=col, parameter=parameter)
     constant = [] if allow_constant else [c for c in X.columns if X[c].nunique() < 2]
     if constant:
         raise InputError(f"feature is constant ({X[constant[0]].iloc[0]:g}) over all points; "
                          f"it carries no information{remedy}", file=source,
                          column=constant[0], parameter=parameter)
+
+
+def point_name(point: pd.Series, column: str, readings: pd.DataFrame | None = None) -> str:
+    """A feature-table point for a message: ``machine M03, axis Y, visit 04, target 150`` and,
+    with the readings, ``test T17`` (``point_tests``)."""
+    parts = [f"{name} {point[key]:g}" if isinstance(point[key], float) else
+             f"{name} {point[key]}"
+             for key, name in (("machine_id", "machine"), ("axis", "axis"), ("visit", "visit"),
+                               ("target", "target")) if key in point]
+    tests = [] if readings is None else point_tests(readings, point, column)
+    if tests:
+        parts.append(f"test{'s' if len(tests) > 1 else ''} {', '.join(tests[:4])}"
+                     + (" ..." if len(tests) > 4 else ""))
+    return ", ".join(parts)
+
+
+def point_tests(readings: pd.DataFrame, point: pd.Series, column: str) -> list[str]:
+    """The ``test_id`` of the tests behind a feature-table ``point`` (its pair keys and
+    target): those whose readings there lack ``column`` when the readings have it (a linear
+    deviation: the linear tests), else every test of the point."""
+    if "test_id" not in readings:
+        return []
+    keys = [k for k in POINT_KEYS if k in point.index and k in readings]
+    here = np.ones(len(readings), bool)
+    for key in keys:
+        value, values = point[key], readings[key]
+        here &= (values.isna() if pd.isna(value) else (values == value)).to_numpy(bool)
+    found = readings[here]
+    if column.startswith("deviation_") and "method" in found:
+        found = found[found["method"] == "linear"]
+    elif column in found and found[column].isna().any():
+        found = found[found[column].isna()]
+    return sorted(found["test_id"].astype(str).unique())
 
 
 def _candidates(table: pd.DataFrame) -> list[str]:

@@ -47,7 +47,7 @@ def model_data(data, format: str = "auto", target: str = "auto", features=None,
     stats = iso230.per_target(readings)
     table = feature_table(readings, target=target, features=check_feature_names(features),
                           stats=stats)
-    check_features(table.X, source)
+    check_features(table.X, source, meta=table.meta, readings=readings)
     if truth is not None and not isinstance(truth, pd.DataFrame):
         truth = read_truth(truth)
     # a mixed table's points name their kinds: no second pass over the readings for them
