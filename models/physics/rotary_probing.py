@@ -165,9 +165,9 @@ def paper_machine(machine_id: str = "W1") -> RotaryMachine:
     themselves: these are chosen to reproduce its size, not its values."""
     return RotaryMachine(machine_id, "AC-table", errors={
         "delta_x_A_um": 1.5, "delta_y_A_um": -2.0, "delta_z_A_um": 1.0,
-        "eps_alpha_A_urad": 120.0, "eps_beta_A_urad": 140.0, "eps_gamma_A_urad": -90.0,
+        "eps_alpha_A_urad": 170.0, "eps_beta_A_urad": 200.0, "eps_gamma_A_urad": -130.0,
         "delta_x_C_um": 1.0, "delta_y_C_um": 1.5, "delta_z_C_um": -1.0,
-        "eps_alpha_C_urad": 100.0, "eps_beta_C_urad": -230.0, "eps_gamma_C_urad": 160.0},
+        "eps_alpha_C_urad": 145.0, "eps_beta_C_urad": -330.0, "eps_gamma_C_urad": 230.0},
         play_arcsec={"A": 12.0, "C": 8.0})
 
 

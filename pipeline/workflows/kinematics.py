@@ -94,8 +94,8 @@ class MachineKinematics:
                 "residual_rms_um": _round(i.residual_rms_um), "points": i.points,
                 "rank": i.rank,
                 "comprehensive_error_mm": {
-                    key: {f"{angle:g}": {k: _round(v / 1000 if v is not None else None, 6)
-                                         for k, v in cell.items()}
+                    key: {f"{angle:g}": {k.replace("_um", "_mm"): _round(
+                        v / 1000 if v is not None else None, 6) for k, v in cell.items()}
                           for angle, cell in rows.items()}
                     for key, rows in self.tables.items()}}
 
