@@ -129,6 +129,7 @@ AGREEMENT = [
     ("volumetric", ["--targets", "5", "--seed", "3"], {"targets": 5, "seed": 3}),
     ("circle", ["{circle}"], {"data": "{circle}"}),
     ("monitor", ["{trace}"], {"traces": "{trace}"}),
+    ("kinematics", ["{probes}"], {"data": "{probes}"}),
 ]
 TIMES = re.compile(r"(^|_)(seconds|elapsed|duration|recorded_at|created|datetime_start|"
                    r"datetime_complete|run_id|study)($|_)")
@@ -158,6 +159,7 @@ def inputs(two_axes, tmp_path_factory) -> dict:
             "trace": str(folder / "trace.parquet"), "small": str(folder / "small.csv"),
             "scenarios": str(folder / "scenarios.toml"), "ess": str(ESS),
             "circle": str(ROOT / "experiments/data/circle/ballbar_xy.csv"),
+            "probes": str(ROOT / "experiments/data/kinematics/probes.csv"),
             "budget": str(ROOT / "experiments/data/paper_uncertainty.toml")}
 
 
