@@ -17,7 +17,10 @@ import tempfile
 import time
 from pathlib import Path
 
-REPEATS = 3
+from bench import size
+
+REPEATS = size(3, 1)
+TARGETS, CYCLES = size(9, 2), size(5, 1)
 GOALS = {"parse_camonitor": 3.0, "read_camonitor": 4.0}
 PVS = {"REF_PV": "IOC_TEST:m0s012-Enc01-PosAct", "TEST_PV": "IOC_TEST:TestNumber",
        "TGT_SET_PV": "IOC_TEST:Axis1-PosSet"}
@@ -26,8 +29,8 @@ PVS = {"REF_PV": "IOC_TEST:m0s012-Enc01-PosAct", "TEST_PV": "IOC_TEST:TestNumber
 def _log(folder: Path) -> Path:
     from tests.camonitor_logs import run_readings, write_run
 
-    targets = {i: 10.0 + 30.0 * (i - 1) for i in range(1, 10)}
-    return write_run(folder / "run.log", targets, run_readings(targets, 5, 0.004), PVS,
+    targets = {i: 10.0 + 30.0 * (i - 1) for i in range(1, TARGETS + 1)}
+    return write_run(folder / "run.log", targets, run_readings(targets, CYCLES, 0.004), PVS,
                      speed=2.0, dwell=4.0)
 
 
