@@ -21,13 +21,16 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import size, verdict
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "experiments" / "data" / "twin" / "readings.csv"
-REPEATS = 5
+REPEATS = size(5, 1)
 GOALS = {"train": 2.0, "predict": 1.5}
 HEAVY = ("mlflow", "torch", "skops", "matplotlib", "optuna", "sklearn")
 HELP_GOAL_S = 0.1
-HELP_COMMANDS = ("iso", "train", "compensate", "fleet", "monitor")  # small, model, large tables
+# small, model and large tables; a tiny run times one
+HELP_COMMANDS = size(("iso", "train", "compensate", "fleet", "monitor"), ("train",))
 
 
 def _env(folder: Path) -> dict:
@@ -68,7 +71,7 @@ def startup(env: dict) -> None:
     for name, argv in commands.items():
         median = statistics.median(times[name])
         goal = "" if name.startswith("python") else (
-            f"< {HELP_GOAL_S:g} {'PASS' if median < HELP_GOAL_S else 'FAIL'}  ")
+            f"< {HELP_GOAL_S:g} {verdict(median < HELP_GOAL_S)}  ")
         heavy = "" if name.startswith("python") else ", ".join(_imported(argv, env)) or "-"
         print(f"{name:<28} {median:>10.3f}  {goal}{heavy}")
 
