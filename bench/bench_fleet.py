@@ -23,8 +23,12 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import size
+
 REPO = Path(__file__).resolve().parents[1]
-REPEATS = 3
+REPEATS = size(3, 1)
+# overrides of the fleet preset: a tiny run simulates one axis of one machine at three visits
+CAMPAIGN = size(None, '[fleet]\nmachines = 1\naxes = ["X"]\nvisits = 3\nadjust_at = []\n')
 GOAL = 3.0
 # Exit codes a command may end with on this data: drift exits 3 when an alert fires.
 ACCEPTED = {"drift": (0, 3), "fleet": (0, 3)}
@@ -51,9 +55,15 @@ def _run(name: str, argv: list[str], env: dict, cwd: Path) -> tuple[float, float
     return wall, usage.ru_maxrss * 1024.0  # ru_maxrss is in KiB on Linux
 
 
-def _simulate(folder: Path, env: dict) -> Path:
-    subprocess.run([sys.executable, "-m", "pipeline.cli", "simulate", "--preset", "fleet",
-                    "--out", str(folder)], env=env, check=True, capture_output=True)
+def simulate_fleet(folder: Path, env: dict) -> Path:
+    """The fleet preset's readings CSV, simulated into ``folder``."""
+    argv = [sys.executable, "-m", "pipeline.cli", "simulate", "--preset", "fleet",
+            "--out", str(folder)]
+    if CAMPAIGN:
+        config = folder.with_suffix(".toml")
+        config.write_text(CAMPAIGN)
+        argv += ["--config", str(config)]
+    subprocess.run(argv, env=env, check=True, capture_output=True)
     return folder / "readings.csv"
 
 
@@ -73,7 +83,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         env = _env(folder)
-        data = _simulate(folder / "fleet", env)
+        data = simulate_fleet(folder / "fleet", env)
         store = folder / "store"
         subprocess.run([*cli, "ingest", str(data), "--store", str(store)], env=env, check=True,
                        capture_output=True)
