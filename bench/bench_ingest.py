@@ -19,8 +19,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench import size
+from bench.bench_fleet import simulate_fleet
+
 REPO = Path(__file__).resolve().parents[1]
-REPEATS = 3
+REPEATS = size(3, 1)
 GOAL = 2.0
 
 
@@ -43,9 +46,7 @@ def main() -> None:
     env = _env()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        subprocess.run([*cli, "simulate", "--preset", "fleet", "--out", str(folder / "fleet")],
-                       env=env, check=True, capture_output=True)
-        data = str(folder / "fleet" / "readings.csv")
+        data = str(simulate_fleet(folder / "fleet", env))
         kept = str(folder / "kept")
         subprocess.run([*cli, "ingest", data, "--store", kept], env=env, check=True,
                        capture_output=True)
