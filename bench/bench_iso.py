@@ -15,7 +15,10 @@ import time
 import numpy as np
 import pandas as pd
 
-TESTS, TARGETS, CYCLES = 10_000, 8, 5
+from bench import size
+
+TESTS, TARGETS, CYCLES = size(10_000, 50), 8, 5
+SMALL = size(200, 10)  # tests analysed all at once and one at a time
 GOAL_S, GOAL_GB = 10.0, 2.0
 
 
@@ -58,7 +61,7 @@ def main() -> None:
           f"(goal < {GOAL_S:.0f} s, ratio {elapsed / GOAL_S:.2f}), {n / elapsed:,.0f} readings/s; "
           f"peak memory {peak_gb:.2f} GB incl. data (goal < {GOAL_GB:.0f} GB)")
 
-    small = readings(200, seed=1)
+    small = readings(SMALL, seed=1)
     _analyse(small)  # warm-up: imports
     start = time.perf_counter()
     _analyse(small)
@@ -67,7 +70,7 @@ def main() -> None:
     for _, one in small.groupby("test_id"):
         _analyse(one)
     looped = time.perf_counter() - start
-    print(f"200 tests: all at once {vectorised:.3f} s, one at a time {looped:.2f} s "
+    print(f"{SMALL} tests: all at once {vectorised:.3f} s, one at a time {looped:.2f} s "
           f"(ratio {looped / vectorised:.0f}x)")
 
 
