@@ -12,7 +12,10 @@ import time
 import numpy as np
 import scipy.linalg
 
-N_SAMPLES, N_INPUTS, EPOCHS, REPEATS = 432, 8, 100, 3
+from bench import size
+
+N_SAMPLES, N_INPUTS, EPOCHS, REPEATS = size(432, 100), 8, size(100, 3), size(3, 1)
+JACOBIANS = size(100, 2)  # Jacobians timed in a row
 RATIO_GOAL, FIT_GOAL_S = 2.0, 0.3
 
 
@@ -132,9 +135,9 @@ def main() -> None:
     theta = torch.from_numpy(theta0)
     Xt = torch.from_numpy(parts["train"][0])
     t_jac = _best_of(lambda: [network.jacobian(theta, Xt, model.shapes_, "tanh")
-                              for _ in range(100)]) / 100
+                              for _ in range(JACOBIANS)]) / JACOBIANS
     t_jacrev = _best_of(lambda: [network.jacobian_autograd(theta, Xt, model.shapes_, "tanh")
-                                 for _ in range(100)]) / 100
+                                 for _ in range(JACOBIANS)]) / JACOBIANS
 
     t_fit = _best_of(lambda: network.ShallowNetwork(random_state=0).fit(X, y))
     paper = network.ShallowNetwork(random_state=0).fit(X, y)
