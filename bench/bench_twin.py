@@ -9,7 +9,10 @@ import subprocess
 import sys
 import time
 
-FLEET = {"fleet": {"machines": 100, "axes": ["X", "Y", "Z"], "visits": 12}}
+from bench import size
+
+MACHINES, VISITS = size(100, 2), size(12, 2)
+FLEET = {"fleet": {"machines": MACHINES, "axes": ["X", "Y", "Z"], "visits": VISITS}}
 GOAL_S = 10.0
 GOAL_GB = 2.0
 
@@ -33,11 +36,11 @@ def _run(machines: int) -> tuple[float, int]:
 
 def main() -> None:
     small_s, small_n = _run(1)
-    fleet_s, fleet_n = _run(100)
+    fleet_s, fleet_n = _run(MACHINES)
     peak_bytes = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024  # Linux: KiB
     peak_gb = peak_bytes / 1e9
-    print(f"1 machine x 3 axes x 12 visits: {small_n:,} readings in {small_s:.2f} s")
-    print(f"100 machines x 3 axes x 12 visits: {fleet_n:,} readings in {fleet_s:.1f} s "
+    print(f"1 machine x 3 axes x {VISITS} visits: {small_n:,} readings in {small_s:.2f} s")
+    print(f"{MACHINES} machines x 3 axes x {VISITS} visits: {fleet_n:,} readings in {fleet_s:.1f} s "
           f"(goal < {GOAL_S:.0f} s, ratio {fleet_s / GOAL_S:.2f}), {fleet_n / fleet_s:,.0f} "
           f"readings/s, peak memory {peak_bytes / 1024**3:.2f} GiB = {peak_gb:.2f} GB "
           f"(goal < {GOAL_GB:g} GB, ratio {peak_gb / GOAL_GB:.2f})")
