@@ -104,30 +104,28 @@ def read_loaded_circles(data, parameter: str = "data") -> pd.DataFrame:
                              f"(SCHEMA.md section 12: the circle table plus {', '.join(ADDED)})",
                              row=1, column=col, **where)
     added = {col: to_float(frame[col], file, col, rows) for col in ADDED}
-    # the circle columns, checked as backlash circle checks them; one circle per centre and
-    # load, so that read_circles sees one run per direction (its visit names them in messages)
+    run = [frame["test_id"].astype(str), frame["direction"].astype(str)]
+    for col in ADDED:
+        changed = added[col].ne(added[col].groupby(run, sort=False).transform("first"))
+        if changed.any():
+            i = int(np.flatnonzero(changed.to_numpy())[0])
+            raise InputError(f"test {frame['test_id'].iloc[i]!r} changes {col} within the "
+                             "run; expected one value per run", row=row_of(rows, i),
+                             column=col, **where)
+    # the circle columns, checked as backlash circle checks them; each run is a circle of its
+    # own to read_circles (its visit names the run), since a centre holds a run per load
     keyed = frame.drop(columns=list(ADDED)).copy()
     keyed.index = rows.to_numpy()
-    visit = keyed["visit"].astype(str) if "visit" in keyed else pd.Series("1", keyed.index)
-    label = [f"{v} @ load {f:g} N @ centre ({x:g}, {y:g}, {z:g}) mm" for v, f, x, y, z in
-             zip(visit, *(added[c] for c in ADDED))]
-    keyed["visit"] = label
+    visit = keyed["visit"] if "visit" in keyed else pd.Series("1", keyed.index)
+    keyed["visit"] = visit.astype(str) + " @ " + keyed["test_id"].astype(str)
     try:
         circles = fc.read_circles(keyed, parameter)
     except InputError as err:
         raise InputError(err.message, row=err.row, column=err.column, **where) from None
-    circles["visit"] = circles["visit"].str.split(" @ load ").str[0]
+    circles["visit"] = circles["visit"].str.rsplit(" @ ", n=1).str[0]
     for col in ADDED:
         circles[col] = added[col].to_numpy()
     circles["row"] = rows.to_numpy()
-    for col in ADDED:
-        changed = circles.groupby(["test_id", "direction"], sort=False)[col].transform(
-            lambda v: v.ne(v.iloc[0]))
-        if changed.any():
-            i = int(np.flatnonzero(changed.to_numpy())[0])
-            raise InputError(f"test {circles['test_id'].iloc[i]!r} changes {col} within the "
-                             "run; expected one value per run", row=row_of(rows, i),
-                             column=col, **where)
     return circles
 
 

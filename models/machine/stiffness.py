@@ -16,8 +16,9 @@ modelled: at each angle of each direction the deviations of the runs at differen
 regressed on the load (``load_slopes``), which leaves :math:`g_d` in the intercept whatever its
 shape, and the slope :math:`s(\\theta) = u^T C u` is fitted by its Fourier terms
 (``plane_compliance``): the constant, :math:`\\cos 2\\theta` and :math:`\\sin 2\\theta` give
-:math:`c_{aa}, c_{bb}, c_{ab}`; :math:`\\cos\\theta, \\sin\\theta` absorb a load-proportional
-shift of the centre (the compliance changing across the circle) and are not reported.
+:math:`c_{aa}, c_{bb}, c_{ab}`; :math:`\\cos\\theta, \\sin\\theta` of each direction absorb a load-correlated
+shift of the centre (the compliance changing across the circle, the pivot moved between runs)
+and are not reported.
 
 Stiffness in a direction is the force along it per um of deflection along it under that
 force: :math:`k_a = 1 / c_{aa}` [N/um].
@@ -172,7 +173,7 @@ def plane_compliance(plane: str, angle_deg, slope_um_per_n, series=None) -> Plan
     """The plane's compliance from the load slopes at each angle (``load_slopes``).
 
     .. math:: s(\\theta) = m_0 + m_2 \\cos 2\\theta + n_2 \\sin 2\\theta
-              + m_1 \\cos\\theta + n_1 \\sin\\theta,
+              + m_{1,d} \\cos\\theta + n_{1,d} \\sin\\theta,
               \\quad c_{aa} = m_0 + m_2,\\; c_{bb} = m_0 - m_2,\\; c_{ab} = n_2
 
     Parameters
@@ -192,8 +193,11 @@ def plane_compliance(plane: str, angle_deg, slope_um_per_n, series=None) -> Plan
     t = np.radians(np.asarray(angle_deg, float))
     s = np.asarray(slope_um_per_n, float)
     series = np.zeros(t.shape, int) if series is None else np.asarray(series)
-    design = np.column_stack([np.ones_like(t), np.cos(2 * t), np.sin(2 * t), np.cos(t),
-                              np.sin(t)])
+    # the 1-per-revolution terms per path: a pivot moved between the runs of one direction
+    # leaves a load-correlated centre shift of its own in that direction's slopes
+    shifts = [np.column_stack([np.cos(t), np.sin(t)]) * (series == k)[:, None]
+              for k in np.unique(series)]
+    design = np.column_stack([np.ones_like(t), np.cos(2 * t), np.sin(2 * t), *shifts])
     coef, *_ = np.linalg.lstsq(design, s, rcond=None)
     residual = s - design @ coef
     dof = max(len(s) - design.shape[1], 1)
