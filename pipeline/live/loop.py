@@ -11,6 +11,7 @@ of ``--until``/``--for`` closes and records the open days.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import signal
 import threading
@@ -18,7 +19,6 @@ import time
 
 import numpy as np
 
-from features.readings.errors import InputError
 from pipeline.live.feed import CHANNELS, AxisFeed
 from pipeline.live.sources import SOURCES
 
@@ -145,10 +145,8 @@ class Watcher:
             task.cancel()
             close = getattr(self.source, "close", None)
             if close is not None:
-                try:
+                with contextlib.suppress(Exception):  # the server may be gone already
                     await close()
-                except Exception:  # noqa: BLE001 - the server may be gone already
-                    pass
         if self.stopping:  # SIGTERM: keep the open day for the next start
             self.tick()
             self.save()
@@ -175,10 +173,7 @@ def run_watch(config, store, *, seconds: float | None, take_up: float, settle_s:
                 loop.add_signal_handler(sig, lambda: setattr(watcher, "stopping", True))
         await watcher.run(seconds)
 
-    try:
-        asyncio.run(main())
-    except InputError:
-        raise
+    asyncio.run(main())
     return watcher
 
 

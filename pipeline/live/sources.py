@@ -83,7 +83,7 @@ class LogSource:
             value = float(parts[3])
         except ValueError:
             return
-        stamp = stamp.replace(tzinfo=dt.timezone.utc)
+        stamp = stamp.replace(tzinfo=dt.UTC)
         ns = (int(stamp.timestamp()) * 1_000_000 + stamp.microsecond) * 1000
         self.emit(parts[0], ns, value)
 
@@ -114,7 +114,7 @@ class CASource:
         for pv in self.pvs:
             try:
                 await pv.wait_for_connection(timeout=timeout_s)
-            except (TimeoutError, asyncio.TimeoutError):
+            except TimeoutError:
                 raise InputError(f"PV {pv.name} does not answer at {self.config.address} "
                                  f"within {timeout_s:g} s (no such PV, or no server)",
                                  parameter="config") from None

@@ -124,8 +124,8 @@ def _seconds_until(text: str) -> float:
         raise InputError(f"{text!r} is not a time; expected ISO 8601 (2026-03-02T18:00)",
                          parameter="until") from None
     if when.tzinfo is None:
-        when = when.replace(tzinfo=dt.timezone.utc)
-    left = (when - dt.datetime.now(dt.timezone.utc)).total_seconds()
+        when = when.replace(tzinfo=dt.UTC)
+    left = (when - dt.datetime.now(dt.UTC)).total_seconds()
     if left <= 0:
         raise InputError(f"{text} has passed; expected a time to come", parameter="until")
     return left
