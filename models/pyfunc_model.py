@@ -6,10 +6,13 @@ the model. A broken or tampered directory raises ``InputError`` with its one-lin
 ``predict`` takes a plan (or new tests' inputs) with the columns of the model's signature
 (``models.serving.input_columns``) and returns a DataFrame: ``backlash_um`` and, for predictors
 with an interval, ``backlash_low_um`` and ``backlash_high_um``, then ``extrapolated`` (the
-inputs of each point outside the trained ranges; ``models.serving``), the same numbers as
-``backlash predict``. A request it cannot interpret (negative operating hours, an unknown axis,
-an axis of a unit the model has no axis of) is refused as ``RefusedRequest``: ``mlflow models
-serve`` answers it with HTTP 400 and a body of one line, no stack trace.
+inputs of each point outside the trained ranges) and, for a fleet model, ``borrowed`` (how it
+forecast an axis it was not trained on): the same numbers and flags as ``backlash predict``,
+from the same check (``models.serving.assess``). A request it cannot interpret or may not
+answer (negative operating hours, an unknown axis, a machine axis the model was not trained
+on, an axis of a unit the model has no axis of) is refused as ``RefusedRequest``: ``mlflow
+models serve`` answers it with HTTP 400 and a body of one line naming the row, no stack
+trace.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ class BacklashPredictor(mlflow.pyfunc.PythonModel):
 
         try:
             points = plan_points(pd.DataFrame(model_input), "request")
-            return prediction_frame(self.model, points)
+            return prediction_frame(self.model, points, "request",
+                                    rows=range(1, len(points) + 1))
         except InputError as err:
             raise RefusedRequest(" ".join(str(err).split())) from None
 

@@ -8,7 +8,8 @@ read from it. Every entry is a scikit-learn style estimator working on the featu
 treat the network, the physics baselines and the comparators alike.
 
 A trained model directory holds ``model.json`` (name, features, target definition,
-validation error, training input ranges, data hash, and the spec and sha256 of every part),
+validation error, training input ranges, the machine axes and units it was trained on
+(``scope``), data hash, and the spec and sha256 of every part),
 ``training_inputs.csv`` (for input-drift tests) and the fitted estimator, written and read by
 ``models.persistence`` (its own format, plain JSON or skops; the loader's checks are described
 there). ``load_model`` is the only reader of model directories.
@@ -380,7 +381,27 @@ def _read_meta(path: Path) -> dict:
                              file=path)
     if not isinstance(meta.get("training_inputs_sha256", ""), str):
         raise InputError("model.json key 'training_inputs_sha256' must be text", file=path)
+    if "scope" in meta:
+        _check_scope(meta["scope"], path)
     return meta
+
+
+def _check_scope(scope, path: Path) -> None:
+    """model.json's ``scope`` (``models.serving.scope_of``): the machine axes the model was
+    trained on, each with the unit of its axis (``um`` linear, ``arcsec`` rotary)."""
+    axes = scope.get("axes") if isinstance(scope, dict) else None
+    if not isinstance(axes, list) or not axes:
+        raise InputError("model.json key 'scope' must list the machine axes the model was "
+                         "trained on ('axes')", file=path)
+    for axis in axes:
+        if (not isinstance(axis, dict) or not all(isinstance(axis.get(k), str)
+                                                  for k in ("machine_id", "axis", "unit"))):
+            raise InputError("model.json 'scope' axes need the text keys machine_id, axis and "
+                             "unit", file=path)
+        if axis["unit"] != schema.deviation_unit(axis["axis"]):
+            raise InputError(f"model.json 'scope' gives axis {axis['axis']} the unit "
+                             f"{axis['unit']!r}; its unit is "
+                             f"{schema.deviation_unit(axis['axis'])!r}", file=path)
 
 
 def _read_training_inputs(directory: Path, sha256: str, where: Path):

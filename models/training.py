@@ -31,14 +31,20 @@ class Fit:
     refit_all: bool = False               # ``estimator`` refit on every row after the scores
 
     def trained_model(self, meta: dict | None = None) -> registry.TrainedModel:
-        """The fitted estimator with what monitoring needs (input ranges, training inputs)."""
+        """The fitted estimator with what monitoring needs (input ranges, training inputs) and
+        what it may answer for: the machine axes and units of its table (``scope``,
+        ``models.serving.scope_of``)."""
         X_train = self.table.X if self.refit_all else self.table.X.iloc[self.train_index]
+        meta_train = self.table.meta if self.refit_all else self.table.meta.iloc[self.train_index]
         ranges = {c: (float(X_train[c].min()), float(X_train[c].max())) for c in X_train}
+        from models.serving import SCOPE, scope_of
+
         axes = _known_axes(self.estimator)
         return registry.TrainedModel(
             self.name, self.estimator, list(self.table.X.columns), self.table.target_kind,
             self.metrics["test_rmse_um"], ranges, X_train.reset_index(drop=True),
-            {"metrics": self.metrics, **({"axes": axes} if axes else {}), **(meta or {})})
+            {"metrics": self.metrics, SCOPE: scope_of(meta_train),
+             **({"axes": axes} if axes else {}), **(meta or {})})
 
 
 def _known_axes(estimator) -> list[dict]:

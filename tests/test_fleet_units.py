@@ -210,6 +210,6 @@ def test_cli_trains_and_forecasts_a_mixed_fleet(tmp_path, capsys):
     assert main(["predict", str(tmp_path / "model"), str(tmp_path / "plan.csv"),
                  "--out", str(tmp_path / "out.csv")]) == 0
     out = pd.read_csv(tmp_path / "out.csv")
-    assert list(out.columns[-5:]) == ["unit", "backlash_um", "backlash_low_um",
-                                      "backlash_high_um", "extrapolated"]
+    assert list(out.columns[-6:]) == ["unit", "backlash_um", "backlash_low_um",
+                                      "backlash_high_um", "extrapolated", "borrowed"]
     assert (out["unit"] == out["axis"].map(deviation_unit)).all()

@@ -106,13 +106,20 @@ def test_signature_lists_the_plan_columns_the_wear_map_uses(wear_map):
     served = mlflow.pyfunc.load_model(f"models:/{NAME}/{version.version}")
     inputs = served.metadata.signature.inputs
     estimator = wear_map.trained.estimator
-    assert inputs.input_names() == ["machine_id", "axis", *estimator.used_features_]
-    assert not any(name.startswith("deviation") for name in inputs.input_names())
-    assert inputs.optional_input_names() == estimator.conditions_ == ["machine_temp_c"]
+    features = wear_map.trained.feature_names_
+    unused = [f for f in features if f not in estimator.used_features_]
+    # the inputs it uses, then, optional, the others it has a trained range of (a value
+    # outside it is flagged, as predict flags it); no deviation is required
+    assert inputs.input_names() == ["machine_id", "axis", *estimator.used_features_, *unused]
+    assert "deviation_up_um" in unused
+    assert inputs.required_input_names() == [
+        "machine_id", "axis", *[f for f in estimator.used_features_ if f != "machine_temp_c"]]
+    assert inputs.optional_input_names() == [*estimator.conditions_, *unused]
+    assert estimator.conditions_ == ["machine_temp_c"]
     outputs = served.metadata.signature.outputs
     assert outputs.input_names() == ["backlash_um", "backlash_low_um", "backlash_high_um",
-                                     "extrapolated"]
-    assert [t.name for t in outputs.input_types()][-1] == "string"
+                                     "extrapolated", "borrowed"]
+    assert [t.name for t in outputs.input_types()][-2:] == ["string", "string"]
 
 
 def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
@@ -120,8 +127,10 @@ def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
     result.write(tmp_path / "ridge")
     spec = model_registry.model_record(result.fit, result.files["model"])["signature"]
     names = [c["name"] for c in spec["inputs"]]
-    assert names == list(result.trained.feature_names_) and "deviation_up_um" in names
-    assert all(c["required"] for c in spec["inputs"])
+    # the machine axis optional (given, it is checked against what the model covers)
+    assert names == ["machine_id", "axis", *result.trained.feature_names_]
+    assert "deviation_up_um" in names
+    assert [c["name"] for c in spec["inputs"] if not c["required"]] == ["machine_id", "axis"]
     assert spec["outputs"] == ["backlash_um", "extrapolated"]
 
 
@@ -195,7 +204,8 @@ def test_pyfunc_returns_the_predict_frame_clipped_at_zero(wear_map, fleet):
     answer = served.predict(plan)
     expected = bl.predict(wear_map.files["model"], plan=plan).predictions
     columns = ["backlash_um", "backlash_low_um", "backlash_high_um"]
-    assert list(answer.columns) == [*columns, "extrapolated"]
+    assert list(answer.columns) == [*columns, "extrapolated", "borrowed"]
+    assert (answer["borrowed"] == "").all()  # every axis of the plan is the fleet's own
     np.testing.assert_allclose(answer[columns], expected[columns], rtol=1e-12)
     assert (answer[columns] >= 0).all().all()
     assert (answer["extrapolated"] == expected["extrapolated"]).all()
@@ -295,7 +305,8 @@ def test_mlflow_models_serve_forecasts_a_plan_over_http(wear_map, fleet, tmp_pat
             stop(server)
     expected = bl.predict(wear_map.files["model"], plan=plan).predictions
     columns = ["backlash_um", "backlash_low_um", "backlash_high_um"]
-    assert list(answer.columns) == [*columns, "extrapolated"] and len(answer) == len(plan)
+    assert list(answer.columns) == [*columns, "extrapolated", "borrowed"]
+    assert len(answer) == len(plan)
     np.testing.assert_allclose(answer[columns], expected[columns], rtol=1e-9)
     # the plan's end targets (0 and 350 mm) lie beyond the training's interior ones
     assert (answer["extrapolated"] == expected["extrapolated"]).all()

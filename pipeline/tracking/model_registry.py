@@ -73,8 +73,13 @@ def model_record(fit, model_dir: Path) -> dict:
 
 
 def _example(fit, inputs: list[dict], rows: int = 5):
-    """The first ``rows`` training rows of the columns the signature lists (numbers as float)."""
+    """The first ``rows`` training rows of the columns the signature lists (numbers as float),
+    with their machine axis."""
+    from models.registry import with_axes
+
     frame = fit.inputs if fit.inputs is not None else fit.table.X
+    if any(c["name"] not in frame for c in inputs):
+        frame = with_axes(fit.table.X, fit.table.meta)
     example = frame[[c["name"] for c in inputs]].iloc[:rows].reset_index(drop=True)
     return example.astype({c["name"]: float for c in inputs if c["type"] == "double"})
 

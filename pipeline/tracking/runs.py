@@ -586,16 +586,16 @@ def log_model(model: dict) -> str:
 def signature(spec: dict):
     """The MLflow ``ModelSignature`` of a record's ``signature`` (plain data): one column per
     input (conditions a plan may omit optional) and one column per output (``double``; the
-    ``extrapolated`` inputs are text)."""
+    ``extrapolated`` inputs and a fleet's ``borrowed`` are text)."""
     from mlflow.models import ModelSignature
     from mlflow.types.schema import ColSpec, Schema
 
-    from models.serving import EXTRAPOLATED
+    from models.serving import TEXT_OUTPUTS
 
     inputs = Schema([ColSpec(c["type"], c["name"], required=c["required"])
                      for c in spec["inputs"]])
     return ModelSignature(inputs=inputs, outputs=Schema([
-        ColSpec("string" if name == EXTRAPOLATED else "double", name)
+        ColSpec("string" if name in TEXT_OUTPUTS else "double", name)
         for name in spec["outputs"]]))
 
 

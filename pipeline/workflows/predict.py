@@ -50,8 +50,10 @@ class PredictionResult(Result):
         interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
         predictions are clipped at 0 (backlash is a magnitude). ``extrapolated`` names the
         point's inputs outside the ranges the model was trained on (``feed_mm_min;target``),
-        empty when none (``models.serving.trained_ranges``). With a rotary axis among the
-        points a ``unit`` column says each row's unit (``arcsec`` for a rotary axis).
+        empty when none (``models.serving.trained_ranges``); a fleet model's ``borrowed``
+        says how it forecast a machine axis it was not trained on (empty for its own). With a
+        rotary axis among the points a ``unit`` column says each row's unit (``arcsec`` for a
+        rotary axis).
     model : str
         Registry name of the predictor.
     recorded : pipeline.store.records.Recorded or None
@@ -132,16 +134,19 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     Raises
     ------
     InputError
-        Neither or both of ``data`` and ``plan``; a ``store`` that does not exist or cannot be
-        written, or points without ``machine_id`` and ``axis`` to record them by (nothing is
-        recorded).
+        Neither or both of ``data`` and ``plan``; a point the model may not answer for (a
+        machine axis it was not trained on, an axis of another unit; a fleet model forecasts
+        another axis of a unit it has a fleet of, with a note: ``models.serving.answerable``),
+        or a model that does not record which axes it was trained on; a ``store`` that does
+        not exist or cannot be written, or points without ``machine_id`` and ``axis`` to
+        record them by (nothing is recorded).
     """
     import pandas as pd
 
     from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
     from models.registry import load_model
-    from models.serving import prediction_frame
+    from models.serving import answerable, predictions
 
     check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
                  "predict")
@@ -159,24 +164,18 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         source = str(plan) if isinstance(plan, (str, os.PathLike)) else "plan"
         table = (read_plan(plan) if isinstance(plan, (str, os.PathLike))
                  else plan_points(plan, source))
+        rows = range(1, len(table) + 1) if source == "plan" else None  # a frame's rows
+        answerable(trained, table, source, rows, parameter="model")  # before what it lacks
         inputs = plan_inputs(table, trained, source)
         keys = list(table.columns)
     else:
         readings = readings_of(data, format)
         source = source_of(data, readings)
         inputs = prediction_inputs(readings, trained.feature_names_)
-        keys = list(KEYS)
+        keys, rows = list(KEYS), None
         check_forecast(trained, inputs, source, plan=False)
-    unknown = getattr(trained.estimator, "unknown_axes", lambda X: [])(
-        trained.inputs(inputs, source))
-    if unknown:
-        names = ", ".join(f"{m} {a}" for m, a in unknown[:4]) + (" ..." if len(unknown) > 4
-                                                                  else "")
-        note(f"{names}: not in the model's fleet; forecast from the fleet's distribution of "
-             "wear maps (a wider interval)")
-    predicted = prediction_frame(trained, inputs, source)
+    predicted, lines = predictions(trained, inputs, source, rows, parameter="model")
     out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
-    lines = extrapolation_notes(trained, inputs)
     for line in lines:
         note(line)
     result = PredictionResult(predictions=out, model=trained.name, notes=lines)
@@ -279,24 +278,3 @@ def check_forecast(model, inputs: pd.DataFrame, source: str, plan: bool) -> None
         raise InputError(f"model {model.name!r} was trained on a single visit (operating "
                          f"hours {low:g} h only): it cannot forecast other hours; train on "
                          "several visits", file=source, column="operating_hours")
-
-
-def extrapolation_notes(model, inputs: pd.DataFrame) -> list[str]:
-    """One note per input with points outside the trained range
-    (``models.serving.extrapolation_lines``); a forecasting model's operating hours only
-    beyond its forecast horizon (``models.serving.FORECAST_HORIZON`` training spans past the
-    last trained hour), with the extrapolation factor."""
-    from models.serving import FORECAST_HORIZON, extrapolation_lines, forecasts
-
-    if not forecasts(model):
-        return extrapolation_lines(model, inputs)
-    lines = extrapolation_lines(model, inputs, skip=("operating_hours",))
-    if "operating_hours" in inputs and "operating_hours" in model.input_ranges_:
-        low, high = model.input_ranges_["operating_hours"]
-        last = float(inputs["operating_hours"].astype(float).max())
-        factor = (last - high) / (high - low) if high > low else 0.0
-        if factor > FORECAST_HORIZON:
-            lines.append(f"operating_hours up to {last:g} h is {factor:.1f}x the training "
-                         f"span ({low:g}-{high:g} h) beyond its end; the forecast "
-                         "extrapolates the wear rate that far")
-    return lines
