@@ -128,6 +128,7 @@ AGREEMENT = [
     ("uncertainty", ["{budget}"], {"budget": "{budget}"}),
     ("volumetric", ["--targets", "5", "--seed", "3"], {"targets": 5, "seed": 3}),
     ("circle", ["{circle}"], {"data": "{circle}"}),
+    ("stiffness", ["{ldbb}", "--ram-top", "200"], {"data": "{ldbb}", "ram_top_mm": 200.0}),
     ("monitor", ["{trace}"], {"traces": "{trace}"}),
     ("kinematics", ["{probes}"], {"data": "{probes}"}),
 ]
@@ -159,6 +160,7 @@ def inputs(two_axes, tmp_path_factory) -> dict:
             "trace": str(folder / "trace.parquet"), "small": str(folder / "small.csv"),
             "scenarios": str(folder / "scenarios.toml"), "ess": str(ESS),
             "circle": str(ROOT / "experiments/data/circle/ballbar_xy.csv"),
+            "ldbb": str(ROOT / "experiments/data/stiffness/ldbb.csv"),
             "probes": str(ROOT / "experiments/data/kinematics/probes.csv"),
             "budget": str(ROOT / "experiments/data/paper_uncertainty.toml")}
 
