@@ -266,3 +266,109 @@ def test_the_circles_are_written_at_the_radius_given(cli, tmp_path):
                 str(tmp_path / "v")]) == 0
     circles = pd.read_csv(tmp_path / "v" / "circles.csv")
     assert set(circles["radius_mm"]) == {80.0} and set(circles["plane"]) == {"XY", "YZ", "ZX"}
+
+
+# ------------------------------------------------------------------------- the path under load
+def pocket_path():
+    """A rectangular pocket at two depths, the cutting force 400 N against the feed."""
+    import itertools
+
+    import pandas as pd
+
+    corners = np.array([[400, -2200], [1100, -2200], [1100, -1400], [400, -1400],
+                        [400, -2200]], float)
+    s = np.linspace(0.0, 1.0, 21)[:-1]
+    xyz = np.array([(*(a + (b - a) * t), z) for z in (-300.0, -700.0)
+                    for a, b in itertools.pairwise(corners) for t in s])
+    step = np.diff(xyz[:, :2], axis=0, prepend=xyz[:1, :2])
+    step[0] = step[1]
+    force = -400.0 * step / np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-9)
+    return pd.DataFrame({"x_mm": xyz[:, 0], "y_mm": xyz[:, 1], "z_mm": xyz[:, 2],
+                         "fx_n": force[:, 0], "fy_n": force[:, 1]})
+
+
+@pytest.fixture(scope="module")
+def path_result():
+    import warnings
+
+    import backlash as bl
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return bl.volumetric(path=pocket_path(), targets=11, track=False)
+
+
+def test_each_part_of_the_error_along_a_path_matches_the_twins(paper, path_result):
+    from models.machine import path_error as pe
+    from models.physics import loaded_circles as lc
+
+    frame = path_result.path
+    xyz = frame[["x_mm", "y_mm", "z_mm"]].to_numpy()
+    force = np.column_stack([frame["fx_n"], frame["fy_n"], np.zeros(len(frame))])
+    truth = {"geometric": twin.tool_error_um(paper.geometry, xyz, paper.tool_mm),
+             "backlash": pe.backlash_error_um(xyz, {a: paper.drives[a].backlash_um
+                                                    for a in twin.AXES}),
+             "load": lc.paper_stiffness(paper).deflection_um(xyz, force)}
+    got = {name: frame[[f"{name}_{a}_um" for a in "xyz"]].to_numpy() for name in truth}
+    # the Abbe-aware identification is within about 1 um of every error function
+    assert np.abs(got["geometric"] - truth["geometric"]).max() < 2.0
+    # the play found by the circles' diagnosis, half of it against the direction of motion
+    assert np.abs(got["backlash"] - truth["backlash"]).max() < 0.5
+    # the deflection in X and Y from the map of the twin's own loaded circles
+    load, true_load = got["load"][:, :2], truth["load"][:, :2]
+    assert np.all(np.abs(load - true_load) <= 0.05 * np.abs(true_load) + 0.3)
+    assert np.abs(true_load).max() > 10  # the load is not negligible on this path
+    assert np.isnan(got["load"][:, 2]).all()  # XY circles say nothing of Z
+    total = frame[[f"total_{a}_um" for a in "xyz"]].to_numpy()
+    assert total == pytest.approx(got["geometric"] + got["backlash"]
+                                  + np.nan_to_num(got["load"]))
+    summary = path_result.path_summary
+    assert summary["stiffness_map"] == "cubic"
+    assert summary["error_vs_twin_um"]["load"] < 0.5
+
+
+def test_the_backlash_follows_the_direction_each_axis_last_moved():
+    from models.machine import path_error as pe
+
+    path = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 1, 0]], float)
+    sense = pe.motion_sense(path)
+    assert sense[:, 0].tolist() == [1, 1, 1, 1, -1, -1]  # held through the stop at row 3
+    assert sense[:, 1].tolist() == [1, 1, 1, 1, 1, 1]  # before its first move: that move's
+    assert sense[:, 2].tolist() == [0] * 6
+    e = pe.backlash_error_um(path, {"X": 6.0, "Y": 4.0})
+    assert e[:, 0].tolist() == [-3, -3, -3, -3, 3, 3] and set(e[:, 1]) == {-2.0}
+
+
+def test_a_saved_stiffness_and_its_loaded_circles_give_the_same_load(tmp_path):
+    import warnings
+
+    import backlash as bl
+
+    ldbb = "experiments/data/stiffness/ldbb.csv"
+    from pathlib import Path
+
+    ldbb = str(Path(__file__).resolve().parents[1] / ldbb)
+    path = pocket_path().iloc[::4]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bl.stiffness(ldbb, ram_top_mm=200.0, out=str(tmp_path / "s"), track=False)
+        a = bl.volumetric(path=path, stiffness=ldbb, targets=5, track=False)
+        b = bl.volumetric(path=path, stiffness=str(tmp_path / "s" / "stiffness.json"),
+                          targets=5, track=False)
+    assert a.path["load_x_um"].to_numpy() == pytest.approx(b.path["load_x_um"].to_numpy())
+    assert b.path_summary["stiffness_source"].endswith("stiffness.json")
+
+
+def test_without_a_path_the_job_is_unchanged(cli, capsys):
+    assert cli(["volumetric", "--targets", "5", "--json"]) == 0
+    assert "path" not in json.loads(capsys.readouterr().out)
+
+
+def test_a_stiffness_without_a_path_or_a_path_without_forces_is_refused(cli, capsys, tmp_path):
+    ldbb = tmp_path / "points.csv"
+    pocket_path().drop(columns="fy_n").to_csv(ldbb, index=False)
+    assert cli(["volumetric", "--path", str(ldbb), "--out", str(tmp_path / "v")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "column 'fy_n': missing required column" in err and "\n" not in err
+    assert cli(["volumetric", "--stiffness", str(ldbb)]) == 2
+    assert "--stiffness" in capsys.readouterr().err and not (tmp_path / "v").exists()

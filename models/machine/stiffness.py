@@ -473,3 +473,48 @@ def deflection_um(stiffness_map: StiffnessMap, point_mm, force_n) -> tuple[np.nd
     d = np.einsum("mij,mj->mi", c, f)
     s = np.sqrt(np.einsum("mij,mj->mi", u ** 2, f ** 2))
     return d, s
+
+
+def map_from_json(saved: dict) -> StiffnessMap:
+    """A map written by ``backlash stiffness --out`` (``StiffnessMap.to_json`` plus
+    ``covariance``: component -> its coefficients' covariance) back as a ``StiffnessMap``.
+
+    Raises
+    ------
+    KeyError
+        A map without its form, coefficients or covariances.
+    """
+    components = {name: (np.asarray(value["coefficients_um_per_n"], float),
+                         np.asarray(saved["covariance"][name], float))
+                  for name, value in saved["components"].items()}
+    return StiffnessMap(saved["form"], saved.get("ram_top_mm"), components,
+                        cv=saved.get("cv", {}), decided=saved.get("decided", True),
+                        reason=saved.get("reason", ""))
+
+
+def map_values(found) -> tuple[np.ndarray, dict]:
+    """The inputs of ``choose_map`` from the centres' compliances.
+
+    Parameters
+    ----------
+    found : iterable of (centre_mm, PlaneCompliance)
+        Each centre's position (3,) [mm] and the compliance of a plane there.
+
+    Returns
+    -------
+    ndarray, dict
+        The distinct centre positions (n, 3) [mm]; component -> (centre indices, values
+        [um/N], standard uncertainties [um/N]) (a centre measured in two planes gives a
+        component shared by both twice).
+    """
+    keys, positions, values = {}, [], {}
+    for centre_mm, pc in found:
+        key = tuple(np.round(np.asarray(centre_mm, float), 6))
+        if key not in keys:
+            keys[key] = len(positions)
+            positions.append(np.asarray(centre_mm, float))
+        for name, (value, u) in pc.components.items():
+            triple = values.setdefault(name, ([], [], []))
+            for target, v in zip(triple, (keys[key], value, u)):
+                target.append(v)
+    return (np.array(positions), {n: tuple(np.array(v) for v in t) for n, t in values.items()})

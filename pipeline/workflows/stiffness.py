@@ -172,7 +172,7 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
         mine = [c for c in items if c.machine_id == machine_id]
         found = [(c, st.centre_compliance(c.plane, c.runs)) for c in mine]
         centres_json = [_centre_json(c, pc) for c, pc in found]
-        positions, values = _components(found)
+        positions, values = st.map_values((c.centre_mm, pc) for c, pc in found)
         stiffness_map, map_notes = st.choose_map(positions, values, ram_top_mm, form)
         notes += [f"machine {machine_id!r}: {n}" for n in map_notes]
         maps[machine_id] = stiffness_map
@@ -201,25 +201,6 @@ def _centre_json(centre, pc) -> dict:
             "compliance_um_per_n": pc.compliance_um_per_n.tolist(),
             "compliance_u_um_per_n": [[float(u[0]), float(u[1])], [float(u[1]), float(u[2])]],
             "rms_residual_um_per_n": pc.rms_residual_um_per_n}
-
-
-def _components(found) -> tuple:
-    """The distinct centre positions and, per compliance component, (centre indices, values,
-    standard uncertainties) for ``choose_map``."""
-    import numpy as np
-
-    keys, positions, values = {}, [], {}
-    for centre, pc in found:
-        key = tuple(np.round(centre.centre_mm, 6))
-        if key not in keys:
-            keys[key] = len(positions)
-            positions.append(centre.centre_mm)
-        for name, (value, u) in pc.components.items():
-            values.setdefault(name, ([], [], []))
-            for target, v in zip(values[name], (keys[key], value, u)):
-                target.append(v)
-    return (np.array(positions), {name: tuple(np.array(v) for v in triple)
-                                  for name, triple in values.items()})
 
 
 def _deflection(at, maps: dict, items) -> tuple:
