@@ -341,3 +341,22 @@ def test_a_validity_of_no_months_is_refused(cli, capsys, tmp_path):
     assert "column 'report.calibration_valid_months': 0 is not a validity" in one_error_line(
         capsys, "report")
     assert not out.exists()
+
+
+def test_report_checks_the_calibration_against_the_tests_it_signs(cli, capsys, tmp_path):
+    """End to end: the twin's tests of 2026-01-05 signed with the example's instrument,
+    calibrated on 2026-02-10, are refused; a meta file with a 1-month validity and a
+    calibration of 2025-10-01 signs them with a note that they were out of calibration."""
+    twin = REPO / "experiments" / "data" / "twin" / "readings.csv"
+    out = tmp_path / "report"
+    assert cli(["report", str(twin), "--meta", str(META), "--out", str(out)]) == 2
+    line = one_error_line(capsys, "report")
+    assert "is dated 2026-02-10, after the test of 2026-01-05" in line
+    assert not out.exists()
+    old = meta_file(tmp_path, ("instrument_calibrated_on = 2026-02-10",
+                               "instrument_calibrated_on = 2025-10-01\n"
+                               "calibration_valid_months = 1"),
+                    ("calibrated_on = 2026-01-15", "calibrated_on = 2025-10-01"))
+    assert cli(["report", str(twin), "--meta", str(old), "--out", str(out)]) == 0
+    assert "the instrument's calibration of 2025-10-01 expired on 2025-11-01" in (
+        capsys.readouterr().err)

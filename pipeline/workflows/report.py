@@ -115,4 +115,7 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
             budget = replace(budget, name=Path(uncertainty).name if given else "")
         params["uncertainty"] = budget
     result = iso_workflow.iso(**params)
-    return ReportResult(iso=result, meta=signed, notes=list(result.notes))
+    notes = list(result.notes)
+    if signed is not None:  # a calibration after the test refused, an expired one noted
+        notes += signed.against_tests(result.readings)
+    return ReportResult(iso=result, meta=signed, notes=notes)
