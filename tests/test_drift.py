@@ -216,10 +216,11 @@ def test_json_without_out_prints_the_series_and_writes_nothing(tmp_path, capsys)
     series = json.loads(captured.out)["series"]
     assert len(series) == 1 and len(series[0]["visits"]) == 6
     assert "report:" not in captured.err and set(tmp_path.iterdir()) == before
-    # neither a report folder nor --json: one line, exit 2
-    assert cli.main(["drift", str(path)]) == 2
-    assert capsys.readouterr().err.splitlines() == [
-        "backlash drift: error: --out: give the report folder (--out) or --json"]
+    # neither a report folder nor --json: the table on stderr, as fleet prints it, no file
+    assert cli.main(["drift", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.splitlines()[0].startswith("machine")
+    assert "report:" not in captured.err and set(tmp_path.iterdir()) == before
 
 
 def test_growing_series_with_adjustment_exits_3(tmp_path, capsys):

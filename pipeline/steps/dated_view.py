@@ -3,8 +3,10 @@
 Both views place every visit on the calendar. A test without a start date (``started_at``)
 cannot be placed: it is left out, with one note naming the tests, rather than stopping the
 view. A view is computed as of a day (``as_of``, default today, UTC) and measures what is
-overdue against that day; given a day, it sees the tests started by the end of it, as it would
-have been seen then.
+overdue against that day; it sees the tests started by the end of that day, as it would have
+been seen then. Today is no exception: a test dated ahead (a mistyped year, a simulated plan
+ingested with ``--allow-future``) would otherwise be taken for the axis's latest visit and
+hide an overdue one.
 """
 
 from __future__ import annotations
@@ -45,9 +47,9 @@ def dated_view(readings, as_of: dt.date | None, source: str = "readings"):
     """The readings a view computed as of ``as_of`` sees, and its notes.
 
     Tests without ``started_at`` are left out (one note naming them), so are tests started
-    after the end of the day ``as_of`` (UTC; one note counting them) when a day is given (the
-    default day, today, cuts nothing: only simulated tests lie in the future). Readings
-    without a ``started_at`` column are returned as they are (the view says what it needs).
+    after the end of the day ``as_of`` (UTC; one note counting them). ``as_of`` None keeps
+    every dated test (for a caller that has no day). Readings without a ``started_at`` column
+    are returned as they are (the view says what it needs).
 
     Raises
     ------

@@ -76,3 +76,51 @@ def _limit(machine: str, key: str, value, file, parameter: str) -> float:
         raise InputError(f"{machine}.{key} = {value!r}: expected a positive finite number",
                          file=file, parameter=parameter)
     return float(value)
+
+
+def limit_notes(limits: dict | None, threshold_um, threshold_arcsec, data, readings,
+                source=None) -> list[str]:
+    """Notes on limits that can apply to nothing: a limit of a machine or axis the data do
+    not hold (a store: anywhere in it, so a selection of other machines says nothing), and a
+    threshold whose unit no axis of the readings has (``threshold_um`` on rotary axes only,
+    which are in arcsec). A slip here would otherwise pass as "no alert". ``source`` is the
+    limits file (or the dict) as given, named in the notes."""
+    from features.readings.schema import ROTARY_AXES
+
+    held = _held_axes(data, readings)
+    notes = []
+    machines = {m for m, _ in held}
+    name = str(source) if isinstance(source, (str, os.PathLike)) else "limits"
+    for machine, axis in sorted(limits or {}):
+        key = f"{machine}.{axis}_{deviation_unit(axis)}"
+        if machine not in machines:
+            notes.append(f"{name}: {key}: the data hold no machine {machine} (machines "
+                         f"{_listed(sorted(machines))}); the limit applies to nothing")
+        elif (machine, axis) not in held:
+            axes = sorted(a for m, a in held if m == machine)
+            notes.append(f"{name}: {key}: machine {machine} has no axis {axis} in the data "
+                         f"(axes {', '.join(axes)}); the limit applies to nothing")
+    axes = set(readings["axis"].unique())
+    rotary = axes <= set(ROTARY_AXES)
+    if threshold_um is not None and rotary:
+        notes.append(f"threshold_um (--threshold-um {threshold_um:g}) is a limit in um of the "
+                     f"linear axes; the data hold rotary axes only ({', '.join(sorted(axes))}), "
+                     "in arcsec: give threshold_arcsec (--threshold-arcsec)")
+    if threshold_arcsec is not None and not axes & set(ROTARY_AXES):
+        notes.append(f"threshold_arcsec (--threshold-arcsec {threshold_arcsec:g}) is a limit "
+                     "in arcsec of the rotary axes; the data hold linear axes only "
+                     f"({', '.join(sorted(axes))}), in um: give threshold_um (--threshold-um)")
+    return notes
+
+
+def _held_axes(data, readings) -> set[tuple[str, str]]:
+    """(machine, axis) pairs the data hold: a whole store's, else the readings'."""
+    from pipeline.store import is_store, open_store
+
+    if isinstance(data, (str, os.PathLike)) and is_store(data):
+        return set(open_store(data).axes())
+    return set(map(tuple, readings[["machine_id", "axis"]].drop_duplicates().to_numpy()))
+
+
+def _listed(names: list[str], most: int = 5) -> str:
+    return ", ".join(names[:most]) + (" ..." if len(names) > most else "")

@@ -228,7 +228,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     values["evidence"] = ",".join(sources)
     records = _evidence_records(data if store is None else store, sources)
     from pipeline.steps.dated_view import as_of_date, dated_view
-    from pipeline.steps.limits import read_limits
+    from pipeline.steps.limits import limit_notes, read_limits
 
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
@@ -243,15 +243,18 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         from models.registry import load_model
 
         predictor = load_model(model)
-    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
+    # today as any other day: a test dated ahead (a mistyped year) is no visit yet, and
+    # taken for the latest one it would hide an overdue axis
+    readings, notes = dated_view(readings_of(data, format), day)
+    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, data, readings,
+                         limits)
     visits = visit_backlash(readings, budget=budget)
     k = None if budget is None else budget.coverage_factor
     offsets = {}
     if records is not None:
         from pipeline.steps.evidence import with_evidence
 
-        visits, offsets, more = with_evidence(visits, records, sources,
-                                              None if as_of is None else day, k)
+        visits, offsets, more = with_evidence(visits, records, sources, day, k)
         notes += more
     counts = visits.groupby(list(SERIES_KEYS)).size()
     notes += [f"{m} axis {a}: a single visit, no drift analysis"

@@ -411,7 +411,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
               "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
     check_params(PARAMETERS, values, "fleet")
     from pipeline.steps.dated_view import as_of_date, dated_view
-    from pipeline.steps.limits import read_limits
+    from pipeline.steps.limits import limit_notes, read_limits
 
     day = as_of_date(as_of)
     values["as_of"] = day.isoformat()
@@ -422,7 +422,11 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from features.visits import visit_backlash
     from models.drift import analyse_visits, two_visit_notes
 
-    readings, notes = dated_view(readings_of(data, format), None if as_of is None else day)
+    # today as any other day: a test dated ahead (a mistyped year) is no visit yet, and
+    # taken for the latest one it would hide an overdue axis
+    readings, notes = dated_view(readings_of(data, format), day)
+    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, data, readings,
+                         limits)
     # once, for the series and the pages alike
     parts = fleet_parts(readings, iso230.per_target(readings))
     visits = visit_backlash(readings, parts.stats, points=parts.points, figures=parts.figures)
