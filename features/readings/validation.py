@@ -56,8 +56,11 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     frame = _rename_case_insensitive(frame)
     missing = [c for c in schema.REQUIRED if c not in frame]
     if missing:
+        given = [c for c in frame.columns if closest_column(c) == missing[0]]
+        hint = f"; is {given[0]!r} meant to be it?" if given else ""
         raise InputError(f"missing required column {missing[0]!r} (required: "
-                         f"{', '.join(schema.REQUIRED)})", file=path, row=1, column=missing[0])
+                         f"{', '.join(schema.REQUIRED)}){hint}", file=path, row=1,
+                         column=missing[0])
     if schema.DEVIATION not in frame and schema.MEASURED not in frame:
         raise InputError("missing column 'deviation_um' (or 'measured'): one of them is required",
                          file=path, row=1, column="deviation_um")
@@ -93,12 +96,45 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     ordered = [c for c in (*schema.REQUIRED, "deviation_um", "measured", *schema.OPTIONAL)
                if c in frame]
     extra = [c for c in frame.columns if c not in ordered and c != ROW]
+    typos = [c for c in extra if closest_column(c) is not None]
+    if typos:  # kept as given (convert passes them on), but nothing reads them as meant
+        note(f"{path}: {unknown_columns_text(typos)}: not in the readings contract, so no "
+             "figure reads them")
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
     for key in (schema.UNSTATED, schema.NAMED_BY):
         if raw.attrs.get(key):
             out.attrs[key] = raw.attrs[key]
     return out
+
+
+# How alike (difflib's ratio) an unknown column must be to a contract column to be taken for
+# a misspelling of it: machine_tmp_c -> machine_temp_c (0.96), humidity -> humidity_pct (0.8).
+CLOSE_NAME = 0.8
+
+
+def contract_columns() -> tuple[str, ...]:
+    """Every column the readings contract names (required and optional)."""
+    return (*schema.REQUIRED, schema.DEVIATION, schema.MEASURED, *schema.OPTIONAL)
+
+
+def closest_column(name: str) -> str | None:
+    """The contract column ``name`` is most probably a misspelling of, or None."""
+    import difflib
+
+    known = contract_columns()
+    found = difflib.get_close_matches(str(name).strip().lower(), known, n=1, cutoff=CLOSE_NAME)
+    return found[0] if found and found[0] != name else None
+
+
+def unknown_columns_text(names: list[str]) -> str:
+    """Columns outside the contract as a message names them, each with the contract column
+    it is closest to: ``machine_tmp_c: did you mean machine_temp_c?``."""
+    parts = []
+    for name in names:
+        close = closest_column(name)
+        parts.append(f"{name}: did you mean {close}?" if close else str(name))
+    return "; ".join(parts)
 
 
 def check_header(names: list[str], path: Path) -> None:
