@@ -95,7 +95,7 @@ def test_new_tests_are_added_beside_the_stored_ones(store, tmp_path):
     assert result.readings_added == 1440
     assert result.to_json()["files"][1] == {"file": str(tmp_path / "M01_v04.csv"),
                                             "readings": 1440, "tests": 18, "added": 18,
-                                            "unchanged": 0}
+                                            "replaced": 0, "unchanged": 0}
 
 
 def test_a_test_stored_with_other_readings_is_refused_and_nothing_changes(store, tmp_path,
@@ -133,11 +133,13 @@ def test_a_test_given_twice_in_one_ingest_is_stored_once(tmp_path):
     assert (result.added, result.unchanged, result.tests_in_store) == (18, 18, 18)
 
 
-def test_extra_columns_are_named_in_a_note(tmp_path):
+def test_extra_columns_are_refused_or_left_out_with_a_note(tmp_path):
     path = tmp_path / "extra.csv"
     visit_frame("01").assign(operator="ann").to_csv(path, index=False)
-    with pytest.warns(BacklashWarning, match="columns operator are not in the readings"):
+    with pytest.raises(InputError, match="unknown column operator; the store keeps only"):
         bl.ingest(path, store=tmp_path / "s")
+    with pytest.warns(BacklashWarning, match="column operator left out of the store"):
+        bl.ingest(path, store=tmp_path / "s", allow_unknown_columns=True)
     assert "operator" not in bl.read(tmp_path / "s").columns
 
 

@@ -337,7 +337,7 @@ def test_a_store_of_the_previous_format_reads_and_is_upgraded_by_its_first_void(
     bl.void(store, machine="M1", axis="X", test_id=bl.read(store)["test_id"].iloc[0],
             reason="r")
     with manifest(store) as conn:
-        assert conn.execute("SELECT value FROM meta").fetchone() == ("3",)
+        assert conn.execute("SELECT value FROM meta").fetchone() == ("4",)
 
 
 @pytest.mark.parametrize(("url", "words"), [

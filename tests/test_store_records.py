@@ -264,7 +264,7 @@ def test_a_store_of_format_1_has_no_records_and_its_first_record_upgrades_it(sto
     assert len(only(read_records(store, "forecast"))) == 1
     assert read_records(store, "compensation") == {}
     pd.testing.assert_frame_equal(bl.read(store), before)
-    assert version(store) == str(FORMAT_VERSION) == "3"
+    assert version(store) == str(FORMAT_VERSION) == "4"
     execute(store, "UPDATE meta SET value = ? WHERE key = 'format_version'",
             str(FORMAT_VERSION + 1))
     with pytest.raises(InputError, match=f"store format {FORMAT_VERSION + 1}"):

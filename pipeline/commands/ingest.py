@@ -18,11 +18,17 @@ def run(args: argparse.Namespace) -> int:
 
     from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
+    from pipeline.workflows.ingest import IngestInterrupted
 
-    result = run_job("ingest", args, "ingest")
+    try:
+        result = run_job("ingest", args, "ingest")
+    except IngestInterrupted as stop:  # say what the store kept, then stop as Ctrl-C does
+        print(f"backlash ingest: interrupted: {stop.text}", file=sys.stderr)
+        raise
     for f in result.inputs:
+        replaced = f"{f['replaced']} replaced, " if f["replaced"] else ""
         print(f"{f['file']}: {f['tests']} tests, {f['readings']} readings: {f['added']} added, "
-              f"{f['unchanged']} already stored", file=sys.stderr)
+              f"{replaced}{f['unchanged']} already stored", file=sys.stderr)
     print(f"store {result.store}: {result.tests_in_store} tests", file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))

@@ -19,7 +19,10 @@ from pipeline.store import tables
 # added the record tables (``records``): a version-1 store reads as having no records and is
 # upgraded by its first record. Version 3 added the void tables (``tables.VOIDED``, ``AUDIT``):
 # a reader of version 2 would read a voided test, so a store with voids must refuse it.
-FORMAT_VERSION = 3
+# Version 4 added the audit's digests of a replaced test (``tables.DIGEST_COLUMNS``): the
+# readings a replacement superseded stay in their part, which the check of version 3 would
+# take for an orphan and its repair remove.
+FORMAT_VERSION = 4
 # The embedded store's manifest: a folder holding it is a store.
 MANIFEST = "manifest.sqlite"
 KEYS = list(schema.TEST_KEYS)
@@ -35,10 +38,17 @@ class Added:
         Digest rows (``content.digests``) of the tests written.
     same : DataFrame
         Digest rows of the tests that were already stored with the same readings.
+    replaced : DataFrame or None
+        With ``replace``: digest rows of the tests whose readings were replaced, with the
+        digest they had (``old_sha256``).
+    voided : tuple
+        The keys of the replaced tests that are voided (they stay voided).
     """
 
     new: object
     same: object
+    replaced: object = None
+    voided: tuple = ()
 
 
 class Transaction:
@@ -79,6 +89,20 @@ class Transaction:
         return sorted(self.conn.execute(f"SELECT {', '.join(KEYS)} FROM {self.TESTS} AS t "
                                         f"WHERE {where}", tuple(given.values())).fetchall())
 
+    def visit_as_stored(self, machine: str, axis: str, visit):
+        """``visit`` as the store writes it for the machine axis: ``8`` is the stored ``08``
+        (the same number, where exactly one stored visit has it), so a visit typed without
+        its leading zero finds its tests and a refusal names the visit as stored."""
+        if visit is None:
+            return None
+        stored = [v for (v,) in self.conn.execute(
+            f"SELECT DISTINCT visit FROM {self.TESTS} WHERE machine_id = {self.MARK} AND "
+            f"axis = {self.MARK}", (machine, axis)).fetchall()]
+        if visit in stored or not visit.strip().isdigit():
+            return visit
+        same = [v for v in stored if v.strip().isdigit() and int(v) == int(visit)]
+        return same[0] if len(same) == 1 else visit
+
     def stored(self, digests):
         """Digest rows (``KEYS`` + ``sha256``) of the tests of ``digests`` already stored."""
         raise NotImplementedError
@@ -86,6 +110,19 @@ class Transaction:
     def write(self, table, digests) -> None:
         """Write the readings (``content`` store table, Arrow) and digests of new tests."""
         raise NotImplementedError
+
+    def replace(self, table, digests) -> None:
+        """Write the readings and digests of stored tests in place of those stored (every
+        reader reads the new ones; the audit row is the caller's)."""
+        raise NotImplementedError
+
+    def voided_of(self, keys: list[tuple]) -> list[tuple]:
+        """The keys among ``keys`` that are voided."""
+        table = tables.VOIDED[self.ENGINE]
+        if not keys or not self.has_table(table):
+            return []
+        found = set(self.conn.execute(f"SELECT {', '.join(KEYS)} FROM {table}").fetchall())
+        return [k for k in keys if tuple(k) in found]
 
     def commit(self) -> None:
         raise NotImplementedError
@@ -150,6 +187,7 @@ class Store:
             No stored test matches (none voided, with ``undo``); nothing is written.
         """
         with self.transaction() as tx:
+            visit = tx.visit_as_stored(machine, axis, visit)
             keys = tx.matching(machine, axis, visit, test_id, voided=undo)
             if not keys:
                 what = ", ".join(f"{k} {v}" for k, v in (("machine", machine), ("axis", axis),
@@ -181,8 +219,9 @@ class Store:
         frame = pd.DataFrame(voided, columns=KEYS).merge(last, on=KEYS, how="left")
         return frame[[*KEYS, "at", "user_name", "reason"]].sort_values(KEYS, ignore_index=True)
 
-    def add(self, table, digests) -> Added:
-        """Add tests in one transaction.
+    def add(self, table, digests, replace: bool = False, reason: str | None = None) -> Added:
+        """Add tests in one transaction, or with ``replace`` put corrected readings in place
+        of stored ones.
 
         Parameters
         ----------
@@ -191,21 +230,52 @@ class Store:
         digests : DataFrame
             One row per test of ``table``: ``KEYS``, ``sha256``, ``readings``, ``started_at``
             and ``file`` (where it came from, for messages).
+        replace : bool
+            Every test must be stored already; those stored with other readings get these
+            readings, and the audit a row each with the time, the user, ``reason`` and both
+            digests. A voided test stays voided.
+        reason : str, optional
+            Why the tests are replaced (``replace`` only).
 
         Raises
         ------
         InputError
-            A test is already stored with other readings (naming its file and the test);
-            nothing is written.
+            A test is already stored with other readings (``replace``: a test not stored),
+            naming its file and the test; nothing is written.
         """
         with self.transaction() as tx:
             stored = tx.stored(digests)
+            if replace:
+                return self._replace(tx, table, digests, stored, reason)
             same = _check_same(digests, stored)
             new = digests[~same].reset_index(drop=True)
             if len(new):
                 tx.write(_rows_of(table, digests, same), new)
                 tx.commit()
         return Added(new, digests[same].reset_index(drop=True))
+
+    def _replace(self, tx, table, digests, stored, reason) -> Added:
+        both = digests.merge(stored, on=KEYS, how="left", suffixes=("", "_stored"))
+        unknown = both["sha256_stored"].isna().to_numpy()
+        if unknown.any():
+            row = both[unknown].iloc[0]
+            raise InputError(f"test {row['test_id']!r} (machine {row['machine_id']}, axis "
+                             f"{row['axis']}, visit {row['visit']}) is not in the store; "
+                             "--replace replaces stored tests only (ingest new tests without "
+                             "it); nothing was changed", file=row["file"])
+        same = (both["sha256_stored"] == both["sha256"]).to_numpy()
+        changed = both[~same].rename(columns={"sha256_stored": "old_sha256"})
+        changed = changed.reset_index(drop=True)
+        voided = ()
+        if len(changed):
+            tx.upgrade()  # the audit's digest columns
+            tx.replace(_rows_of(table, digests, same), digests[~same].reset_index(drop=True))
+            tables.replace_rows(tx.conn, tx.ENGINE, tx.MARK,
+                                changed[[*KEYS, "old_sha256", "sha256"]].itertuples(index=False),
+                                tables.now(), _user(), reason or "")
+            voided = tuple(tx.voided_of(list(changed[KEYS].itertuples(index=False, name=None))))
+            tx.commit()
+        return Added(digests[:0], digests[same].reset_index(drop=True), changed, voided)
 
     def read(self, selection):
         """The validated readings frame of the tests ``selection`` keeps.

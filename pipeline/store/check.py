@@ -1,7 +1,8 @@
 """What ``backlash store check`` finds: every recorded test's readings present and as the
 manifest says (count and digest), every part recorded and readable, nothing on disk that the
-manifest does not name. The engines gather the facts (``FolderStore.check``,
-``PostgresStore.check``); this module holds the result and the comparison they share."""
+manifest does not name, and every replaced test (``ingest --replace``) holding the readings its
+last replacement recorded in the audit. The engines gather the facts (``FolderStore.check``,
+``PostgresStore.check``); this module holds the result and the comparisons they share."""
 
 from __future__ import annotations
 
@@ -85,3 +86,35 @@ def compare(tests, found) -> list[str]:
 class _Found:
     sha256: str
     readings: int
+
+
+def replacement_problems(tests, replacements: list[tuple]) -> list[str]:
+    """One line per replaced test whose digest in the manifest is not the one its last
+    replacement recorded in the audit (``tables.replacements`` rows), or that the manifest
+    no longer holds: the manifest was changed outside backlash since."""
+    last = {tuple(r[:4]): r for r in replacements}  # oldest first: the last one wins
+    held = {tuple(getattr(t, k) for k in KEYS): t.sha256 for t in tests.itertuples(index=False)}
+    lines = []
+    for key, (machine, axis, visit, test_id, at, user, _, _, sha) in sorted(last.items()):
+        test = _Key(machine, axis, visit, test_id)
+        if key not in held:
+            lines.append(f"{name(test)}: replaced on {at} by {user}, but the manifest no longer "
+                         "holds it")
+        elif held[key] != sha:
+            lines.append(f"{name(test)}: its digest is not the one its replacement on {at} by "
+                         f"{user} recorded: the manifest was changed outside backlash")
+    return lines
+
+
+def superseded(replacements: list[tuple]) -> set[tuple]:
+    """(``KEYS``..., digest) of every reading set a replacement superseded: kept as history in
+    the part that held it, never an orphan."""
+    return {(*r[:4], r[7]) for r in replacements}
+
+
+@dataclass
+class _Key:
+    machine_id: str
+    axis: str
+    visit: str
+    test_id: str

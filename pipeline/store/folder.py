@@ -87,6 +87,10 @@ class FolderStore(Store):
         try:
             mode = self.root.stat().st_mode
         except FileNotFoundError:
+            parent = self.root.absolute().parent
+            if write and not parent.is_dir():  # a mistyped path, never a tree of new folders
+                raise self._error(f"the folder {parent} does not exist; a new store is made "
+                                  "only inside an existing folder") from None
             if write:
                 return False
             raise self._error("no such file or store folder") from None
@@ -101,8 +105,12 @@ class FolderStore(Store):
         except OSError as err:
             raise self._error(f"cannot read the store folder: {err.strerror}") from None
         if not write:
+            # an empty folder is what a first ingest interrupted before its manifest leaves:
+            # no store yet, not a damaged one
+            empty = (": an empty folder holds no store yet; add tests with backlash ingest"
+                     if not entries else "")
             raise self._error(f"is a folder; expected a readings file or a fleet store (a "
-                              f"folder holding {MANIFEST})")
+                              f"folder holding {MANIFEST}){empty}")
         if entries:
             raise self._error(f"is a folder but not a fleet store (no {MANIFEST}); expected a "
                               "store, an empty folder or a new name")
@@ -312,6 +320,27 @@ class _FolderTransaction(Transaction):
         return pd.DataFrame(rows, columns=[*KEYS, "sha256"])
 
     def write(self, table, digests) -> None:
+        now, part_of = self._write_parts(table)
+        self.conn.executemany(
+            "INSERT INTO tests VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            [(*row[:4], row[4], int(row[5]), _iso(row[6]), part_of[row[0], row[1]], now)
+             for row in digests[[*KEYS, "sha256", "readings", "started_at"]].itertuples(
+                index=False)])
+
+    def replace(self, table, digests) -> None:
+        """New parts hold the corrected readings and the tests are read from them; the parts
+        that held the replaced readings are never rewritten (the readings other tests read
+        from them stay, and the replaced ones stay as the history the audit's digests name)."""
+        now, part_of = self._write_parts(table)
+        self.conn.executemany(
+            "UPDATE tests SET sha256 = ?, readings = ?, started_at = ?, part = ?, "
+            "ingested_at = ? WHERE machine_id = ? AND axis = ? AND visit = ? AND test_id = ?",
+            [(row[4], int(row[5]), _iso(row[6]), part_of[row[0], row[1]], now, *row[:4])
+             for row in digests[[*KEYS, "sha256", "readings", "started_at"]].itertuples(
+                index=False)])
+
+    def _write_parts(self, table) -> tuple[str, dict]:
+        """One part per machine axis of ``table``, recorded; the time and each one's part."""
         now = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
         part_of = {}
         for (machine, axis), rows in _partitions(table):
@@ -319,11 +348,7 @@ class _FolderTransaction(Transaction):
             part_of[machine, axis] = part
             self.conn.execute("INSERT INTO parts VALUES (?, ?, ?, ?, ?)",
                               (part, machine, axis, rows.num_rows, now))
-        self.conn.executemany(
-            "INSERT INTO tests VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            [(*row[:4], row[4], int(row[5]), _iso(row[6]), part_of[row[0], row[1]], now)
-             for row in digests[[*KEYS, "sha256", "readings", "started_at"]].itertuples(
-                index=False)])
+        return now, part_of
 
     def _write_part(self, machine: str, axis: str, rows) -> str:
         import pyarrow.parquet as pq
@@ -448,15 +473,20 @@ class _FolderCheck:
         self.tests = pd.DataFrame(conn.execute(
             f"SELECT {', '.join(KEYS)}, sha256, readings, part FROM tests").fetchall(),
             columns=[*KEYS, "sha256", "readings", "part"])
-        from pipeline.store.check import Checked
+        from pipeline.store.check import Checked, superseded
 
         self.out = Checked(tests=len(self.tests), readings=int(self.tests["readings"].sum()))
+        self.replacements = tables.replacements(conn, 0, "?")
+        self.superseded = superseded(self.replacements)
 
     def run(self):
+        from pipeline.store.check import replacement_problems
+
         held = self._read_parts()
         self._unrecorded_files()
         self._tests(held)
         self._unread_parts(held)
+        self.out.problems += replacement_problems(self.tests, self.replacements)
         return self.out
 
     def _problem(self, text: str, mend=None) -> None:
@@ -534,8 +564,13 @@ class _FolderCheck:
             found = held.get(part)
             if found is None:
                 continue
-            own = [k for k in found.itertuples(index=False)
-                   if not _intact_elsewhere(tests, tuple(getattr(k, c) for c in KEYS), held)]
+            rows = list(found.itertuples(index=False))
+            history = [k for k in rows
+                       if (*(getattr(k, c) for c in KEYS), k.sha256) in self.superseded]
+            own = [k for k in rows if k not in history
+                   and not _intact_elsewhere(tests, tuple(getattr(k, c) for c in KEYS), held)]
+            if history and not own:
+                continue  # the readings replacements superseded: the audit's history, kept
             if own:
                 self._problem(f"part {part} is recorded but no test reads it, and it holds "
                               f"{len(own)} tests the store has nowhere else: left as it is")

@@ -154,7 +154,12 @@ class PostgresStore(Store):
         import pandas as pd
 
         from features.readings.selection import Selection
-        from pipeline.store.check import Checked, compare, found_digests
+        from pipeline.store.check import (
+            Checked,
+            compare,
+            found_digests,
+            replacement_problems,
+        )
 
         if not self.exists():
             raise self._error("no such store (its tables do not exist)")
@@ -163,8 +168,10 @@ class PostgresStore(Store):
                 f"SELECT {', '.join(KEYS)}, sha256, readings FROM {TESTS}").fetchall(),
                 columns=[*KEYS, "sha256", "readings"])
             table = _copy(tx.conn, Selection(), voids=False)
+            replaced = tables.replacements(tx.conn, 1, "%s")
         return Checked(tests=len(tests), readings=int(tests["readings"].sum()),
-                       problems=compare(tests, found_digests(table)))
+                       problems=compare(tests, found_digests(table))
+                       + replacement_problems(tests, replaced))
 
     def read_table(self, selection):
         with self._connection() as conn:
@@ -225,6 +232,17 @@ class _PostgresTransaction(Transaction):
         with self.conn.cursor().copy(f"COPY {READINGS} ({', '.join(table.column_names)}) "
                                      "FROM STDIN (FORMAT csv)") as copy:
             copy.write(buffer.getbuffer())
+
+    def replace(self, table, digests) -> None:
+        """The stored readings of the tests of ``digests`` deleted and these written (the
+        keys tie every reading to its test, so only one set can be held; the audit keeps the
+        digest of the replaced one)."""
+        keys = [tuple(k) for k in digests[KEYS].itertuples(index=False)]
+        where = " AND ".join(f"{k} = %s" for k in KEYS)
+        for key in keys:
+            self.conn.execute(f"DELETE FROM {READINGS} WHERE {where}", key)
+            self.conn.execute(f"DELETE FROM {TESTS} WHERE {where}", key)
+        self.write(table, digests)
 
     def commit(self) -> None:
         self.conn.commit()

@@ -5,7 +5,9 @@ Record tables (``records``): one per kind of record, columns ``machine_id``, ``a
 ``record`` (the JSON text), keyed by machine, axis and digest.
 
 Void tables (``voids``): ``voided`` names the tests every reader skips; ``audit`` keeps every
-void and undo with when, who and why, never deleted.
+void and undo with when, who and why, never deleted, and every replacement of a test's readings
+(``ingest --replace``) with the digest of the readings it replaced (``old_sha256``) and of
+those that replaced them (``sha256``; both null for a void or an undo).
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ VOIDED = ("voided", "backlash_voided")
 AUDIT = ("audit", "backlash_audit")
 AUDIT_COLUMNS = ("at", "user_name", "action", "machine_id", "axis", "visit", "test_id",
                  "reason")
+# The audit's digests of a replacement (format 4): an audit of format 3 gets them by upgrade.
+DIGEST_COLUMNS = ("old_sha256", "sha256")
 _KEYS = "machine_id text NOT NULL, axis text NOT NULL, visit text NOT NULL, test_id text NOT NULL"
 
 
@@ -39,7 +43,8 @@ def create_sql(table: str) -> str:
                 "PRIMARY KEY (machine_id, axis, visit, test_id))")
     if table in AUDIT:
         return (f"CREATE TABLE IF NOT EXISTS {table} (at text NOT NULL, user_name text NOT NULL, "
-                f"action text NOT NULL, {_KEYS}, reason text NOT NULL)")
+                f"action text NOT NULL, {_KEYS}, reason text NOT NULL, old_sha256 text, "
+                "sha256 text)")
     return (f"CREATE TABLE IF NOT EXISTS {table} (machine_id text NOT NULL, axis text NOT NULL, "
             "sha256 text NOT NULL, recorded_at text NOT NULL, record text NOT NULL, "
             "PRIMARY KEY (machine_id, axis, sha256))")
@@ -60,6 +65,11 @@ def upgrade(conn, meta: str, tables, mark: str, version: int) -> None:
     (inside the caller's transaction: undone with it)."""
     for table in tables:
         conn.execute(create_sql(table))
+        if table in AUDIT:
+            have = _columns(conn, table, mark)
+            for column in DIGEST_COLUMNS:
+                if column not in have:
+                    conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} text")
     stored = conn.execute(f"SELECT value FROM {meta} WHERE key = 'format_version'").fetchone()
     if int(stored[0]) < version:
         conn.execute(f"UPDATE {meta} SET value = {mark} WHERE key = 'format_version'",
@@ -91,3 +101,35 @@ def void_rows(conn, engine: int, mark: str, keys: list[tuple], action: str, at: 
         conn.execute(f"INSERT INTO {audit} ({', '.join(AUDIT_COLUMNS)}) VALUES "
                      f"({', '.join([mark] * len(AUDIT_COLUMNS))})",
                      (at, user, action, *key, reason))
+
+
+def replace_rows(conn, engine: int, mark: str, replaced, at: str, user: str,
+                 reason: str) -> None:
+    """One audit row per replaced test (``replaced``: rows of ``KEYS``, ``old_sha256`` and
+    ``sha256``), inside the caller's transaction (the tables upgraded)."""
+    columns = (*AUDIT_COLUMNS, *DIGEST_COLUMNS)
+    sql = (f"INSERT INTO {AUDIT[engine]} ({', '.join(columns)}) VALUES "
+           f"({', '.join([mark] * len(columns))})")
+    for row in replaced:
+        machine, axis, visit, test_id, old, new = row
+        conn.execute(sql, (at, user, "replace", machine, axis, visit, test_id, reason, old, new))
+
+
+def replacements(conn, engine: int, mark: str) -> list[tuple]:
+    """Every replacement the audit keeps: (``KEYS``..., ``at``, ``user_name``, ``reason``,
+    ``old_sha256``, ``sha256``), oldest first; none in a store that never replaced a test."""
+    table = AUDIT[engine]
+    if not set(DIGEST_COLUMNS) <= _columns(conn, table, mark):
+        return []
+    return conn.execute(f"SELECT machine_id, axis, visit, test_id, at, user_name, reason, "
+                        f"old_sha256, sha256 FROM {table} WHERE action = 'replace' "
+                        "ORDER BY at").fetchall()
+
+
+def _columns(conn, table: str, mark: str) -> set[str]:
+    """The columns of ``table`` (none when it does not exist); ``mark`` tells the engine."""
+    if mark == "?":
+        return {row[1] for row in conn.execute(f"PRAGMA table_info({table})").fetchall()}
+    return {row[0] for row in conn.execute(
+        "SELECT column_name FROM information_schema.columns WHERE table_name = %s "
+        "AND table_schema = current_schema()", (table,)).fetchall()}

@@ -8,11 +8,16 @@
 Every file goes through the readers of every other job (any accepted layout, one validation).
 A test is its key (machine_id, axis, visit, test_id) and its readings: ingesting the same test
 again changes nothing (a note says so); a key already stored with other readings is refused
-and the whole ingest with it. All files are added in one transaction, or none.
+and the whole ingest with it, unless ``replace`` (with a ``reason``) puts the corrected
+readings in place, kept in the store's audit. All files are added in one transaction, or
+none. What a hurried planner may get wrong is refused before anything is written: a test
+dated after today (``allow_future`` keeps it), a column the store would drop
+(``allow_unknown_columns`` drops it), a store in a folder that does not exist.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 from dataclasses import dataclass, field
 
@@ -24,10 +29,28 @@ from pipeline.workflows import check_params, readings_of
 PARAMETERS = {
     "files": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
     "format": FORMAT,
-    "store": Param((str, os.PathLike), "store folder (created when new or empty) or "
+    "store": Param((str, os.PathLike), "store folder (created when new or empty, inside an existing folder) or "
                    "postgresql://USER@HOST/DB (password in ~/.pgpass or PGPASSWORD, not in the "
                    "URL)", metavar="STORE", required=True),
+    "allow_future": Param(("boolean",), "keep tests started after today (refused otherwise: a "
+                          "mistyped year would pass for the latest visit)"),
+    "allow_unknown_columns": Param(("boolean",), "leave out columns outside the readings "
+                                   "contract (refused otherwise: a misspelled column would be "
+                                   "lost from the store)"),
+    "replace": Param(("boolean",), "replace stored tests by these corrected ones (same "
+                     "machine, axis, visit and test_id, other readings); needs --reason"),
+    "reason": Param((str, None), "why the stored tests are replaced (kept in the store's audit "
+                    "with the time, the user and the replaced readings' digest)",
+                    metavar="TEXT"),
 }
+
+
+class IngestInterrupted(KeyboardInterrupt):
+    """An ingest stopped (Ctrl-C) before its commit; ``text`` says what the store kept."""
+
+    def __init__(self, text: str):
+        super().__init__(text)
+        self.text = text
 
 
 @dataclass
@@ -39,8 +62,8 @@ class IngestResult(Result):
     store : str
         The store's location (a URL without its password).
     inputs : list of dict
-        Per input file: ``file``, ``readings``, ``tests``, ``added`` and ``unchanged``
-        (tests).
+        Per input file: ``file``, ``readings``, ``tests``, ``added``, ``replaced`` and
+        ``unchanged`` (tests).
     added : int
         Tests written to the store.
     unchanged : int
@@ -49,6 +72,10 @@ class IngestResult(Result):
         Readings written to the store.
     tests_in_store : int
         Tests in the store after the ingest.
+    replaced : int
+        Tests whose readings were replaced (``replace``).
+    new_store : bool
+        The ingest made the store.
     """
 
     store: str
@@ -57,14 +84,19 @@ class IngestResult(Result):
     unchanged: int = 0
     readings_added: int = 0
     tests_in_store: int = 0
+    replaced: int = 0
+    new_store: bool = False
 
     def to_json(self) -> dict:
         return {"store": self.store, "files": self.inputs, "added": self.added,
-                "unchanged": self.unchanged, "readings_added": self.readings_added,
-                "tests_in_store": self.tests_in_store}
+                "unchanged": self.unchanged, "replaced": self.replaced,
+                "readings_added": self.readings_added, "tests_in_store": self.tests_in_store,
+                "new_store": self.new_store}
 
 
-def ingest(files, store, *, format: str = "auto", progress=None) -> IngestResult:
+def ingest(files, store, *, format: str = "auto", allow_future: bool = False,
+           allow_unknown_columns: bool = False, replace: bool = False,
+           reason: str | None = None, progress=None) -> IngestResult:
     """Validate readings files and add their tests to a fleet store, in one transaction.
 
     Parameters
@@ -77,6 +109,18 @@ def ingest(files, store, *, format: str = "auto", progress=None) -> IngestResult
         the password in ``~/.pgpass`` or ``PGPASSWORD`` rather than in the URL).
     format : str
         Layout of the files, ``"auto"`` to recognise each one.
+    allow_future : bool
+        Keep tests started after today (UTC; a note names them); refused otherwise, as a
+        mistyped date would pass for an axis's latest visit.
+    allow_unknown_columns : bool
+        Leave out columns outside the readings contract (a note names each with the contract
+        column it is closest to); refused otherwise, as the store keeps only the contract.
+    replace : bool
+        Put these readings in place of those stored for the same tests (each test must be
+        stored); the audit keeps the time, the user, ``reason`` and both digests. A voided
+        test stays voided.
+    reason : str, optional
+        Why the tests are replaced; required with ``replace`` and only with it.
     progress : callable, optional
         ``progress(done, total, what)`` after each file read.
 
@@ -87,28 +131,61 @@ def ingest(files, store, *, format: str = "auto", progress=None) -> IngestResult
     Raises
     ------
     InputError
-        A file that cannot be read or breaks the readings contract, a test already stored
-        with other readings, a store that cannot be opened or written: nothing is written.
+        A file that cannot be read or breaks the readings contract, a test started after
+        today, a column outside the contract, a test already stored with other readings
+        (``replace``: a test not stored), ``replace`` without a reason, a store that cannot be
+        opened or written or whose folder's parent does not exist: nothing is written.
+    IngestInterrupted
+        Interrupted (Ctrl-C) before the commit: nothing was added.
     """
-    check_params(PARAMETERS, {"files": files, "store": store, "format": format}, "ingest")
+    check_params(PARAMETERS, {"files": files, "store": store, "format": format,
+                              "allow_future": allow_future,
+                              "allow_unknown_columns": allow_unknown_columns,
+                              "replace": replace, "reason": reason}, "ingest")
+    reason = _reason(replace, reason)
     from pipeline.store import open_store, redact
 
     inputs = _inputs(files)
     target = open_store(store, write=True, parameter="store")  # refused before any reading
-    tables, digests, per_file = _read_all(inputs, format, progress)
-    import pandas as pd
-    import pyarrow as pa
+    new_store = not target.exists()
+    if replace and new_store:
+        raise InputError("holds no store yet; --replace replaces tests of an existing store",
+                         file=redact(store), parameter="store")
+    try:
+        tables, digests, per_file, notes = _read_all(inputs, format, progress,
+                                                     allow_future, allow_unknown_columns)
+        import pandas as pd
+        import pyarrow as pa
 
-    added = target.add(pa.concat_tables(tables), pd.concat(digests, ignore_index=True))
+        added = target.add(pa.concat_tables(tables), pd.concat(digests, ignore_index=True),
+                           replace=replace, reason=reason)
+    except KeyboardInterrupt:
+        raise IngestInterrupted(f"nothing was added to the store {redact(store)} (all files "
+                                "go in one transaction, or none)") from None
     result = IngestResult(store=redact(store), inputs=per_file, added=len(added.new),
                           unchanged=len(added.same) + _repeated(per_file),
                           readings_added=int(added.new["readings"].sum()),
-                          tests_in_store=target.count())
+                          tests_in_store=target.count(),
+                          replaced=0 if added.replaced is None else len(added.replaced),
+                          new_store=new_store and bool(len(added.new)))
     _count_per_file(result, added)
-    for text in _notes(result):
+    for text in notes + _notes(result, added, reason):
         result.notes.append(text)
         note(text)
     return result
+
+
+def _reason(replace: bool, reason: str | None) -> str | None:
+    """The reason of a replacement, checked: required with ``replace``, only with it."""
+    if reason is not None and not reason.strip():
+        raise InputError("is empty; say why the stored tests are replaced", parameter="reason")
+    if replace and reason is None:
+        raise InputError("is missing: --replace needs the reason the stored tests are replaced "
+                         "(kept in the store's audit)", parameter="reason")
+    if reason is not None and not replace:
+        raise InputError("applies to --replace only (the reason a stored test's readings are "
+                         "replaced); nothing was added", parameter="reason")
+    return None if reason is None else reason.strip()
 
 
 def _inputs(files) -> list:
@@ -119,30 +196,71 @@ def _inputs(files) -> list:
     return items
 
 
-def _read_all(inputs: list, format: str, progress) -> tuple[list, list, list[dict]]:
-    """Store tables, digests and a summary per input; a test given twice with the same
-    readings is kept once, with other readings it is refused."""
+def _read_all(inputs: list, format: str, progress, allow_future: bool,
+              allow_unknown_columns: bool) -> tuple[list, list, list[dict], list[str]]:
+    """Store tables, digests, a summary per input and the notes; a test given twice with the
+    same readings is kept once, with other readings it is refused."""
     from features.readings.errors import report
     from pipeline.store import content
 
-    tables, digests, per_file, seen = [], [], [], {}
+    tables, digests, per_file, seen, notes = [], [], [], {}, []
     for i, item in enumerate(inputs):
         readings = readings_of(item, format, "files")
         name = readings.attrs.get("source", f"files[{i}]")
-        extra = content.extra_columns(readings)
-        if extra:
-            note(f"{name}: columns {', '.join(extra)} are not in the readings contract; the "
-                 "store does not keep them")
+        notes += _unknown_columns(content.extra_columns(readings), name, allow_unknown_columns)
         table = content.store_table(readings)
         found = content.digests(table)
         found["file"] = name
+        notes += _future(found, name, allow_future)
         keep = _first_time(found, seen)
         tables.append(table if keep.all() else _tests_of(table, found[keep]))
         digests.append(found[keep])
         per_file.append({"file": name, "readings": len(readings), "tests": len(found),
-                         "added": 0, "unchanged": int((~keep).sum())})
+                         "added": 0, "replaced": 0, "unchanged": int((~keep).sum())})
         report(progress, i + 1, len(inputs), name)
-    return tables, digests, per_file
+    return tables, digests, per_file, notes
+
+
+def _unknown_columns(extra: list[str], name: str, allowed: bool) -> list[str]:
+    """Refuse columns outside the contract (the store would drop them, and the corrected file
+    would then be refused as other readings of the same tests); with ``allowed``, a note."""
+    if not extra:
+        return []
+    from features.readings.validation import unknown_columns_text
+
+    text = unknown_columns_text(extra)
+    if not allowed:
+        raise InputError(f"unknown column{'s' if len(extra) > 1 else ''} {text}; the store "
+                         "keeps only the readings contract's columns: rename it, or leave it "
+                         "out with --allow-unknown-columns; nothing was added", file=name)
+    return [(f"{name}: column{'s' if len(extra) > 1 else ''} {text} left out of the store "
+            "(--allow-unknown-columns)")]
+
+
+def _future(found, name: str, allowed: bool) -> list[str]:
+    """Refuse tests started after today (UTC): dated ahead, a test would pass for the axis's
+    latest visit; with ``allowed``, a note naming them."""
+    import pandas as pd
+
+    today = dt.datetime.now(dt.UTC).date()
+    starts = pd.to_datetime(found["started_at"], utc=True)
+    later = (starts >= pd.Timestamp(today + dt.timedelta(days=1), tz="UTC")).to_numpy()
+    if not later.any():
+        return []
+    rows = found[later]
+    first = rows.iloc[0]
+    if not allowed:
+        raise InputError(f"test {first['test_id']!r} (machine {first['machine_id']}, axis "
+                         f"{first['axis']}, visit {first['visit']}) started on "
+                         f"{starts[later].iloc[0].date().isoformat()}, after today "
+                         f"({today.isoformat()}); expected a start not in the future (a "
+                         "mistyped date?), or keep it with --allow-future; nothing was added",
+                         file=name, column="started_at")
+    shown = ", ".join(f"{t} ({d.date().isoformat()})"
+                      for t, d in zip(rows["test_id"][:5], starts[later][:5]))
+    return [(f"{name}: {len(rows)} test(s) started after today ({today.isoformat()}) kept "
+            f"(--allow-future): {shown}{' ...' if len(rows) > 5 else ''}; a view as of an "
+            "earlier day leaves them out")]
 
 
 def _first_time(found, seen: dict):
@@ -184,14 +302,25 @@ def _repeated(per_file: list[dict]) -> int:
 def _count_per_file(result: IngestResult, added) -> None:
     new = added.new["file"].value_counts()
     same = added.same["file"].value_counts()
+    replaced = ({} if added.replaced is None else added.replaced["file"].value_counts())
     for f in result.inputs:
         f["added"] = int(new.get(f["file"], 0))
+        f["replaced"] = int(replaced.get(f["file"], 0))
         f["unchanged"] += int(same.get(f["file"], 0))
 
 
-def _notes(result: IngestResult) -> list[str]:
+def _notes(result: IngestResult, added, reason: str | None) -> list[str]:
     notes = [f"{f['file']}: {f['unchanged']} of {f['tests']} tests already in the store with "
              "the same readings; left unchanged" for f in result.inputs if f["unchanged"]]
-    if not result.added:
+    if result.new_store:
+        notes.insert(0, f"new store at {result.store}")
+    if result.replaced:
+        notes.append(f"{result.replaced} test(s) replaced ({reason}): the store's audit keeps "
+                     "the time, the user and the digest of the readings replaced")
+    for machine, axis, visit, test_id in added.voided:
+        notes.append(f"test {test_id!r} (machine {machine}, axis {axis}, visit {visit}) is "
+                     "voided and stays voided with its new readings (backlash void --undo "
+                     "restores it)")
+    if not result.added and not result.replaced:
         notes.append(f"nothing changed: every test is already in the store {result.store}")
     return notes

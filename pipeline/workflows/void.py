@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from features.readings.errors import InputError, note
+from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import STORE, Param
 from pipeline.workflows import check_params
@@ -54,6 +54,19 @@ class VoidResult(Result):
     def to_json(self) -> dict:
         return {"store": self.store, "action": self.action, "reason": self.reason,
                 "tests": self.tests}
+
+    @property
+    def line(self) -> str:
+        """What was done, in one line (the command prints it): how many tests of which
+        machine axis (and visits, as the store writes them), why, and what readers do now."""
+        first = self.tests[0] if self.tests else {"machine_id": "?", "axis": "?"}
+        visits = sorted({t["visit"] for t in self.tests})
+        done = "restored" if self.action == "undo" else "voided"
+        now = "every reader reads them again" if self.action == "undo" else \
+            "every reader skips them"
+        return (f"{len(self.tests)} tests of machine {first['machine_id']}, axis "
+                f"{first['axis']} {done} (visit{'s' if len(visits) > 1 else ''} "
+                f"{', '.join(visits)}) in {self.store}: {now}; reason: {self.reason}")
 
 
 def void(store, *, machine: str, axis: str, visit: str | None = None,
@@ -99,9 +112,4 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
     result = VoidResult(store=redact(store), action="undo" if undo else "void",
                         tests=[dict(zip(("machine_id", "axis", "visit", "test_id"), k))
                                for k in keys], reason=reason.strip())
-    text = (f"{len(keys)} tests of machine {machine}, axis {axis} "
-            f"{'restored' if undo else 'voided'}: every reader "
-            f"{'reads them again' if undo else 'skips them'}")
-    result.notes.append(text)
-    note(text)
-    return result
+    return result  # what was done is the result (``line``), not a note beside it
