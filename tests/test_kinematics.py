@@ -201,12 +201,14 @@ def test_one_sphere_on_the_c_axis_is_refused_naming_what_is_lost(tmp_path, capsy
     assert "second sphere" in err
 
 
-def test_one_sphere_off_the_axis_is_kept_with_a_note(tmp_path):
+def test_one_sphere_off_the_axis_is_refused_unless_accepted_with_a_note(tmp_path, capsys):
     m = ip.machine(0, 50.0)
     frame = ip.probing(m, seed=1, spheres={"ball_1": ip.SPHERES["ball_1"]})
+    _refused([_file(frame, tmp_path)], tmp_path, capsys, "one sphere only", "rigid body",
+             "--one-sphere")
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        result = bl.kinematics(frame, track=False)
+        result = bl.kinematics(frame, one_sphere=True, track=False)
     assert any("one sphere only" in n for n in result.notes)
     assert abs(result.machines[0].to_json()["play_arcsec"]["A"] - m["play_arcsec"]["A"]) < 1
 

@@ -40,6 +40,9 @@ PARAMETERS = {
     "workspace_mm": Param((Interval(Real, 0, 5000, closed="neither"),), "half width of the "
                           "workpiece cube of the report's tables and field plots: x, y in "
                           "[-W, W], z in [0, W] [mm]", metavar="MM"),
+    "one_sphere": Param(("boolean",), "accept a machine probed on one sphere: its errors are "
+                        "identified, but nothing checks that the table moves as one rigid body "
+                        "(refused without it)"),
     "controller": Param((None, StrOptions(set(ROTARY_BACKLASH))), "write each rotary axis's "
                         "play as that controller's backlash parameter (in --out)",
                         choices=ROTARY_BACKLASH),
@@ -186,7 +189,7 @@ class KinematicsResult(Result):
         return self.files
 
 
-def kinematics(data, *, at=None, workspace_mm: float = 200.0,
+def kinematics(data, *, at=None, workspace_mm: float = 200.0, one_sphere: bool = False,
                controller: str | None = None) -> KinematicsResult:
     """Identify the rotary axes' 12 geometric errors and plays from probed spheres.
 
@@ -201,6 +204,10 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0,
     workspace_mm : float
         Half width W of the workpiece cube (x, y in [-W, W], z in [0, W]) over which seed
         003's Tables 4-5 (smallest and largest comprehensive error) are taken [mm].
+    one_sphere : bool
+        Accept a machine probed on a single sphere (off the C axis) with a note: its 12
+        errors are determined, but nothing checks that the table moves as one rigid body (a
+        second sphere at another radius and height does). Refused without it.
     controller : {"siemens", "heidenhain"}, optional
         Write each rotary axis's play as the controller's backlash machine parameter
         (SINUMERIK MD32450, Heidenhain MP710) [deg].
@@ -216,14 +223,16 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0,
     ------
     InputError
         A table that breaks the contract (a missing column, angles that look like radians),
-        angles that do not span each axis, a single sphere that leaves errors inseparable.
+        angles that do not span each axis, a single sphere (unless ``one_sphere``; always when
+        it leaves errors inseparable).
 
     References
     ----------
     S. Wu et al. (seed 003): eq. 6, Table 1, eq. 12-13, Tables 4-5; ISO 10791-6.
     """
     check_params(PARAMETERS, {"data": data, "at": at, "workspace_mm": workspace_mm,
-                              "controller": controller}, "kinematics")
+                              "one_sphere": one_sphere, "controller": controller},
+                 "kinematics")
     from features.probing import read_probes
     from features.readings.errors import note
 
@@ -232,12 +241,12 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0,
     source = str(data) if isinstance(data, (str, os.PathLike)) else "<frame>"
     machines, notes = [], []
     for (machine, visit), part in probes.groupby(["machine_id", "visit"], sort=True):
-        found, said = _identify(part, source, workspace_mm)
+        found, said = _identify(part, source, workspace_mm, one_sphere)
         machines.append(found)
         notes += said
     result = KinematicsResult(machines, source=source, workspace_mm=workspace_mm,
                               parameters={"workspace_mm": workspace_mm,
-                                          "controller": controller})
+                                          "one_sphere": one_sphere, "controller": controller})
     if points is not None:
         result.field = _field(machines, points)
     if controller is not None:
@@ -250,7 +259,7 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0,
     return result
 
 
-def _identify(part, source: str, workspace_mm: float):
+def _identify(part, source: str, workspace_mm: float, one_sphere: bool = False):
     """One machine and visit: checks, identification, Tables 4-5, notes."""
     from features.probing import (
         MEASURED_COLUMNS,
@@ -283,6 +292,12 @@ def _identify(part, source: str, workspace_mm: float):
             f"machine {machine}: one sphere only ({spheres[0]}): with it the probing cannot "
             f"separate {'; '.join(' from '.join(g) for g in extra)}; probe a second sphere "
             "at another radius from C and another height", file=source, column="sphere")
+    if len(spheres) == 1 and not one_sphere:
+        raise InputError(
+            f"machine {machine}: one sphere only ({spheres[0]}): its errors are determined, but "
+            "what a second sphere gives is lost: the check that the table moves as one rigid "
+            "body; probe a second sphere at another radius and height, or accept it with "
+            "--one-sphere", file=source, column="sphere")
     notes = []
     if len(spheres) == 1:
         notes.append(f"machine {machine}: one sphere only ({spheres[0]}): the 12 errors are "
