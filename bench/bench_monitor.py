@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 from bench import size, verdict
@@ -61,8 +60,7 @@ def main() -> None:
     from tests.independent_traces import fleet_traces
 
     trace, _ = fleet_traces(seed=7, days=DAYS)
-    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "fleet.parquet"
         trace.to_parquet(path, index=False)
         write_dataset(trace, Path(tmp) / "ds")
