@@ -12,7 +12,10 @@ Engines:
 - ``dask``: Dask (``dask.delayed``). Without an address, Dask's local threaded scheduler (its
   "local mode": no cluster, starts at once, tasks share the process); with ``address``
   (``tcp://host:8786``) an existing ``dask.distributed`` scheduler, whose workers must have this
-  package installed.
+  package installed. A scheduler that does not answer within ``SCHEDULER_TIMEOUT_S`` is
+  refused: ``distributed`` bounds the TCP connection but waits for the scheduler's handshake
+  without a limit, so a port that accepts and never answers (a stalled scheduler, another
+  service) would hang the job.
 
 Why Dask and not Spark: the work per partition is numpy and pandas, which Dask runs as it is,
 in Python, with no JVM to start and no Arrow round trip per group (Spark's ``applyInPandas``);
@@ -27,6 +30,9 @@ from collections.abc import Callable, Sequence
 from features.readings.errors import InputError
 
 ENGINES = ("local", "dask")
+# Seconds a Dask scheduler has to connect and answer the handshake (a scheduler on a busy
+# cluster answers within a second; ten leave room for a slow network).
+SCHEDULER_TIMEOUT_S = 10
 
 
 def map_partitions(function: Callable, items: Sequence, *, engine: str = "local",
@@ -50,7 +56,7 @@ def map_partitions(function: Callable, items: Sequence, *, engine: str = "local"
     ------
     InputError
         An unknown engine, an address without a cluster engine, a scheduler that cannot be
-        reached.
+        reached or does not answer within ``SCHEDULER_TIMEOUT_S``.
     """
     if engine not in ENGINES:
         raise InputError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}",
@@ -92,10 +98,32 @@ def _dask(function: Callable, items: Sequence, address: str | None) -> list:
         return list(dask.compute(*tasks, scheduler="threads"))
     from distributed import Client
 
+    _answers(address, SCHEDULER_TIMEOUT_S)
     try:
-        client = Client(address, timeout="10s", set_as_default=False)
+        client = Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s", set_as_default=False)
     except OSError as err:
         raise InputError(f"cannot reach the Dask scheduler at {address}: {err}",
                          parameter="address") from None
     with client:
         return list(client.gather(client.compute(tasks)))
+
+
+def _answers(address: str, seconds: float) -> None:
+    """Refuse a scheduler that does not connect and answer the handshake within ``seconds``
+    (``distributed.Client`` would wait for the handshake forever)."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def handshake():
+        comm = await asyncio.wait_for(connect(address, timeout=seconds), seconds)
+        await comm.close()
+
+    try:
+        asyncio.run(handshake())
+    except TimeoutError:  # asyncio's, since Python 3.11; before OSError, of which it is one
+        raise InputError(f"Dask scheduler at {address} did not answer within {seconds:g} s",
+                         parameter="address") from None
+    except (OSError, ValueError) as err:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {err}",
+                         parameter="address") from None
