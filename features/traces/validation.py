@@ -3,7 +3,9 @@
 Refused, each with one line naming the file, the row and the column: a required channel
 missing (as a column, or as an empty value), a column named after a channel in a unit the
 contract does not know (``load_um``), a time that is no date-time, a time going back within a
-machine axis, an unknown axis, a value that is no finite number. Label columns are checked per
+machine axis, an unknown axis, a value that is no finite number, a machine axis's time given
+twice with different values. The same sample written twice (same machine axis, time and
+values) is dropped, with a note saying how many. Label columns are checked per
 distinct value and numeric columns as whole arrays, so validating costs little beside reading.
 """
 
@@ -12,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from features.readings.errors import InputError
+from features.readings.errors import InputError, note
 from features.readings.schema import LINEAR_AXES, ROTARY_AXES, is_rotary
 from features.readings.validation import to_datetime, to_float, to_label
 from features.traces import contract as c
@@ -54,7 +56,7 @@ def check_trace(frame: pd.DataFrame, source, row_base: int = 2) -> pd.DataFrame:
     _check_deg_names(frame, out["axis"], source, row_base)
     checked = pd.DataFrame(out, columns=[k for k in c.COLUMNS if k in out], copy=False)
     _check_order(checked, source, row_base)
-    return checked
+    return _without_repeats(checked, source, row_base)
 
 
 def _named(frame: pd.DataFrame, source) -> pd.DataFrame:
@@ -191,3 +193,43 @@ def _check_order(frame: pd.DataFrame, source, row_base: int) -> None:
                          f"later sample of {frame['machine_id'].iloc[i]} {frame['axis'].iloc[i]})"
                          "; expected samples sorted by time within a machine axis",
                          file=source, row=row_base + i, column=c.TIME)
+
+
+def _without_repeats(frame: pd.DataFrame, source, row_base: int) -> pd.DataFrame:
+    """The frame without samples repeated (a logger writing a sample twice, two exports
+    joined with an overlap); refused when a repeated time holds other values, since which one
+    the axis had cannot be known."""
+    earlier, later = _repeated_times(frame)
+    if not len(later):
+        return frame
+    for col in (k for k in c.CHANNELS if k in frame):
+        a, b = frame[col].to_numpy()[earlier], frame[col].to_numpy()[later]
+        differ = np.flatnonzero((a != b) & ~(np.isnan(a) & np.isnan(b)))
+        if len(differ):
+            i, j = int(earlier[differ[0]]), int(later[differ[0]])
+            when = pd.Timestamp(frame[c.TIME].to_numpy()[j], tz="UTC").isoformat()
+            raise InputError(f"{frame['machine_id'].iloc[j]} {frame['axis'].iloc[j]} at {when} "
+                             f"is given twice with different values ({a[differ[0]]!r} in row "
+                             f"{row_base + i}, {b[differ[0]]!r} here); expected one sample "
+                             "per time", file=source, row=row_base + j, column=col)
+    note(f"{source}: {len(later)} repeated sample(s) (same machine axis, time and values) "
+         "dropped")
+    keep = np.ones(len(frame), bool)
+    keep[later] = False
+    return frame[keep].reset_index(drop=True)
+
+
+def _repeated_times(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Row pairs (earlier, later) of one machine axis at the same time; the times are in
+    order within each machine axis (``_check_order``), so repeats are neighbours there."""
+    machine = frame["machine_id"].array.codes.astype(np.int64)
+    group = machine * 64 + frame["axis"].array.codes
+    t = frame[c.TIME].to_numpy().view(np.int64)
+    step = group[1:] != group[:-1]
+    starts = np.r_[0, np.flatnonzero(step) + 1]
+    if len(starts) == len(np.unique(group[starts])):  # each machine axis in one block
+        hit = np.flatnonzero((t[1:] == t[:-1]) & ~step)
+        return hit, hit + 1
+    order = np.argsort(group, kind="stable")  # axes interleaved: their rows put together
+    hit = np.flatnonzero((np.diff(t[order]) == 0) & (np.diff(group[order]) == 0))
+    return order[hit], order[hit + 1]
