@@ -237,9 +237,14 @@ DAILY_COLUMNS = ("machine_id", "axis", "unit", "date", "lost_motion_um", "lost_m
 
 
 def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
-                      settle_s: float = SETTLE_S) -> pd.DataFrame:
+                      settle_s: float = SETTLE_S, travel: bool = False) -> pd.DataFrame:
     """Lost motion of every machine axis and UTC day of a validated trace with ``load_mm``
     (``features.traces``): a pure function of its input, so it runs per partition anywhere.
+
+    Parameters
+    ----------
+    travel : bool
+        Add ``TRAVEL_COLUMNS``, what ``check_physical`` needs of each day.
 
     Returns
     -------
@@ -266,13 +271,20 @@ def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
             dates, day = _runs((start + mean_ns.astype(np.int64)) // DAY_NS)
             # the samples through the stream and day combiner ``watch`` runs
             # (models.lost_motion_stream): a file and a live feed agree by construction
-            fits = [DayFit(*fit) for _, fit in stream_days(
-                ns, *(part[c].to_numpy() for c in ("commanded_mm", "motor_mm", "load_mm")),
-                take_up=take_up, settle_s=settle_s)]
-            frames.append(_day_rows(str(part["machine_id"].iloc[0]),
-                                    str(part["axis"].iloc[0]), dates, fits))
+            extra = _travel(day, weight, *channels) if travel else {}
+            if extra and _motor_off(extra, take_up).any():
+                # refused after (check_physical), so not fitted: a motor side in counts would
+                # size the lead-error grid by its counts
+                fits = [DayFit(np.nan, np.nan, 0, 0, np.nan, 0)] * len(dates)
+            else:
+                fits = [DayFit(*fit) for _, fit in stream_days(
+                    ns, *(part[c].to_numpy() for c in ("commanded_mm", "motor_mm", "load_mm")),
+                    take_up=take_up, settle_s=settle_s)]
+            rows = _day_rows(str(part["machine_id"].iloc[0]), str(part["axis"].iloc[0]),
+                             dates, fits)
+            frames.append(rows.assign(**extra))
     if not frames:
-        return pd.DataFrame(columns=list(DAILY_COLUMNS))
+        return pd.DataFrame(columns=list(DAILY_COLUMNS) + (list(TRAVEL_COLUMNS) * travel))
     return frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
 
 
@@ -307,3 +319,164 @@ def _blas():
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController()
+
+
+# ------------------------------------------------------------- what cannot be physical
+# Per day, what tells a wrong channel from a lost motion (``daily_lost_motion(travel=True)``):
+# the travel (range) of the commanded, motor and load positions, the load's gain on the motor
+# (least-squares slope: about 1, its sign the load's direction) and the load's mean offset
+# from the motor [mm or deg].
+TRAVEL_COLUMNS = ("travel_mm", "motor_travel_mm", "load_travel_mm", "load_gain",
+                  "load_offset_mm")
+# A load side travelling more than this factor more or less than the motor side is not the
+# same axis in the same unit: raw counts, um for mm, a wrong gear ratio or lead.
+TRAVEL_RATIO = 2.0
+# A lost motion below zero by more than NEGATIVE_U standard uncertainties and NEGATIVE_FLOOR
+# [um or arcsec] is no play: the load leads the motor at reversals. Three, not two, standard
+# uncertainties: a fleet monitors thousands of axis days, and two would refuse one day in
+# forty of an axis without play; the floor keeps a tiny u from refusing noise at zero.
+NEGATIVE_U = 3.0
+NEGATIVE_FLOOR = 1.0
+# Known unit factors between two channels, named in the likely cause (within 5 %).
+UNIT_FACTORS = {1000.0: "um against mm", 25.4: "inch against mm", 3600.0: "arcsec against deg"}
+
+
+def _travel(day: np.ndarray, weight: np.ndarray, commanded: np.ndarray, motor: np.ndarray,
+            load: np.ndarray) -> dict[str, np.ndarray]:
+    """``TRAVEL_COLUMNS`` per day of one machine axis's bins (``day`` sorted)."""
+    starts = np.flatnonzero(np.r_[True, day[1:] != day[:-1]])
+
+    def span(v):
+        return np.maximum.reduceat(v, starts) - np.minimum.reduceat(v, starts)
+
+    def mean(v):
+        return np.add.reduceat(weight * v, starts) / np.add.reduceat(weight, starts)
+
+    dm, dl = motor - mean(motor)[day], load - mean(load)[day]
+    var, cov = mean(dm * dm), mean(dm * dl)
+    gain = np.divide(cov, var, out=np.full(len(var), np.nan), where=var > 0)
+    return {"travel_mm": span(commanded), "motor_travel_mm": span(motor),
+            "load_travel_mm": span(load), "load_gain": gain,
+            "load_offset_mm": mean(load) - mean(motor)}
+
+
+def check_physical(daily: pd.DataFrame, names: dict, *, min_travel: float = TAKE_UP_MM,
+                   file=None, remedy: str = "") -> None:
+    """Refuse the first day of ``daily`` (``daily_lost_motion(travel=True)``) whose figures
+    cannot be physical, before anything is recorded.
+
+    Refused: a load side that moves against the motor side (a sign), or travels more than
+    ``TRAVEL_RATIO`` times more or less (raw counts, a wrong unit or gear ratio), a motor side
+    that travels so against the set point, on a day whose motor (set point) travelled at least
+    ``min_travel`` (below it no play is taken up and the ranges are noise); a lost motion
+    larger than the day's commanded travel; a lost motion negative beyond ``NEGATIVE_U``
+    standard uncertainties and ``NEGATIVE_FLOOR``.
+
+    Parameters
+    ----------
+    names : dict
+        Channel (``commanded``, ``motor``, ``load``) -> the name the user gave it (a PV, a
+        column), named in the message.
+    file : str or path, optional
+        The input the days come from.
+    remedy : str
+        Appended to a scale, sign or unit problem (how the input states a scale).
+
+    Raises
+    ------
+    InputError
+        One line: the machine axis and day, the channel, the figures and the likely cause.
+    """
+    from features.readings.errors import InputError
+
+    for row in daily.itertuples():
+        problem = _scale_problem(row, names, min_travel)
+        problem = (problem + remedy if problem
+                   else _motor_problem(row, names, min_travel) or _negative(row, names))
+        if problem:
+            raise InputError(f"{row.machine_id} {row.axis} on {row.date}: {problem}", file=file)
+
+
+def _motor_off(travel: dict, min_travel: float) -> np.ndarray:
+    """Days whose motor side travels more than ``TRAVEL_RATIO`` times more or less than the
+    set point, which moved at least ``min_travel``."""
+    ratio = travel["motor_travel_mm"] / np.where(travel["travel_mm"] > 0, travel["travel_mm"], 1)
+    return (travel["travel_mm"] >= min_travel) & ((ratio > TRAVEL_RATIO)
+                                                   | (ratio < 1 / TRAVEL_RATIO))
+
+
+def _motor_problem(row, names: dict, min_travel: float) -> str | None:
+    """A motor side that does not travel as the set point does (raw counts, a unit, a lead);
+    None when it does."""
+    if not _motor_off({k: np.array([getattr(row, k)]) for k in TRAVEL_COLUMNS},
+                      min_travel)[0]:
+        return None
+    unit = "deg" if row.unit == "arcsec" else "mm"
+    ratio = row.motor_travel_mm / row.travel_mm
+    return (f"the motor side {names['motor']} travels {row.motor_travel_mm:.6g} {unit} while "
+            f"the commanded {names['commanded']} travels {row.travel_mm:.6g} {unit} "
+            f"({ratio:.6g}x): {_cause(ratio)}; expected the same travel within a factor of "
+            f"{TRAVEL_RATIO:g}")
+
+
+def _scale_problem(row, names: dict, min_travel: float) -> str | None:
+    """What a scale of the load side would fix on this day (a sign, raw counts, a unit, a
+    gear ratio), with its likely cause; None when nothing."""
+    unit = "deg" if row.unit == "arcsec" else "mm"
+    load, motor = f"load side {names['load']}", f"motor side {names['motor']}"
+    if row.motor_travel_mm >= min_travel and not _motor_problem(row, names, min_travel):
+        if row.load_gain < 0:
+            return (f"the {load} moves against the {motor} (gain {row.load_gain:.4g}): a "
+                    "sign; expected both counting the same way")
+        ratio = row.load_travel_mm / row.motor_travel_mm
+        if not 1 / TRAVEL_RATIO <= ratio <= TRAVEL_RATIO:
+            return (f"the {load} travels {row.load_travel_mm:.6g} {unit} while the {motor} "
+                    f"travels {row.motor_travel_mm:.6g} {unit} ({ratio:.6g}x): "
+                    f"{_cause(ratio)}; expected the same travel within a factor of "
+                    f"{TRAVEL_RATIO:g}")
+    if row.lost_motion_um > row.travel_mm * deviation_scale(row.axis):
+        return (f"lost motion {row.lost_motion_um:.6g} {row.unit} is larger than the day's "
+                f"travel of {row.travel_mm:.6g} {unit} (commanded {names['commanded']}): a "
+                f"wrong scale or unit of the {load} or the {motor}")
+    return None
+
+
+def _negative(row, names: dict) -> str | None:
+    """A lost motion negative beyond its uncertainty: the load leads the motor."""
+    value, u = row.lost_motion_um, row.lost_motion_u_um
+    if value < -max(NEGATIVE_U * u, NEGATIVE_FLOOR):
+        return (f"lost motion {value:.6g} +- {u:.3g} {row.unit} is negative beyond its "
+                "uncertainty: the load leads the motor at reversals; are the motor side "
+                f"{names['motor']} and the load side {names['load']} swapped, or one of them "
+                "lagging in time?")
+    return None
+
+
+def _cause(ratio: float) -> str:
+    """The likely cause of a load travel ``ratio`` times the motor's."""
+    big = max(ratio, 1 / ratio)
+    for factor, what in UNIT_FACTORS.items():
+        if abs(big / factor - 1) < 0.05:
+            return f"a wrong unit ({what})"
+    return "raw counts or a wrong unit" if big > 50 else "a wrong scale, gear ratio or lead"
+
+
+def offset_notes(daily: pd.DataFrame, names: dict, *, min_travel: float = TAKE_UP_MM
+                 ) -> list[str]:
+    """A note per machine axis whose load side sits further from the motor side than the
+    motor travels: not the same coordinates. The lost motion does not change (the lead-error
+    spline's constant absorbs any offset), so it is said, not refused."""
+    notes = []
+    for (machine, axis), days in daily.groupby(["machine_id", "axis"], sort=True):
+        off = days[days["motor_travel_mm"] >= min_travel]
+        far = off[off["load_offset_mm"].abs() > off["motor_travel_mm"]]
+        if len(far):
+            r = far.iloc[0]
+            unit = "deg" if r.unit == "arcsec" else "mm"
+            notes.append(f"{machine} {axis}: the load side {names['load']} sits "
+                         f"{r.load_offset_mm:+.6g} {unit} from the motor side {names['motor']} "
+                         f"on {r.date}, more than the {r.motor_travel_mm:.6g} {unit} it "
+                         "travels: not the same coordinates; lost motion does not change with "
+                         "an offset (the lead-error fit absorbs it); a raw log's reference "
+                         f"scale 1,{-r.load_offset_mm:.6g} states it")
+    return notes

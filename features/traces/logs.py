@@ -7,7 +7,9 @@ The raw readers (``features.readings.camonitor.read_camonitor``,
 optional ``motor_current``, ``following_error``, ``machine_temp``) to a log's PVs (camonitor)
 or fields/pins (halsampler; ``sample`` marks a ``halsampler -t`` sample number), e.g. ``{"commanded": "MC:X-PosSet", "motor": "MC:X-PosAct",
 "load": "MC:ec0-s4-EL5101-Enc-PosAct"}``. Values are taken as logged, in the contract's units
-(mm or deg; no conversion). The machine and axis come from the commanded (set-point) PV's name
+(mm or deg), except the load side's with a ``reference_scale`` (gain, offset): load position =
+gain * logged value + offset, in the commanded channel's unit (a resolver logged in counts, an
+external reference counting the other way or with its own zero). The machine and axis come from the commanded (set-point) PV's name
 when it states them (its IOC prefix; ``features.readings.formats.axis_from_pv`` for the axis),
 else from ``machine``/``axis``, which also override the name.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from features.readings.errors import InputError
@@ -32,7 +35,7 @@ AXES = (*LINEAR_AXES, *ROTARY_AXES)
 
 def read_log_trace(path, format: str, channels, machine: str | None = None,
                    axis: str | None = None, period_s: float | None = None,
-                   start=None) -> pd.DataFrame:
+                   start=None, reference_scale=None) -> pd.DataFrame:
     """A raw controller log as a validated trace frame (one machine axis).
 
     Parameters
@@ -50,6 +53,8 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
         Sample period [s] of halsampler output (``read_halsampler``).
     start : datetime or str, optional
         Time of a halsampler file's first sample (``read_halsampler``).
+    reference_scale : float or (float, float), optional
+        The load side's gain, or (gain, offset): load = gain * logged + offset.
 
     Returns
     -------
@@ -60,9 +65,11 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
     ------
     InputError
         An unknown format or channel, a required channel missing, a PV or field the log does
-        not have, a machine or axis neither named nor given.
+        not have, a machine or axis neither named nor given, a reference scale that is no
+        (gain, offset) of finite numbers with a gain not 0.
     """
     path = Path(path)
+    gain, offset = _scale(reference_scale)
     if format not in LOG_FORMATS:
         raise InputError(f"unknown log format {format!r}; expected {' or '.join(LOG_FORMATS)}",
                          parameter="format")
@@ -74,7 +81,7 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
         first = {}
         for name, pv in channels.items():
             first.setdefault(pv, name)
-        logged = read_camonitor(path, {name: pv for pv, name in first.items()})
+        logged = _instants(read_camonitor(path, {name: pv for pv, name in first.items()}))
         samples = pd.DataFrame({"time": logged["time"],
                                 **{n: logged[first[pv]] for n, pv in channels.items()}})
         named_machine, named_axis = _names(channels["commanded"])
@@ -95,15 +102,38 @@ def read_log_trace(path, format: str, channels, machine: str | None = None,
     frame = pd.DataFrame({"time": samples["time"], "machine_id": machine, "axis": axis})
     for name in channels.keys() & COLUMNS.keys():
         frame[COLUMNS[name]] = samples[name].to_numpy(dtype=float)
+    if "load_mm" in frame:
+        frame["load_mm"] = gain * frame["load_mm"] + offset
     return check_trace(frame, path)
+
+
+def _scale(reference_scale) -> tuple[float, float]:
+    """(gain, offset) of the load side; (1, 0) when not given."""
+    if reference_scale is None:
+        return 1.0, 0.0
+    pair = np.atleast_1d(np.asarray(reference_scale, dtype=object))
+    try:
+        numbers = [float(v) for v in pair]
+    except (TypeError, ValueError):
+        numbers = []
+    if not 1 <= len(numbers) <= 2 or not np.isfinite(numbers).all() or numbers[0] == 0:
+        raise InputError(f"{reference_scale!r}: expected GAIN or (GAIN, OFFSET), finite "
+                         "numbers with a gain not 0", parameter="reference_scale")
+    return numbers[0], numbers[1] if len(numbers) > 1 else 0.0
+
+
+def _instants(logged: pd.DataFrame) -> pd.DataFrame:
+    """One row per logged time: camonitor writes a line per PV update, so PVs updated in one
+    controller cycle share a time, and only the last of those lines holds every PV's value
+    at that time (the ones before still hold older values)."""
+    last = ~logged["time"].duplicated(keep="last").to_numpy()
+    return logged if last.all() else logged[last].reset_index(drop=True)
 
 
 def _channels(channels, format: str) -> dict:
     """A checked mapping; halsampler field numbers given as text become ints."""
     if isinstance(channels, str):
-        from features.readings.camonitor import parse_channels
-
-        channels = parse_channels(channels)
+        channels = parse_log_channels(channels)
     if not channels:
         raise InputError("no channels; expected commanded=PV,motor=PV,load=PV",
                          parameter="channels")
@@ -119,6 +149,21 @@ def _channels(channels, format: str) -> dict:
     if format == "halsampler":
         return {n: int(k) if str(k).isdigit() else k for n, k in channels.items()}
     return dict(channels)
+
+
+def parse_log_channels(text: str) -> dict:
+    """``"commanded=PV,motor=PV,load=PV"`` -> the mapping, its messages in this module's
+    channel names (``parse_channels``, shared with convert, names convert's)."""
+    from features.readings.camonitor import parse_channels
+
+    expected = "expected name=PV pairs separated by commas: commanded=PV,motor=PV,load=PV"
+    for entry in filter(None, (e.strip() for e in str(text).split(","))):
+        name, sep, pv = (part.strip() for part in entry.partition("="))
+        if ";" in entry or not sep or not name or not pv or any(c.isspace() for c in pv):
+            raise InputError(f"{entry!r} is not name=PV; {expected}", parameter="channels")
+    if not str(text).strip(", "):
+        raise InputError(f"no channels; {expected}", parameter="channels")
+    return parse_channels(text)
 
 
 def _names(pv: str) -> tuple[str | None, str | None]:

@@ -11,6 +11,11 @@ chosen engine (``pipeline.engines``: in-process by default, or Dask) and give th
 wherever they run. The daily series of each axis then gets the drift statistics of laser
 visits (``models.drift.analyse_series``): change points (an adjustment, a failure), the trend
 since the last one, alerts.
+
+Before anything is recorded, every day is checked against what can be physical
+(``models.lost_motion.check_physical``): a load side that moves against the motor side, or
+travels more than twice or less than half as far (raw counts, a wrong unit or gear ratio), a
+lost motion larger than the day's travel or negative beyond its uncertainty are refused.
 """
 
 from __future__ import annotations
@@ -22,9 +27,9 @@ from numbers import Real
 from pathlib import Path
 
 from features.readings.errors import InputError, note
-from pipeline.engines import ENGINES
+from pipeline.engines import ENGINES, SCHEDULER_TIMEOUT_S
 from pipeline.results import Result, axis_alerts
-from pipeline.steps.parameters import PROGRESS, Param, python_only
+from pipeline.steps.parameters import PROGRESS, Param, python_only, scale_offset
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
 
@@ -38,8 +43,9 @@ PARAMETERS = {
                  "monitor.html", output="folder"),
     "engine": Param((StrOptions(ENGINES),), "where the partitions run (default local: this "
                     "process)"),
-    "address": Param((str, None), "Dask scheduler address (tcp://host:8786); default Dask's "
-                     "local scheduler", metavar="URL"),
+    "address": Param((str, None), "Dask scheduler address (tcp://host:8786), refused if it "
+                     f"does not answer within {SCHEDULER_TIMEOUT_S} s; default Dask's local "
+                     "scheduler", metavar="URL"),
     "threshold_um": Param((_POSITIVE, None), "lost-motion limit [um]: alert at it, forecast "
                           "its crossing", metavar="X"),
     "take_up_mm": Param((_POSITIVE,), "travel after a reversal past which the play is taken "
@@ -52,6 +58,9 @@ PARAMETERS = {
                     group=_RAW),
     "channels": Param((str, dict, None), "commanded=PV,motor=PV,load=PV (halsampler: field "
                       "numbers or pins)", metavar="MAP", group=_RAW),
+    "reference_scale": Param((Real, tuple, list, None), "load position = GAIN * logged load "
+                             "+ OFFSET, in the commanded channel's unit (default: as logged)",
+                             metavar="GAIN[,OFFSET]", parse=scale_offset, group=_RAW),
     "machine": Param((str, None), "the log's machine (default: the commanded PV's IOC)",
                      group=_RAW),
     "axis": Param((str, None), "the log's axis (default: the commanded PV's axis letter)",
@@ -145,8 +154,8 @@ class MonitorResult(Result):
 def monitor(traces, *, engine: str = "local", address: str | None = None,
             threshold_um: float | None = None, take_up_mm: float = 0.05,
             settle_s: float = 0.1, progress=None, store=None, format: str = "trace",
-            channels=None, machine: str | None = None, axis: str | None = None,
-            period_s: float | None = None) -> MonitorResult:
+            channels=None, reference_scale=None, machine: str | None = None,
+            axis: str | None = None, period_s: float | None = None) -> MonitorResult:
     """Lost motion per machine axis and day from dual-feedback traces, with change points.
 
     Parameters
@@ -179,6 +188,9 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     channels : str or dict, optional
         A raw log's channels: ``"commanded=PV,motor=PV,load=PV"`` or a dict (halsampler:
         0-based field numbers or pin names). Required with a raw log, refused without one.
+    reference_scale : float or (float, float), optional
+        A raw log's load side: load position = gain * logged value + offset, in the
+        commanded channel's unit (a resolver in counts, a reference counting the other way).
     machine, axis : str, optional
         A raw log's machine and axis; default what the commanded PV's name states.
     period_s : float, optional
@@ -194,14 +206,17 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
         engine, a ``store`` that does not exist or cannot be written (nothing recorded); a
         raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
-        axis neither named nor given (``features.traces.logs``), ``channels`` on a trace.
+        axis neither named nor given (``features.traces.logs``), ``channels`` on a trace;
+        a day that cannot be physical (``models.lost_motion.check_physical``; nothing is
+        written or recorded).
     """
     check_params(PARAMETERS, {"traces": traces, "engine": engine, "address": address,
                                  "threshold_um": threshold_um, "take_up_mm": take_up_mm,
                                  "settle_s": settle_s, "store": store, "format": format,
-                                 "channels": channels, "machine": machine, "axis": axis,
-                                 "period_s": period_s}, "monitor")
-    log = _log_options(format, channels, machine, axis, period_s)
+                                 "channels": channels, "reference_scale": reference_scale,
+                                 "machine": machine, "axis": axis, "period_s": period_s},
+                 "monitor")
+    log = _log_options(format, channels, reference_scale, machine, axis, period_s)
     if store is not None:  # before any work: a store that cannot take the records
         from pipeline.store.records import open_for_records
 
@@ -212,17 +227,19 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     from pipeline.engines import map_partitions
 
     options = {"take_up": float(take_up_mm), "settle_s": float(settle_s)}
-    tasks = [(item, options) for item in _partitions(traces, log)]
-    frames = map_partitions(partition_days, tasks, engine=engine, address=address,
-                            progress=progress)
+    items = _partitions(traces, log)
+    frames = map_partitions(partition_days, [(item, options) for item, _ in items],
+                            engine=engine, address=address, progress=progress)
     daily = (pd.concat(frames, ignore_index=True) if frames
              else pd.DataFrame(columns=list(DAILY_COLUMNS)))
     _check_each_day_once(daily)
+    offsets = _check_physical(frames, [source for _, source in items], log, take_up_mm)
+    daily = daily[list(DAILY_COLUMNS)]
     daily = daily.sort_values(["machine_id", "axis", "date"], kind="stable",
                               ignore_index=True)
     axes = [_axis_monitor(group, threshold_um)
             for _, group in daily.groupby(["machine_id", "axis"], sort=True)]
-    notes = _notes(daily)
+    notes = offsets + _notes(daily)
     for text in notes:
         note(text)
     result = MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
@@ -236,23 +253,24 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     return result
 
 
-def _log_options(format, channels, machine, axis, period_s) -> dict | None:
+def _log_options(format, channels, reference_scale, machine, axis, period_s) -> dict | None:
     """A raw log's reading options (``features.traces.logs``), or None for trace tables,
-    which state their channels, machine and axis themselves."""
-    given = {"channels": channels, "machine": machine, "axis": axis, "period_s": period_s}
+    which state their channels, scale, machine and axis themselves."""
+    given = {"channels": channels, "reference_scale": reference_scale, "machine": machine,
+             "axis": axis, "period_s": period_s}
     if format == "trace":
         name = next((k for k, v in given.items() if v is not None), None)
         if name is not None:
-            raise InputError("applies to a raw log (--format camonitor or halsampler) only; a "
-                             "trace table names its own columns", parameter=name)
+            raise InputError("applies to a raw log (--log-format camonitor or halsampler) "
+                             "only; a trace table names its own columns", parameter=name)
         return None
     if channels is None:
         raise InputError(f"a {format} log needs its channels; expected "
                          "commanded=PV,motor=PV,load=PV", parameter="channels")
     if isinstance(channels, str):
-        from features.readings.camonitor import parse_channels
+        from features.traces.logs import parse_log_channels
 
-        channels = parse_channels(channels)
+        channels = parse_log_channels(channels)
     if "load" not in channels:
         raise InputError(LOAD_NEEDED.replace("column load_mm", "channel load=PV"),
                          parameter="channels")
@@ -260,8 +278,9 @@ def _log_options(format, channels, machine, axis, period_s) -> dict | None:
 
 
 def _partitions(traces, log: dict | None = None) -> list:
-    """The work items: a dataset's partitions (read by the task), or a table's or raw log's
-    machine axes (read here, whole: a single file fits one machine)."""
+    """The work items, each with its source (named in errors): a dataset's partitions (read
+    by the task), or a table's or raw log's machine axes (read here, whole: a single file
+    fits one machine)."""
     import pandas as pd
 
     from features.traces.io import is_dataset, partitions, read_trace
@@ -271,17 +290,17 @@ def _partitions(traces, log: dict | None = None) -> list:
         if log is not None:
             raise InputError(f"format {log['format']!r} reads a log file, not a frame",
                              parameter="format")
-        return _axes_of(check_trace(traces, "traces"), "traces")
+        return [(a, "traces") for a in _axes_of(check_trace(traces, "traces"), "traces")]
     items = []
     for path in ([traces] if isinstance(traces, (str, os.PathLike)) else list(traces)):
         if log is not None:
             from features.traces.logs import read_log_trace
 
-            items.extend(_axes_of(read_log_trace(path, **log), path))
+            items.extend((a, path) for a in _axes_of(read_log_trace(path, **log), path))
         elif is_dataset(path):
-            items.extend(partitions(path))
+            items.extend((p, os.path.dirname(p.files[0])) for p in partitions(path))
         else:
-            items.extend(_axes_of(read_trace(path), path))
+            items.extend((a, path) for a in _axes_of(read_trace(path), path))
     if not items:
         raise InputError("names no trace; expected one or more files or folders",
                          parameter="traces")
@@ -315,7 +334,27 @@ def partition_days(task) -> object:
         _require_load(trace, item.files[0])
     else:
         trace = item
-    return daily_lost_motion(trace, **options)
+    return daily_lost_motion(trace, **options, travel=True)
+
+
+def _check_physical(frames: list, sources: list, log: dict | None, take_up_mm: float
+                    ) -> list[str]:
+    """Refuse a day that cannot be physical (``check_physical``), naming its input and the
+    channels as the user named them; the notes of load sides not in the motor's
+    coordinates."""
+    from models.lost_motion import check_physical, offset_notes
+
+    if log is None:
+        names = {k: f"{k}_mm" for k in ("commanded", "motor", "load")}
+        remedy = "; expected both positions in mm (deg on a rotary axis) of the axis"
+    else:
+        names = {k: str(v) for k, v in log["channels"].items()}
+        remedy = ("; give the load side's scale with --reference-scale GAIN,OFFSET (Python "
+                  "reference_scale=)")
+    for frame, source in zip(frames, sources, strict=True):
+        check_physical(frame, names, min_travel=take_up_mm, file=source, remedy=remedy)
+    return [text for frame in frames
+            for text in offset_notes(frame, names, min_travel=take_up_mm)]
 
 
 def _check_each_day_once(daily) -> None:
