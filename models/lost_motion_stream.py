@@ -45,6 +45,9 @@ SEPARABLE = 1e-3
 # anchored at 0: a screw pitch's wave of 10 mm or more is followed (four points a wave), as
 # the old rule's 2.7 mm on 350 mm of travel did.
 LEAD_SPACING_MM = 2.5
+# At most this many control points (50 m of travel): positions spanning more are counts or
+# a wrong unit, and the day's statistics would grow without bound (1.5 kB a control point).
+MAX_COLUMNS = 20_000
 # Moves are pooled into this many groups, the sandwich's clusters: with thousands of moves a
 # day 31 degrees of freedom give the uncertainty within about 13 % of itself, and the day's
 # state stays a few hundred kB whatever its length.
@@ -99,6 +102,13 @@ class DayStats:
     def _cover(self, lo: int, hi: int) -> None:
         """Grow the column range to hold columns lo..hi-1."""
         k = self.cols.shape[1]
+        span = max(hi, self.col0 + k) - min(lo, self.col0 if k else lo)
+        if span > MAX_COLUMNS:
+            from features.readings.errors import InputError
+
+            raise InputError(f"positions span {span * LEAD_SPACING_MM:.6g} mm in one day, more "
+                             f"than the {MAX_COLUMNS * LEAD_SPACING_MM:g} mm an axis travels: "
+                             "positions in counts or a wrong unit; expected mm (deg)")
         if k == 0:
             self.col0, self.cols = lo, np.zeros((GROUPS, hi - lo, _WIDTH))
             return

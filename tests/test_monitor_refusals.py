@@ -114,6 +114,16 @@ def test_motor_in_counts_is_refused_against_the_set_point(day):
         monitor(trace(day, motor=day[2] * COUNTS_PER_MM))
 
 
+def test_every_side_in_counts_is_refused_before_its_statistics_grow(day):
+    """Set point, motor and load all in increments agree with each other, so no ratio rule
+    fires: the lead-error grid would need millions of control points (gigabytes); refused."""
+    t, cmd, m, load = day
+    counts = trace((t, cmd * COUNTS_PER_MM, m * COUNTS_PER_MM, load * COUNTS_PER_MM))
+    with pytest.raises(InputError, match=r"positions span .* mm in one day.*counts or a wrong "
+                                         "unit"):
+        quiet(traces=counts)
+
+
 def test_lost_motion_larger_than_the_travel_is_refused():
     """500 mm of lost motion on 180 mm of travel, the channels' travels alike (what a fit
     gives from channels that agree with each other but not with the axis)."""
