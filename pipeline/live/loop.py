@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from features.readings.errors import InputError
 from pipeline.live.feed import CHANNELS, AxisFeed
 from pipeline.live.sources import SOURCES
 
@@ -43,6 +44,7 @@ class Watcher:
         self.recorded: list[dict] = []
         self.updates = 0
         self.stopping = False
+        self.error: InputError | None = None
         self._restore()
 
     # ------------------------------------------------------------------ state
@@ -105,8 +107,13 @@ class Watcher:
     # ------------------------------------------------------------------ updates
     def emit(self, name: str, ns: int, value: float) -> None:
         self.updates += 1
-        for feed, channel in self.route.get(name, ()):
-            feed.update(channel, ns, value)
+        try:
+            for feed, channel in self.route.get(name, ()):
+                feed.update(channel, ns, value)
+        except InputError as err:
+            # a protocol library calls this from its own callbacks, which swallow errors:
+            # kept for the loop to raise (the clock ran backwards, a value in counts)
+            self.error = self.error or err
 
     def _event(self, line: dict) -> None:
         self.status({"time": _iso(time.time_ns()), **line})
@@ -131,6 +138,8 @@ class Watcher:
                 await asyncio.sleep(TICK_S)
                 if task.done():
                     task.result()  # a source's own error (InputError: the clock went back)
+                if self.error is not None:
+                    raise self.error
                 self.tick()
                 now = loop.time()
                 if now - saved >= SAVE_S:

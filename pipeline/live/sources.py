@@ -128,7 +128,9 @@ class CASource:
         for pv in self.pvs:
             pv.subscribe(data_type="time").add_callback(self._callback)
 
-    def _callback(self, sub, response) -> None:
+    async def _callback(self, sub, response) -> None:
+        # a coroutine: caproto awaits it on the loop in arrival order, where a plain function
+        # would run in a thread pool, out of order and beside the other channels' updates
         stamp = response.metadata.stamp
         ns = ((stamp.secondsSinceEpoch + EPICS_EPOCH_S) * 1_000_000_000
               + stamp.nanoSeconds)

@@ -59,8 +59,10 @@ def load_state(folder: Path, machine: str, axis: str):
 
 
 def live_axes(store) -> list[dict]:
-    """Every watched axis: machine_id, axis, last_sample (ISO, UTC), stale_after_s, source."""
-    root = getattr(store, "root", None)
+    """Every watched axis: machine_id, axis, last_sample (ISO, UTC), stale_after_s, source;
+    ``store`` a Store or its folder."""
+    # a path's own ``root`` is its anchor ("/"), not the store's folder
+    root = store if isinstance(store, (str, os.PathLike)) else getattr(store, "root", None)
     if root is None or not (Path(root) / FOLDER).is_dir():
         return []
     out = []

@@ -1,0 +1,107 @@
+"""Controller servers for the watch tests, on 127.0.0.1 only: an EPICS Channel Access IOC
+(caproto), a PV Access server (p4p) and an OPC UA server with OPC 40502 CncAxisType-style axis
+nodes (asyncua), each playing a recorded trace with the trace's own timestamps.
+
+Run as ``python -m tests.live_servers PROTOCOL TRACE.npz --port P [--start I] [--stop J]``:
+the server takes sample ``start`` as its channels' initial values, waits until every channel
+has a subscriber (so that what it plays is what a watcher receives, whatever the start-up
+order), then plays samples ``start+1 .. stop-1`` as fast as its client takes them, and keeps
+serving until it is killed or ``--linger`` seconds pass. On stdout: ``ready``, then
+``played N`` (the index after the last sample played) when done.
+
+TRACE.npz holds ``names`` (channel names, one per column), ``ns`` (int64 sample times, ns since
+the epoch, UTC) and ``values`` (samples x channels); ``units`` optionally (one per channel).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+
+import numpy as np
+
+EPICS_EPOCH_S = 631_152_000
+# Samples played between yields to the server's send loop: small enough that no subscription
+# queue overflows (an overflowing queue drops updates, and a test must know what was sent).
+BURST = 20
+
+
+def _say(text: str) -> None:
+    print(text, flush=True)
+
+
+def _load(path: str):
+    with np.load(path, allow_pickle=False) as data:
+        names = [str(n) for n in data["names"]]
+        units = [str(u) for u in data["units"]] if "units" in data else ["mm"] * len(names)
+        return names, data["ns"].astype(np.int64), data["values"].astype(float), units
+
+
+# ---------------------------------------------------------------- Channel Access (caproto)
+async def _ca(args) -> None:
+    os.environ.update({"EPICS_CA_SERVER_PORT": str(args.port),
+                       "EPICS_CAS_INTF_ADDR_LIST": "127.0.0.1",
+                       "EPICS_CAS_AUTO_BEACON_ADDR_LIST": "NO",
+                       "EPICS_CAS_BEACON_ADDR_LIST": "127.0.0.1",
+                       "EPICS_CAS_BEACON_PORT": str(args.port + 1),
+                       "EPICS_CA_REPEATER_PORT": str(args.port + 1)})
+    from caproto import ChannelDouble
+    from caproto.asyncio.server import Context
+
+    names, ns, values, units = _load(args.trace)
+
+    def stamp(i: int):
+        sec, nano = divmod(int(ns[i]), 1_000_000_000)
+        return (sec - EPICS_EPOCH_S, nano)
+
+    pvdb = {name: ChannelDouble(value=float(values[args.start, j]), units=units[j],
+                                timestamp=stamp(args.start), precision=6)
+            for j, name in enumerate(names)}
+    channels = list(pvdb.values())
+
+    async def play(_async_lib):
+        _say("ready")
+        while not all(c._queues for c in channels):  # every channel subscribed
+            await asyncio.sleep(0.02)
+        for i in range(args.start + 1, min(args.stop, len(ns))):
+            for j, channel in enumerate(channels):
+                await channel.write(float(values[i, j]), timestamp=stamp(i))
+            if i % BURST == 0:
+                await asyncio.sleep(0)
+                # a slow client would have caproto drop "old news": wait for the sends
+                while any(c.subscription_queue.qsize() > 2 * BURST * len(channels)
+                          for c in server.circuits):
+                    await asyncio.sleep(0.002)
+        _say(f"played {min(args.stop, len(ns))}")
+
+    server = Context(pvdb, ["127.0.0.1"])
+    await server.run(startup_hook=play)
+
+
+PROTOCOLS = {"ca": _ca}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("protocol", choices=sorted(PROTOCOLS))
+    parser.add_argument("trace")
+    parser.add_argument("--port", type=int, required=True)
+    parser.add_argument("--start", type=int, default=0)
+    parser.add_argument("--stop", type=int, default=sys.maxsize)
+    parser.add_argument("--linger", type=float, default=300.0)
+    args = parser.parse_args(argv)
+
+    async def bounded():
+        # a test server never outlives its test by long, whatever happens to the test
+        try:
+            await asyncio.wait_for(PROTOCOLS[args.protocol](args), args.linger)
+        except TimeoutError:
+            pass
+
+    asyncio.run(bounded())
+
+
+if __name__ == "__main__":
+    main()
