@@ -3,9 +3,10 @@
 nodes (asyncua), each playing a recorded trace with the trace's own timestamps.
 
 Run as ``python -m tests.live_servers PROTOCOL TRACE.npz --port P [--start I] [--stop J]``:
-the server takes sample ``start`` as its channels' initial values, waits until every channel
-has a subscriber (so that what it plays is what a watcher receives, whatever the start-up
-order), then plays samples ``start+1 .. stop-1`` as fast as its client takes them, and keeps
+the server takes sample ``start`` as its channels' initial values, says ``ready``, waits for
+``go`` on stdin (the test says it once the watcher has every channel's first value, so that
+what the server plays is what the watcher receives; the CA IOC also waits for a subscriber on
+every channel), then plays samples ``start+1 .. stop-1`` as fast as its client takes them, and keeps
 serving until it is killed or ``--linger`` seconds pass. On stdout: ``ready``, then
 ``played N`` (the index after the last sample played) when done.
 
@@ -62,7 +63,7 @@ async def _ca(args) -> None:
     channels = list(pvdb.values())
 
     async def play(_async_lib):
-        _say("ready")
+        await _go()
         while not all(c._queues for c in channels):  # every channel subscribed
             await asyncio.sleep(0.02)
         for i in range(args.start + 1, min(args.stop, len(ns))):
@@ -80,7 +81,47 @@ async def _ca(args) -> None:
     await server.run(startup_hook=play)
 
 
-PROTOCOLS = {"ca": _ca}
+# ---------------------------------------------------------------- PV Access (p4p)
+async def _pva(args) -> None:
+    from p4p.nt import NTScalar
+    from p4p.server import Server
+    from p4p.server.thread import SharedPV
+
+    names, ns, values, units = _load(args.trace)
+    nt = NTScalar("d", display=True)
+
+    def value(i: int, j: int):
+        sec, nano = divmod(int(ns[i]), 1_000_000_000)
+        return nt.wrap({"value": float(values[i, j]), "display": {"units": units[j]},
+                        "timeStamp": {"secondsPastEpoch": sec, "nanoseconds": nano}})
+
+    pvs = {name: SharedPV(nt=nt, initial=value(args.start, j)) for j, name in enumerate(names)}
+    conf = {"EPICS_PVAS_INTF_ADDR_LIST": "127.0.0.1", "EPICS_PVAS_BEACON_ADDR_LIST": "127.0.0.1",
+            "EPICS_PVAS_AUTO_BEACON_ADDR_LIST": "NO", "EPICS_PVAS_SERVER_PORT": str(args.port),
+            "EPICS_PVAS_BROADCAST_PORT": str(args.port)}
+    with Server(providers=[pvs], conf=conf, useenv=False):
+        await _go()
+        for i in range(args.start + 1, min(args.stop, len(ns))):
+            for j, name in enumerate(names):
+                pvs[name].post(value(i, j))
+            if i % BURST == 0:
+                await asyncio.sleep(0.001)
+        _say(f"played {min(args.stop, len(ns))}")
+        await asyncio.Event().wait()
+
+
+async def _go() -> None:
+    """Say ``ready`` and wait for ``go`` on stdin: the test says it once the watcher has every
+    channel's first value (these protocols tell a server of no subscription)."""
+    _say("ready")
+    loop = asyncio.get_running_loop()
+    while True:
+        line = await loop.run_in_executor(None, sys.stdin.readline)
+        if line.strip() == "go" or not line:  # "go", or no test to say it
+            return
+
+
+PROTOCOLS = {"ca": _ca, "pva": _pva}
 
 
 def main(argv=None) -> None:

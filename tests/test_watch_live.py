@@ -37,6 +37,8 @@ from tests.independent_traces import fleet_traces
 ROOT = Path(__file__).resolve().parents[1]
 AXES = ("X", "Y")
 CHANNELS = (("commanded", "commanded_mm"), ("motor", "motor_mm"), ("load", "load_mm"))
+# A 40 s day at 50 Hz finds the clearance within this [um] (its moves, not the watcher)
+TRUTH_UM = 0.5
 WAIT_S = 90.0  # the longest any condition is waited for on a loaded machine
 
 
@@ -51,13 +53,14 @@ def _names(protocol: str, axis: str) -> dict:
 
 @pytest.fixture(scope="module")
 def samples():
-    """Three short days (40 s at 50 Hz) of two axes on one clock: (ns, {axis: frame})."""
-    trace, _ = fleet_traces(seed=11, days=3, seconds=40.0, rate_hz=50.0)
+    """Three short days (40 s at 50 Hz) of two axes on one clock: (ns, {axis: frame}, truth
+    {(axis, date): lost motion [um]})."""
+    trace, truth = fleet_traces(seed=11, days=3, seconds=40.0, rate_hz=50.0)
     trace = trace.assign(time=trace["time"].dt.floor("us"))
     parts = {a: trace[trace["axis"] == a].sort_values("time").reset_index(drop=True)
              for a in AXES}
     ns = pd.to_datetime(parts[AXES[0]]["time"], utc=True).array.asi8
-    return ns, parts
+    return ns, parts, {(r.axis, r.date): r.lost_motion_um for r in truth.itertuples()}
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +79,7 @@ def _store(fleet: Path, tmp: Path) -> Path:
 
 
 def _npz(path: Path, protocol: str, samples, units=None) -> Path:
-    ns, parts = samples
+    ns, parts, _ = samples
     names, columns = [], []
     for axis in AXES:
         for channel, column in CHANNELS:
@@ -162,7 +165,7 @@ def _popen(started, argv, port: int, stderr: Path) -> subprocess.Popen:
     """A child whose stderr goes to a file (a pipe nobody reads would block it once full)."""
     with open(stderr, "w") as err:
         p = subprocess.Popen(argv, cwd=ROOT, env=_env(port), stdout=subprocess.PIPE,
-                             stderr=err, text=True)
+                             stderr=err, stdin=subprocess.PIPE, text=True)
     p.stderr_path = stderr
     started.append(p)
     return p
@@ -199,6 +202,11 @@ def _watcher(started, config: Path, store: Path, port: int) -> Lines:
                          str(store), "--json", "--no-track"], port,
                config.with_name(f"watch-{len(started)}.err"))
     return Lines(p)
+
+
+def _go(server: Lines) -> None:
+    server.process.stdin.write("go\n")
+    server.process.stdin.flush()
 
 
 def _event(name: str):
@@ -252,6 +260,7 @@ def _assert_monitor(store: Path, tmp: Path, samples, keep: np.ndarray) -> dict:
         batch = _monitor_days(tmp, samples, keep, axis)
         assert [d["date"] for d in days] == list(batch["date"])  # each day once
         for day, row in zip(days, batch.itertuples(), strict=True):
+            assert abs(day["lost_motion_um"] - samples[2][axis, day["date"]]) < TRUTH_UM
             assert day["reversals"] == row.reversals
             assert abs(day["lost_motion_um"] - row.lost_motion_um) < 1e-9
             assert abs(day["lost_motion_u_um"] - row.lost_motion_u_um) < 1e-9
@@ -284,6 +293,7 @@ def _killed_mid_day(protocol: str, samples, fleet: Path, tmp: Path, extra: str =
         first = _server(started, protocol, trace, port, 0, a)
         watcher = _watcher(started, config, store, port)
         watcher.wait_for(_event("started"))
+        _go(first)
         first.wait_for(_played(a))
         # all of the first server's samples are in before it dies: the last one is released
         # once every channel passed it, so the one before it shows as the last sample
@@ -292,6 +302,8 @@ def _killed_mid_day(protocol: str, samples, fleet: Path, tmp: Path, extra: str =
         started[0].wait(timeout=10)
         watcher.wait_for(_event("source_down"))
         second = _server(started, protocol, trace, port, b, n)
+        watcher.wait_for(_event("source_up"))
+        _go(second)
         second.wait_for(_played(n))
         _wait(lambda: _days_recorded(store, 2), "days 1 and 2 recorded")
         watcher.process.send_signal(signal.SIGTERM)  # keeps day 3 open
@@ -302,9 +314,10 @@ def _killed_mid_day(protocol: str, samples, fleet: Path, tmp: Path, extra: str =
     return store, keep, (a, b), events
 
 
-def test_ca_gives_monitors_days_and_reports_the_gap_of_an_ioc_killed_mid_day(
-        samples, fleet, tmp_path):
-    store, keep, (a, b), events = _killed_mid_day("ca", samples, fleet, tmp_path)
+@pytest.mark.parametrize("protocol", ["ca", "pva"])
+def test_monitors_days_and_the_gap_of_a_server_killed_mid_day(protocol, samples, fleet,
+                                                              tmp_path):
+    store, keep, (a, b), events = _killed_mid_day(protocol, samples, fleet, tmp_path)
     days = _assert_monitor(store, tmp_path, samples, keep)
     ns = samples[0]
     (d1, d2, _) = _day_bounds(ns)

@@ -4,7 +4,9 @@ away, and raises ``InputError`` when it never answers at start (within ``timeout
 
 - ``log``: a camonitor file being appended to; follows rotation (a new file at the path) and
   truncation (the file shorter than what was read), resuming at a saved offset;
-- ``ca``: EPICS Channel Access, caproto's pure-Python asyncio client.
+- ``ca``: EPICS Channel Access, caproto's pure-Python asyncio client;
+- ``pva``: EPICS PV Access, p4p's asyncio client;
+- ``opcua``: OPC UA (asyncua), node ids or OPC 40502 CncAxisType browse paths.
 """
 
 from __future__ import annotations
@@ -94,8 +96,7 @@ class CASource:
     def __init__(self, config, emit, status):
         self.config, self.emit, self.status = config, emit, status
         self.names = sorted({n for a in config.axes for n in a.channels.values()})
-        self.kinds = {n: ("rotary" if a.axis in "ABC" else "linear")
-                      for a in config.axes for n in a.channels.values()}
+        self.kinds = _kinds(config)
         self.context = self.pvs = None
 
     def state(self) -> dict:
@@ -121,10 +122,9 @@ class CASource:
             reading = await pv.read(data_type="control", timeout=timeout_s)
             unit = getattr(reading.metadata, "units", b"")
             unit = unit.decode() if isinstance(unit, bytes) else str(unit)
-            if unit.strip() not in UNITS[self.kinds[pv.name]]:
-                raise InputError(f"PV {pv.name} is in {unit!r}; expected "
-                                 f"{UNITS[self.kinds[pv.name]][0]} (watch takes positions as "
-                                 "the axis's unit, as monitor does)", parameter="config")
+            error = _unit_error(pv.name, unit, self.kinds[pv.name])
+            if error is not None:
+                raise error
         for pv in self.pvs:
             pv.subscribe(data_type="time").add_callback(self._callback)
 
@@ -152,4 +152,105 @@ class CASource:
             await self.context.disconnect()
 
 
-SOURCES = {"log": LogSource, "ca": CASource}
+class PVASource:
+    """EPICS PV Access (p4p's asyncio client), searching at ``host:port`` (the server's UDP
+    search port). p4p renews a subscription itself when its server comes back; a channel is
+    down from its ``Disconnected`` to its next value."""
+
+    def __init__(self, config, emit, status):
+        self.config, self.emit, self.status = config, emit, status
+        self.names = sorted({n for a in config.axes for n in a.channels.values()})
+        self.kinds = _kinds(config)
+        self.context, self.subs = None, []
+        self.down: set = set(self.names)  # channels without a value since (re)connecting
+        self.first = asyncio.Event()
+        self.was_down = False
+        self.failed: InputError | None = None  # a refusal found in a callback
+
+    def state(self) -> dict:
+        return {}
+
+    def restore(self, state: dict) -> None:
+        pass
+
+    async def start(self, timeout_s: float) -> None:
+        from p4p.client.asyncio import Context
+
+        host, _, port = self.config.address.rpartition(":")
+        conf = {"EPICS_PVA_ADDR_LIST": host or self.config.address,
+                "EPICS_PVA_AUTO_ADDR_LIST": "NO"}
+        if port.isdigit():
+            conf["EPICS_PVA_BROADCAST_PORT"] = port
+        self.context = Context("pva", conf=conf, useenv=False, nt=False)
+        # a deep queue, so that a burst is delivered rather than squashed into its last value
+        request = "record[queueSize=10000]field()"
+        self.subs = [self.context.monitor(name, self._callback(name), request,
+                                          notify_disconnect=True) for name in self.names]
+        try:
+            await asyncio.wait_for(self.first.wait(), timeout_s)
+        except TimeoutError:
+            missing = ", ".join(sorted(self.down)[:3])
+            raise InputError(f"PV {missing} does not answer at {self.config.address} within "
+                             f"{timeout_s:g} s (no such PV, or no server)",
+                             parameter="config") from None
+        if self.failed is not None:
+            raise self.failed
+
+    def _callback(self, name: str):
+        async def callback(value) -> None:
+            if isinstance(value, Exception):
+                if name not in self.down:
+                    self.down.add(name)
+                    if not self.was_down:
+                        self.was_down = True
+                        self.status({"event": "source_down", "channel": name})
+                return
+            if name in self.down:
+                self._check_unit(name, value)
+                self.down.discard(name)
+                if not self.down:
+                    self.first.set()
+                    if self.was_down:
+                        self.was_down = False
+                        self.status({"event": "source_up"})
+            stamp = value["timeStamp"]
+            self.emit(name, int(stamp["secondsPastEpoch"]) * 1_000_000_000
+                      + int(stamp["nanoseconds"]), float(value["value"]))
+        return callback
+
+    def _check_unit(self, name: str, value) -> None:
+        try:
+            unit = str(value["display.units"])
+        except (KeyError, TypeError):
+            unit = ""  # no display metadata: the values are checked as they come
+        error = _unit_error(name, unit, self.kinds[name])
+        if error is not None and self.failed is None:
+            self.failed = error
+            self.first.set()
+
+    async def run(self) -> None:
+        while self.failed is None:
+            await asyncio.sleep(0.2)
+        raise self.failed
+
+    async def close(self) -> None:
+        for sub in self.subs:
+            sub.close()
+        if self.context is not None:
+            self.context.close()
+
+
+def _kinds(config) -> dict:
+    return {n: ("rotary" if a.axis in "ABC" else "linear")
+            for a in config.axes for n in a.channels.values()}
+
+
+def _unit_error(name: str, unit: str, kind: str) -> InputError | None:
+    """A channel whose engineering unit is not the axis's (mm, or deg on a rotary axis)."""
+    if unit.strip() in UNITS[kind]:
+        return None
+    return InputError(f"channel {name} is in {unit!r}; expected {UNITS[kind][0]} (watch takes "
+                      "positions in the axis's unit, as monitor does)", parameter="config")
+
+
+SOURCES = {"log": LogSource, "ca": CASource, "pva": PVASource}
