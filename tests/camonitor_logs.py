@@ -73,14 +73,19 @@ def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 
               offset: float = 0.0, speed: float = 5.0, dwell: float = 2.0,
               overrun: float = 2.0, seed: int = 0, test_numbers: bool = True,
               alarms: bool = True, rate: float = RATE_HZ, tail_mm: float = 0.0,
-              invalid: int = 0) -> Path:
+              invalid: int = 0, motor_pv: str | None = None) -> Path:
     """Write the camonitor log of a linear ISO 230-2 run whose approach readings are
     ``readings[("FWD"|"BWD", i, j)]`` [mm, axis coordinates]; the reference PV logs
     ``(reading - offset) / scale`` (raw units), so a reader must map it back with ``scale`` and
     ``offset``. ``speed`` [mm/s], ``dwell`` [s] at each target, ``rate`` [Hz] of the encoder
     and the set point; ``tail_mm``: after the last approach the axis moves this far and back
     with the set point held (ecmc's resolver test); ``invalid``: this many reference samples
-    during the dwells are dropouts logged with severity INVALID and a wild value."""
+    during the dwells are dropouts logged with severity INVALID and a wild value;
+    ``motor_pv``: an open-loop step counter, at the set point (and moving in the tail).
+
+    The load follows the motor with its play taken up: while the axis moves towards a target
+    the reference reads the set point plus that approach's deviation (reading - target), so a
+    reversal shifts it by the lost motion, as a real axis does."""
     rng = np.random.default_rng(seed)
     ref_pv, test_pv, set_pv = pvs["REF_PV"], pvs["TEST_PV"], pvs["TGT_SET_PV"]
     order = sorted(targets)
@@ -101,15 +106,17 @@ def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 
         alarm = "HIGH MINOR" if alarms and not exact and rng.random() < 0.01 else ""
         log.add(ref_pv, seconds, f"{value:.10f}" if exact else f"{value:.8f}", alarm)
 
-    def move(to, seconds):
+    def move(to, seconds, shift=0.0):
         """The first step in the cycle ``seconds`` (right after a test number), then one per
-        sample; returns the time of the last."""
+        sample; the load ``shift`` [mm] from the set point; returns the time of the last."""
         nonlocal position
         steps = max(int(abs(to - position) / speed * rate), 1)
         for k in range(1, steps + 1):
             x = position + (to - position) * k / steps
             log.add(set_pv, seconds, f"{x:.6g}")
-            ref(seconds + 0.002, x + rng.normal(0, 0.002))
+            if motor_pv:
+                log.add(motor_pv, seconds + 0.001, f"{x:.6g}")
+            ref(seconds + 0.002, x + shift + rng.normal(0, 2e-4))
             seconds += 1 / rate
         position = to
         return seconds - 1 / rate
@@ -129,25 +136,30 @@ def write_run(path, targets: dict, readings: dict, pvs: dict, *, scale: float = 
 
     # connection values, stamped with their last change before the log starts
     log.add(set_pv, -30.0, f"{position:.6g}")
+    if motor_pv:
+        log.add(motor_pv, -30.0, f"{position:.6g}")
     if test_numbers:
         log.add(test_pv, -40.0, "0")
     ref(0.01, position)
     t = move(lo, 1.0) + 0.5
-    last = (cycles[-1], "BWD")
+    last, shift = (cycles[-1], "BWD"), 0.0
     for j in cycles:
         for way, sequence, park in (("FWD", order, hi), ("BWD", order[::-1], lo)):
             for i in sequence:
-                t = move(targets[i], t)
+                shift = readings[(way, i, j)] - targets[i]  # the play, taken up this way
+                t = move(targets[i], t, shift)
                 t = settle(readings[(way, i, j)], t)
                 if test_numbers:
                     code = f"{1 if way == 'FWD' else 2}{j:0{width_c}d}0{i:0{width_p}d}"
                     log.add(test_pv, t, code, stamp=t + HOST_DELAY_S)
             if (j, way) != last or not tail_mm:
-                t = move(park, t) + 0.5
+                t = move(park, t, shift) + 0.5
     if tail_mm:  # the axis moves with the set point held: no stop, no reading
         here = readings[("BWD", order[0], cycles[-1])]
         for k in range(1, int(4 * rate)):
             x = here + tail_mm * np.sin(np.pi * k / (4 * rate))
+            if motor_pv:
+                log.add(motor_pv, t + k / rate + 0.001, f"{x - shift:.6g}")
             ref(t + k / rate + 0.002, x)
     Path(path).write_text(log.text())
     return Path(path)

@@ -7,6 +7,7 @@ while it moves. The logs are written by ``tests/camonitor_logs.py`` to that conv
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -44,7 +45,7 @@ def run(tmp_path_factory):
     resolver test after the run, three INVALID dropouts while settling."""
     folder = tmp_path_factory.mktemp("ecmc")
     truth = run_readings(NINE, 5, 0.034, seed=3)
-    kwargs = dict(scale=GEAR[0], offset=GEAR[1], speed=20.0, dwell=1.5, tail_mm=0.8)
+    kwargs = {"scale": GEAR[0], "offset": GEAR[1], "speed": 20.0, "dwell": 1.5, "tail_mm": 0.8}
     with_numbers = write_run(folder / "data.log", NINE, truth, PVS, invalid=3, **kwargs)
     without = write_run(folder / "stops.log", NINE, truth, PVS, test_numbers=False, **kwargs)
     return with_numbers, without, truth
@@ -169,12 +170,15 @@ def settle_log(tmp_path, creep_um_per_s: float):
 
 
 def test_a_hold_where_the_axis_never_settles_is_refused(tmp_path, capsys):
-    assert len(read_camonitor_readings(settle_log(tmp_path, 0.0), reference_scale=1)) == 8
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the parking stops, reached one way only
+        assert len(read_camonitor_readings(settle_log(tmp_path, 0.0), reference_scale=1)) == 8
     log = settle_log(tmp_path, 40.0)  # 40 um/s: still moving after 3 s
     with pytest.raises(InputError, match=r"the reference never settles .*a reading taken "
                                          "while the axis moves is no measurement"):
         read_camonitor_readings(log, reference_scale=1)
     out = tmp_path / "r.csv"
+    capsys.readouterr()
     line = refused(capsys, ["convert", str(log), "--reference-scale", "1", "--out", str(out)])
     assert "never settles" in line and "row" in line and not out.exists()
 
@@ -232,3 +236,35 @@ def test_poscmd_names_the_set_point_and_posact_the_motor(tmp_path):
     assert set(readings["axis"]) == {"X"} and set(readings["machine_id"]) == {"MC"}
     assert len(readings) == 8
     assert np.allclose(reversal(readings), -6.0, atol=0.6)
+
+
+def test_monitor_on_the_run_reports_its_lost_motion_and_refuses_raw_counts(tmp_path, capsys):
+    """The same ISO run as a trace: the open-loop counter is the motor side, the laser the load
+    side mapped by ecmc's (negative) gear ratio; the run's lost motion is 34 um. A resolver
+    logged in raw increments as the load side is refused, never printed as a figure."""
+    truth = run_readings(NINE, 5, 0.034, seed=3)
+    motor = "IOC_TEST:Axis1-PosAct"
+    log = write_run(tmp_path / "run.log", NINE, truth, PVS, scale=GEAR[0], offset=GEAR[1],
+                    speed=20.0, dwell=1.5, tail_mm=0.8, motor_pv=motor)
+    resolver = "IOC_TEST:ec0-s4-EL7211-Enc-PosAct"  # 2^20 increments per 5 mm
+    lines = log.read_text().splitlines()
+    counts = []
+    for line in lines:
+        if line.startswith(motor):
+            _, day, clock, value = line.split()
+            raw = float(value) * 2**20 / 5 + 491650
+            counts.append(f"{resolver:<30} {day} {clock} {raw:.0f}  ")
+    log.write_text("\n".join(lines + counts) + "\n")
+    channels = f"commanded={PVS['TGT_SET_PV']},motor={motor},load={PVS['REF_PV']}"
+    capsys.readouterr()
+    assert main(["monitor", str(log), "--log-format", "camonitor", "--channels", channels,
+                 "--reference-scale", "-1.0036,50.3", "--axis", "X", "--json"]) == 0
+    (axis,) = json.loads(capsys.readouterr().out)["axes"]
+    (day,) = axis["days"]
+    assert day["lost_motion_um"] == pytest.approx(34.0, abs=2.0)
+    iso = read_camonitor_readings(log, {"target": PVS["TGT_SET_PV"], "reference": PVS["REF_PV"],
+                                        "test": PVS["TEST_PV"]}, reference_scale=GEAR)
+    assert -reversal(iso).min() - 2 <= day["lost_motion_um"] <= -reversal(iso).max() + 2
+    line = refused(capsys, ["monitor", str(log), "--log-format", "camonitor", "--channels",
+                            channels.replace(PVS["REF_PV"], resolver), "--axis", "X"])
+    assert resolver in line and "raw counts" in line
