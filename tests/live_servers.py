@@ -11,7 +11,7 @@ serving until it is killed or ``--linger`` seconds pass. On stdout: ``ready``, t
 ``played N`` (the index after the last sample played) when done.
 
 TRACE.npz holds ``names`` (channel names, one per column), ``ns`` (int64 sample times, ns since
-the epoch, UTC) and ``values`` (samples x channels); ``units`` optionally (one per channel).
+the epoch, UTC) and ``values`` (samples x channels); ``units`` optionally (one per channel: mm, deg or counts).
 """
 
 from __future__ import annotations
@@ -110,6 +110,64 @@ async def _pva(args) -> None:
         await asyncio.Event().wait()
 
 
+# ---------------------------------------------------------------- OPC UA (asyncua)
+# EUInformation of UNECE units (OPC UA Part 8): millimetre, degree, and a count of pulses
+EU = {"mm": (5066068, "mm", "millimetre"), "deg": (17476, "°", "degree"),
+      "counts": (4337492, "counts", "count")}
+UNITS_URI = "http://www.opcfoundation.org/UA/units/un/cefact"
+
+
+async def _opcua(args) -> None:
+    import datetime as dt
+    import logging
+
+    from asyncua import Server, ua
+
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
+    names, ns, values, units = _load(args.trace)
+    server = Server()
+    await server.init()
+    server.set_endpoint(f"opc.tcp://127.0.0.1:{args.port}/")
+    idx = await server.register_namespace("urn:backlash:test-cnc")
+
+    def stamp(i: int):
+        return dt.datetime(1970, 1, 1) + dt.timedelta(microseconds=int(ns[i]) // 1000)
+
+    def value(i: int, j: int):
+        return ua.DataValue(ua.Variant(float(values[i, j]), ua.VariantType.Double),
+                            SourceTimestamp=stamp(i), ServerTimestamp=stamp(i))
+
+    # names are browse paths M1/X/CmdPos, M1/X/PosIndirect/ActPos, M1/X/PosDirect/ActPos: an
+    # object per machine, a CncAxisType-style object per axis, the position variables under it
+    made, nodes = {}, []
+    for j, name in enumerate(names):
+        parent = server.nodes.objects
+        parts = name.split("/")
+        for k, part in enumerate(parts[:-1]):
+            key = "/".join(parts[:k + 1])
+            if key not in made:
+                made[key] = await parent.add_object(ua.NodeId(key, idx), f"{idx}:{part}")
+            parent = made[key]
+        node = await parent.add_variable(ua.NodeId(name, idx), f"{idx}:{parts[-1]}", 0.0)
+        unit_id, shown, text = EU[units[j]]
+        await node.add_property(ua.NodeId(f"{name}/EngineeringUnits", idx),
+                                ua.QualifiedName("EngineeringUnits", 0),
+                                ua.EUInformation(NamespaceUri=UNITS_URI, UnitId=unit_id,
+                                                 DisplayName=ua.LocalizedText(shown),
+                                                 Description=ua.LocalizedText(text)))
+        await node.write_value(value(args.start, j))
+        nodes.append(node)
+    async with server:
+        await _go()
+        for i in range(args.start + 1, min(args.stop, len(ns))):
+            for j, node in enumerate(nodes):
+                await server.write_attribute_value(node.nodeid, value(i, j))
+            if i % BURST == 0:
+                await asyncio.sleep(0.001)
+        _say(f"played {min(args.stop, len(ns))}")
+        await asyncio.Event().wait()
+
+
 async def _go() -> None:
     """Say ``ready`` and wait for ``go`` on stdin: the test says it once the watcher has every
     channel's first value (these protocols tell a server of no subscription)."""
@@ -121,7 +179,7 @@ async def _go() -> None:
             return
 
 
-PROTOCOLS = {"ca": _ca, "pva": _pva}
+PROTOCOLS = {"ca": _ca, "pva": _pva, "opcua": _opcua}
 
 
 def main(argv=None) -> None:

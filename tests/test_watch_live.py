@@ -95,6 +95,9 @@ def _config(path: Path, protocol: str, address: str, extra: str = "", axes=AXES)
     for axis in axes:
         names = _names(protocol, axis)
         text += f'[[axis]]\nmachine_id = "M1"\naxis = "{axis}"\n'
+        if protocol == "opcua":  # the OPC 40502 axis node, its channels by browse name
+            text += f'node = "M1/{axis}"\n'
+            continue
         text += "".join(f'{c} = "{names[c]}"\n' for c, _ in CHANNELS)
     path.write_text(text)
     return path
@@ -314,7 +317,7 @@ def _killed_mid_day(protocol: str, samples, fleet: Path, tmp: Path, extra: str =
     return store, keep, (a, b), events
 
 
-@pytest.mark.parametrize("protocol", ["ca", "pva"])
+@pytest.mark.parametrize("protocol", ["ca", "pva", "opcua"])
 def test_monitors_days_and_the_gap_of_a_server_killed_mid_day(protocol, samples, fleet,
                                                               tmp_path):
     store, keep, (a, b), events = _killed_mid_day(protocol, samples, fleet, tmp_path)

@@ -12,6 +12,9 @@ from features.readings.schema import LINEAR_AXES, ROTARY_AXES
 
 PROTOCOLS = ("ca", "pva", "opcua", "log")
 CHANNELS = ("commanded", "motor", "load")
+# Under an OPC 40502 CncAxisType node: the commanded position, the motor-side (indirect)
+# and the load-side (direct) measuring systems' actual positions.
+AXIS_NODE = {"commanded": "CmdPos", "motor": "PosIndirect/ActPos", "load": "PosDirect/ActPos"}
 # How long a source may take to answer at start before watch gives up [s].
 TIMEOUT_S = 10.0
 # An axis silent longer than this is stale in fleet (``source_stale``) unless it says [s].
@@ -76,7 +79,7 @@ def read_config(path) -> WatchConfig:
         fail("has no [[axis]] table; expected one per machine axis")
     axes, seen, owner = [], set(), {}
     for i, entry in enumerate(entries, 1):
-        axes.append(_axis(entry, i, fail))
+        axes.append(_axis(entry, i, fail, protocol))
         a = axes[-1]
         if a.key in seen:
             fail(f"machine {a.machine_id} axis {a.axis} is given twice")
@@ -89,10 +92,19 @@ def read_config(path) -> WatchConfig:
     return WatchConfig(protocol, address.strip(), axes, timeout, period, str(path))
 
 
-def _axis(entry, i: int, fail) -> AxisConfig:
+def _axis(entry, i: int, fail, protocol: str = "") -> AxisConfig:
     if not isinstance(entry, dict):
         fail(f"[[axis]] {i} is not a table")
     machine, axis = entry.get("machine_id"), entry.get("axis")
+    node = entry.get("node")
+    if node is not None:
+        # an OPC 40502 CncAxisType node: its set point and its two position feedbacks
+        if protocol != "opcua" or not isinstance(node, str) or not node.strip():
+            fail(f"[[axis]] {i}: node {node!r} is for an opcua source (an OPC 40502 axis)")
+        if any(name in entry for name in CHANNELS):
+            fail(f"[[axis]] {i}: give node or the channels, not both")
+        entry = {**entry, **{name: f"{node.strip().rstrip('/')}/{path}"
+                             for name, path in AXIS_NODE.items()}}
     if not isinstance(machine, str) or not machine.strip():
         fail(f"[[axis]] {i} has no machine_id")
     if axis not in (*LINEAR_AXES, *ROTARY_AXES):
@@ -105,7 +117,7 @@ def _axis(entry, i: int, fail) -> AxisConfig:
             fail(f"[[axis]] {i} ({machine} {axis}) has no {name} channel"
                  + ("; lost motion needs a load-side position" if name == "load" else ""))
         channels[name] = value.strip()
-    known = {"machine_id", "axis", *CHANNELS, "reference_scale", "stale_after_s"}
+    known = {"machine_id", "axis", *CHANNELS, "node", "reference_scale", "stale_after_s"}
     unknown = sorted(set(entry) - known)
     if unknown:
         fail(f"[[axis]] {i} ({machine} {axis}): unknown key {unknown[0]!r}; expected "

@@ -240,6 +240,152 @@ class PVASource:
             self.context.close()
 
 
+class OPCUASource:
+    """OPC UA (asyncua), server at ``opc.tcp://host:port``: one subscription with a monitored
+    item per channel, each sample placed by its SourceTimestamp. asyncua does not renew a
+    subscription on a server that restarted, so the source does: a lost connection is
+    retried with a fresh session after ``BACKOFF_S`` (the last delay repeated), until it
+    answers again.
+
+    A channel is a node id (``ns=2;s=M1.X.CmdPos``), a path of browse names from the Objects
+    folder (``M1/X/CmdPos``), or a node id followed by browse names (``ns=2;s=M1.X/CmdPos``):
+    an OPC 40502 CncAxisType axis gives CmdPos, PosIndirect/ActPos and PosDirect/ActPos."""
+
+    # the server's queue per monitored item: a burst between two publishes is delivered whole
+    QUEUE = 10000
+    PUBLISH_MS = 50
+
+    def __init__(self, config, emit, status):
+        self.config, self.emit, self.status = config, emit, status
+        self.names = sorted({n for a in config.axes for n in a.channels.values()})
+        self.kinds = _kinds(config)
+        self.client = None
+        self.lost = asyncio.Event()
+
+    def state(self) -> dict:
+        return {}
+
+    def restore(self, state: dict) -> None:
+        pass
+
+    async def start(self, timeout_s: float) -> None:
+        try:
+            await asyncio.wait_for(self._connect(check=True), timeout_s)
+        except (TimeoutError, OSError) as err:
+            await self.close()
+            raise InputError(f"the OPC UA server {self.config.address} does not answer within "
+                             f"{timeout_s:g} s ({type(err).__name__})", parameter="config") from None
+
+    async def _connect(self, check: bool = False) -> None:
+        import logging
+
+        from asyncua import Client
+
+        # asyncua logs every lost connection with its traceback; watch says source_down
+        logging.getLogger("asyncua").setLevel(logging.CRITICAL)
+        self.lost = asyncio.Event()
+        client = Client(self.config.address, timeout=max(self.config.timeout_s, 1.0))
+        self.client = client
+
+        async def lost(_exc) -> None:
+            self.lost.set()
+
+        client.connection_lost_callback = lost
+        await client.connect()
+        nodes = {}
+        for name in self.names:
+            nodes[name] = node = await self._resolve(name)
+            if check:
+                error = _unit_error(name, await self._unit(node), self.kinds[name])
+                if error is not None:
+                    raise error
+        subscription = await client.create_subscription(self.PUBLISH_MS, _Handler(self, nodes))
+        await subscription.subscribe_data_change(list(nodes.values()), queuesize=self.QUEUE)
+
+    async def _resolve(self, name: str):
+        from asyncua import ua
+
+        client = self.client
+        head, _, rest = name.partition("/")
+        if head.startswith(("ns=", "i=", "s=", "g=", "b=")):
+            node, path = client.get_node(head), [p for p in rest.split("/") if p]
+        else:
+            node, path = client.nodes.objects, name.split("/")
+        try:
+            await node.read_browse_name()
+            for part in path:
+                children = {(await c.read_browse_name()).Name: c
+                            for c in await node.get_children()}
+                if part not in children:
+                    raise ua.UaStatusCodeError(ua.StatusCodes.BadNodeIdUnknown)
+                node = children[part]
+        except (ua.UaStatusCodeError, ValueError):
+            raise InputError(f"node {name} does not exist at {self.config.address}; expected a "
+                             "node id or browse names (an OPC 40502 axis: CmdPos, "
+                             "PosIndirect/ActPos, PosDirect/ActPos)", parameter="config") from None
+        return node
+
+    async def _unit(self, node) -> str:
+        """The variable's EngineeringUnits (OPC UA Part 8 EUInformation), as a unit name."""
+        for child in await node.get_properties():
+            if (await child.read_browse_name()).Name == "EngineeringUnits":
+                eu = await child.read_value()
+                return {5066068: "mm", 17476: "deg"}.get(
+                    getattr(eu, "UnitId", None), str(eu.DisplayName.Text or ""))
+        return ""  # no EngineeringUnits: the values are checked as they come
+
+    async def run(self) -> None:
+        attempt = 0
+        while True:
+            await self.lost.wait()
+            self.status({"event": "source_down", "address": self.config.address})
+            while True:
+                await self.close()
+                await asyncio.sleep(BACKOFF_S[min(attempt, len(BACKOFF_S) - 1)])
+                attempt += 1
+                try:
+                    await asyncio.wait_for(self._connect(), self.config.timeout_s)
+                except (TimeoutError, OSError, InputError):
+                    continue
+                except Exception as err:  # asyncua's own errors while the server starts
+                    if type(err).__module__.startswith("asyncua"):
+                        continue
+                    raise
+                attempt = 0
+                self.status({"event": "source_up", "address": self.config.address})
+                break
+
+    async def close(self) -> None:
+        import contextlib
+
+        if self.client is not None:
+            client, self.client = self.client, None
+            with contextlib.suppress(Exception):  # a lost server cannot say goodbye
+                await asyncio.wait_for(client.disconnect(), 2.0)
+
+
+class _Handler:
+    """asyncua's subscription handler: each notification in arrival order on the loop."""
+
+    def __init__(self, source: OPCUASource, nodes: dict):
+        self.source = source
+        self.names = {node.nodeid: name for name, node in nodes.items()}
+
+    def datachange_notification(self, node, val, data) -> None:
+        import datetime as dt
+
+        stamp = data.monitored_item.Value.SourceTimestamp
+        if stamp is None or val is None:
+            return  # no value (a bad status): not a sample
+        if stamp.tzinfo is not None:
+            stamp = stamp.astimezone(dt.UTC).replace(tzinfo=None)
+        ns = (stamp - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1) * 1000
+        self.source.emit(self.names[node.nodeid], ns, float(val))
+
+    def status_change_notification(self, status) -> None:
+        self.source.lost.set()
+
+
 def _kinds(config) -> dict:
     return {n: ("rotary" if a.axis in "ABC" else "linear")
             for a in config.axes for n in a.channels.values()}
@@ -253,4 +399,4 @@ def _unit_error(name: str, unit: str, kind: str) -> InputError | None:
                       "positions in the axis's unit, as monitor does)", parameter="config")
 
 
-SOURCES = {"log": LogSource, "ca": CASource, "pva": PVASource}
+SOURCES = {"log": LogSource, "ca": CASource, "pva": PVASource, "opcua": OPCUASource}
