@@ -92,7 +92,7 @@ def test_compensate_selects_the_machine_and_axis_from_python_as_from_the_cli(two
 # both, so the results compare with the folders dropped.
 AGREEMENT = [
     ("convert", ["{two}", "--out", "{side}/r.csv"], {"data": "{two}", "out": "{side}/r.csv"}),
-    ("ingest", ["{two}", "--store", "{side}/new"], {"files": "{two}", "store": "{side}/new"}),
+    ("ingest", ["{two}", "--store", "{base}/new"], {"files": "{two}", "store": "{base}/new"}),
     ("store", ["check", "{store}"], {"store": "{store}"}),
     ("void", ["{store}", "--machine", "M01", "--axis", "Y", "--visit", "01", "--reason", "r"],
      {"store": "{store}", "machine": "M01", "axis": "Y", "visit": "01", "reason": "r"}),
