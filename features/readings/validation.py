@@ -98,8 +98,8 @@ def validate(raw: pd.DataFrame, path: Path, row_base: int | None) -> pd.DataFram
     extra = [c for c in frame.columns if c not in ordered and c != ROW]
     typos = [c for c in extra if closest_column(c) is not None]
     if typos:  # kept as given (convert passes them on), but nothing reads them as meant
-        note(f"{path}: {unknown_columns_text(typos)}: not in the readings contract, so no "
-             "figure reads them")
+        note(f"{path}: not in the readings contract, so no figure reads "
+             f"{'them' if len(typos) > 1 else 'it'}: {unknown_columns_text(typos)}")
     out = frame[ordered + extra].reset_index(drop=True)
     out.attrs["source"] = str(path)
     for key in (schema.UNSTATED, schema.NAMED_BY):
