@@ -335,3 +335,81 @@ def test_monitors_days_and_the_gap_of_a_server_killed_mid_day(protocol, samples,
                                                    abs=1e-6)
     kinds = [e["event"] for e in events]
     assert kinds.index("source_down") < kinds.index("source_up")
+
+
+def _refused(started, config: Path, store: Path, port: int, limit_s: float):
+    """Run watch to its refusal: (its one line, seconds it took); the event lines before it
+    (started) are the watcher's log, not part of the refusal."""
+    begun = time.monotonic()
+    run = subprocess.run([sys.executable, "-m", "pipeline.cli", "watch", str(config), "--store",
+                          str(store), "--for", "30", "--no-track"], cwd=ROOT, env=_env(port),
+                         capture_output=True, text=True, timeout=WAIT_S, check=False)
+    took = time.monotonic() - begun
+    lines = [line for line in run.stderr.strip().splitlines() if not line[:4].isdigit()]
+    assert run.returncode == 2, run.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("backlash watch: error:"), run.stderr[-2000:]
+    assert took < limit_s
+    return lines[0], took
+
+
+@pytest.mark.parametrize("protocol", ["ca", "pva", "opcua"])
+def test_a_channel_that_does_not_exist_fails_within_its_timeout(protocol, samples, fleet,
+                                                                tmp_path):
+    port = _free_port()
+    trace = _npz(tmp_path / "trace.npz", protocol, samples)
+    address = (f"opc.tcp://127.0.0.1:{port}" if protocol == "opcua" else f"127.0.0.1:{port}")
+    config = _config(tmp_path / "WATCH.toml", protocol, address, "timeout_s = 2")
+    missing = {"ca": "M1:Y-PosNone", "pva": "M1:Y-PosNone", "opcua": "M1/Y/PosNone"}[protocol]
+    text = config.read_text()
+    if protocol == "opcua":
+        text = text.replace('node = "M1/Y"', 'commanded = "M1/Y/CmdPos"\nmotor = '
+                            f'"M1/Y/PosIndirect/ActPos"\nload = "{missing}"')
+    else:
+        text = text.replace(_names(protocol, "Y")["load"], missing)
+    config.write_text(text)
+    with _processes() as started:
+        _server(started, protocol, trace, port)
+        # the start-up allows timeout_s (2 s) for the server to answer; the rest is start-up
+        line, _ = _refused(started, config, _store(fleet, tmp_path), port, limit_s=2 + 45)
+    assert missing in line and ("does not answer" in line or "does not exist" in line)
+
+
+@pytest.mark.parametrize("protocol", ["ca", "pva", "opcua"])
+def test_a_channel_in_counts_is_refused(protocol, samples, fleet, tmp_path):
+    port = _free_port()
+    units = ["mm"] * 3 * len(AXES)
+    units[2] = "counts"  # X's load-side encoder reports counts
+    trace = _npz(tmp_path / "trace.npz", protocol, samples, units)
+    address = (f"opc.tcp://127.0.0.1:{port}" if protocol == "opcua" else f"127.0.0.1:{port}")
+    config = _config(tmp_path / "WATCH.toml", protocol, address, "timeout_s = 5")
+    with _processes() as started:
+        _server(started, protocol, trace, port)
+        line, _ = _refused(started, config, _store(fleet, tmp_path), port, limit_s=WAIT_S)
+    assert _names(protocol, "X")["load"] in line and "'counts'" in line and "expected mm" in line
+
+
+def _log_config(tmp: Path, lines: list[str]) -> Path:
+    log = tmp / "m1.log"
+    log.write_text("".join(lines))
+    return _config(tmp / "WATCH.toml", "log", str(log), axes=("X",))
+
+
+def test_values_clearly_in_counts_are_refused(fleet, tmp_path):
+    names = _names("log", "X")
+    lines = [f"{names[c]} 2026-03-01 09:00:0{i}.000000 {v}\n" for i in range(3)
+             for c, v in (("commanded", 10.0 + i), ("motor", 10.0 + i), ("load", 4096000 + i))]
+    config = _log_config(tmp_path, lines)
+    line, _ = _refused([], config, _store(fleet, tmp_path), 0, limit_s=WAIT_S)
+    assert names["load"] in line and "not encoder counts" in line
+
+
+def test_a_source_whose_clock_runs_backwards_is_refused(fleet, tmp_path):
+    names = _names("log", "X")
+    times = ["09:00:01", "09:00:02", "09:00:00"]  # the third sample before the second
+    lines = [f"{names[c]} 2026-03-01 {t}.000000 {10.0 + i}\n" for i, t in enumerate(times)
+             for c in ("commanded", "motor", "load")]
+    config = _log_config(tmp_path, lines)
+    store = _store(fleet, tmp_path)
+    line, _ = _refused([], config, store, 0, limit_s=WAIT_S)
+    assert "clock runs backwards" in line and names["commanded"] in line
+    assert not read_records(store, "trace")  # nothing recorded

@@ -17,6 +17,8 @@ from features.readings.errors import InputError
 from models.lost_motion_stream import DAY_NS, AxisStream, Binner
 
 CHANNELS = ("commanded", "motor", "load")
+# A linear position beyond this [mm] (100 m) is no machine tool's travel: encoder counts.
+COUNTS_MM = 1e5
 # Intervals kept per day to estimate the source's sampling period (their median).
 PERIOD_PROBE = 1000
 
@@ -48,6 +50,10 @@ class AxisFeed:
                              "timestamps in order", parameter="config")
         if channel == 2:
             value = self.config.gain * value + self.config.offset
+        if abs(value) > COUNTS_MM and self.config.axis not in "ABC":
+            raise InputError(f"{name} reads {value:g}, beyond any travel in mm; expected "
+                             "positions in mm, not encoder counts (scale them at the source, "
+                             "or the load by reference_scale)", parameter="config")
         self.latest[channel] = ns
         self.held.append((ns, self.seq, channel, float(value)))
         self.seq += 1
