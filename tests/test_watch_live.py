@@ -241,15 +241,20 @@ def _days_recorded(store: Path, count: int) -> bool:
     return all(len(records.get(("M1", a), [])) >= count for a in AXES)
 
 
-def _monitor_days(tmp: Path, samples, keep: np.ndarray, axis: str) -> pd.DataFrame:
-    """``monitor`` on the samples ``keep`` of one axis, as a camonitor file of its PVs."""
+def _camonitor(samples, keep: np.ndarray, axis: str) -> list[str]:
+    """camonitor lines of the samples ``keep`` of one axis (its three PVs per sample)."""
     frame = samples[1][axis].iloc[keep]
     stamp = frame["time"].dt.strftime("%Y-%m-%d %H:%M:%S.%f").to_numpy()
     names = _names("ca", axis)
-    lines = [f"{names[c]} {s} {v:.17g}\n" for i, s in enumerate(stamp)
-             for c, column in CHANNELS for v in [frame[column].iat[i]]]
+    return [f"{names[c]} {s} {v:.17g}\n" for i, s in enumerate(stamp)
+            for c, column in CHANNELS for v in [frame[column].iat[i]]]
+
+
+def _monitor_days(tmp: Path, samples, keep: np.ndarray, axis: str) -> pd.DataFrame:
+    """``monitor`` on the samples ``keep`` of one axis, as a camonitor file of its PVs."""
+    names = _names("ca", axis)
     path = tmp / f"arrived-{axis}.log"
-    path.write_text("".join(lines))
+    path.write_text("".join(_camonitor(samples, keep, axis)))
     daily = monitor(path, format="camonitor", channels=names, machine="M1").daily
     return daily.dropna(subset=["lost_motion_um"]).reset_index(drop=True)
 
@@ -413,3 +418,43 @@ def test_a_source_whose_clock_runs_backwards_is_refused(fleet, tmp_path):
     line, _ = _refused([], config, store, 0, limit_s=WAIT_S)
     assert "clock runs backwards" in line and names["commanded"] in line
     assert not read_records(store, "trace")  # nothing recorded
+
+
+def test_a_rotated_and_a_truncated_log_lose_nothing_and_double_nothing(samples, fleet, tmp_path):
+    ns = samples[0]
+    every = np.arange(len(ns))
+    lines = {axis: _camonitor(samples, every, axis) for axis in AXES}
+    both = [line for i in range(len(ns)) for axis in AXES
+            for line in lines[axis][3 * i:3 * i + 3]]  # the axes' samples interleaved
+    per_sample = 3 * len(AXES)
+    (d1, d2, d3) = _day_bounds(ns)
+    rotate, truncate = (d1[1] + d2[0]) // 2 + 400, d2[0] + (d2[1] - d2[0]) // 2
+    rotate, truncate = rotate * per_sample, truncate * per_sample
+    log = tmp_path / "m1.log"
+    log.write_text("".join(both[:rotate - 600]))
+    config = _config(tmp_path / "WATCH.toml", "log", str(log))
+    store = _store(fleet, tmp_path)
+    with _processes() as started:
+        watcher = _watcher(started, config, store, 0)
+        watcher.wait_for(_event("started"))
+        _wait(lambda: _received_through(store, ns[(rotate - 600) // per_sample - 2]),
+              "the first lines")
+        with open(log, "a") as out:  # lines the watcher has not read when the file is renamed
+            out.writelines(both[rotate - 600:rotate])
+        log.rename(tmp_path / "m1.log.1")
+        log.write_text("".join(both[rotate:truncate]))
+        watcher.wait_for(_event("log_rotated"))
+        _wait(lambda: _received_through(store, ns[truncate // per_sample - 2]), "the new file")
+        # rewritten shorter, starting with lines it had already (as a logger that restarts
+        # from its own buffer): those are not taken twice
+        log.write_text("".join(both[truncate - 300:truncate + 30]))
+        watcher.wait_for(_event("log_truncated"))
+        with open(log, "a") as out:
+            out.writelines(both[truncate + 30:d3[0] * per_sample + 5 * per_sample])
+        _wait(lambda: _days_recorded(store, 2), "days 1 and 2 recorded")
+        watcher.process.send_signal(signal.SIGTERM)  # keeps day 3 open
+        watcher.wait_for(_event("stopped"))
+        assert watcher.process.wait(timeout=30) == 0
+    days = _assert_monitor(store, tmp_path, samples, np.arange(d3[0] + 5))
+    for axis in AXES:  # every sample once: the days as whole as monitor's
+        assert [d["samples_received"] for d in days[axis]] == [d1[1] - d1[0], d2[1] - d2[0]]

@@ -25,18 +25,29 @@ UNITS = {"linear": ("mm", ""), "rotary": ("deg", "degree", "degrees", "°", "")}
 
 
 class LogSource:
-    """A camonitor log as it grows (``offset``/``inode`` are its resumable state)."""
+    """A camonitor log as it grows (``offset``/``inode`` are its resumable state).
+
+    The file stays open, as ``tail -F`` keeps it: at a rotation (a new file at the path) what
+    was appended to the old one is read to its end first, so nothing is lost; at a truncation
+    (the file shorter than what was read) it is read again from its start. After either,
+    a line no later than the last one taken from its PV was taken before the file was
+    rewritten, and is skipped, so nothing is doubled."""
 
     def __init__(self, config, emit, status):
         self.path, self.emit, self.status = config.address, emit, status
         self.names = {n for a in config.axes for n in a.channels.values()}
-        self.offset, self.inode, self.rest = 0, None, b""
+        self.offset, self.inode, self.handle = 0, None, None
+        self.last: dict = {}  # PV -> time of its last line taken [ns]
+        self.resync: set = set()  # PVs whose lines may repeat what was taken
 
     def state(self) -> dict:
-        return {"offset": self.offset, "inode": self.inode}
+        return {"offset": self.offset, "inode": self.inode, "last": self.last,
+                "resync": sorted(self.resync)}
 
     def restore(self, state: dict) -> None:
         self.offset, self.inode = int(state.get("offset", 0)), state.get("inode")
+        self.last = {k: int(v) for k, v in state.get("last", {}).items()}
+        self.resync = set(state.get("resync", ()))
 
     async def start(self, timeout_s: float) -> None:
         loop = asyncio.get_running_loop()
@@ -52,23 +63,49 @@ class LogSource:
             self.poll()
             await asyncio.sleep(POLL_S)
 
+    async def close(self) -> None:
+        if self.handle is not None:
+            self.handle.close()
+            self.handle = None
+
+    def _open(self) -> bool:
+        try:
+            self.handle = open(self.path, "rb")  # noqa: SIM115 - kept open across polls
+        except FileNotFoundError:
+            return False  # between a rotation's rename and the new file
+        inode = os.fstat(self.handle.fileno()).st_ino
+        if self.inode is not None and inode != self.inode:  # rotated while no watcher ran
+            self._rewritten("log_rotated")
+        self.inode = inode
+        return True
+
+    def _rewritten(self, event: str) -> None:
+        self.status({"event": event, "path": self.path})
+        self.offset = 0
+        self.resync = set(self.last)
+
     def poll(self) -> None:
+        if self.handle is None and not self._open():
+            return
+        self._read()
         try:
             st = os.stat(self.path)
         except FileNotFoundError:
-            return  # between a rotation's rename and the new file
-        if self.inode is not None and st.st_ino != self.inode:
-            self.status({"event": "log_rotated", "path": self.path})
-            self.offset, self.rest = 0, b""
+            return  # renamed, the new file not there yet: the old one was read to its end
+        if st.st_ino != self.inode:
+            self._read()  # the old file's last lines, written before the rename
+            self.handle.close()
+            self.handle = None
+            if self._open():
+                self._rewritten("log_rotated")
+                self._read()
         elif st.st_size < self.offset:
-            self.status({"event": "log_truncated", "path": self.path})
-            self.offset, self.rest = 0, b""
-        self.inode = st.st_ino
-        if st.st_size == self.offset:
-            return
-        with open(self.path, "rb") as handle:
-            handle.seek(self.offset)
-            data = handle.read()
+            self._rewritten("log_truncated")
+            self._read()
+
+    def _read(self) -> None:
+        self.handle.seek(self.offset)
+        data = self.handle.read()
         end = data.rfind(b"\n") + 1  # complete lines only: a line being written waits
         for line in data[:end].decode("utf-8", "replace").splitlines():
             self._line(line)
@@ -87,7 +124,13 @@ class LogSource:
             return
         stamp = stamp.replace(tzinfo=dt.UTC)
         ns = (int(stamp.timestamp()) * 1_000_000 + stamp.microsecond) * 1000
-        self.emit(parts[0], ns, value)
+        pv = parts[0]
+        if pv in self.resync:
+            if ns <= self.last[pv]:
+                return  # taken from the file before it was rewritten
+            self.resync.discard(pv)
+        self.last[pv] = ns
+        self.emit(pv, ns, value)
 
 
 class CASource:
