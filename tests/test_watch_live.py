@@ -458,3 +458,31 @@ def test_a_rotated_and_a_truncated_log_lose_nothing_and_double_nothing(samples, 
     days = _assert_monitor(store, tmp_path, samples, np.arange(d3[0] + 5))
     for axis in AXES:  # every sample once: the days as whole as monitor's
         assert [d["samples_received"] for d in days[axis]] == [d1[1] - d1[0], d2[1] - d2[0]]
+
+
+def _watched(store: Path, last_sample: str, stale_after_s=None) -> None:
+    """A watcher's saved state naming M01 X (as ``pipeline.live.loop`` writes it)."""
+    from pipeline.store.live import live_folder, save_state
+    from pipeline.store.records import open_for_records
+
+    meta = {"axes": [{"machine_id": "M01", "axis": "X", "last_sample": last_sample,
+                      "stale_after_s": stale_after_s, "source": "WATCH.toml"}]}
+    save_state(live_folder(open_for_records(store)), "watch__WATCH", "state", {}, meta)
+
+
+@pytest.mark.parametrize("last, limit, stale", [
+    ("2026-06-30T20:00:00.000000Z", None, False),  # 4 h before the view's end: live
+    ("2026-06-27T23:00:00.000000Z", None, True),   # 3 days: past the default 2 days
+    ("2026-06-30T20:00:00.000000Z", 3600.0, True),  # its WATCH.toml allows an hour only
+])
+def test_fleet_shows_a_watched_axis_last_sample_and_alerts_when_it_goes_silent(
+        fleet, tmp_path, last, limit, stale):
+    store = _store(fleet, tmp_path)
+    _watched(store, last, limit)
+    axes = {(a["machine_id"], a["axis"]): a
+            for a in bl.fleet(store, as_of="2026-06-30").to_json()["axes"]}
+    x = axes["M01", "X"]
+    assert x["last_sample"] == last
+    assert x["stale_after_s"] == (limit or 2 * 86400.0)
+    assert ("source_stale" in x["alerts"]) is stale
+    assert all(a["last_sample"] is None for k, a in axes.items() if k != ("M01", "X"))

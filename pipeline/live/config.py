@@ -17,8 +17,9 @@ CHANNELS = ("commanded", "motor", "load")
 AXIS_NODE = {"commanded": "CmdPos", "motor": "PosIndirect/ActPos", "load": "PosDirect/ActPos"}
 # How long a source may take to answer at start before watch gives up [s].
 TIMEOUT_S = 10.0
-# An axis silent longer than this is stale in fleet (``source_stale``) unless it says [s].
-STALE_AFTER_S = 600.0
+# An axis silent longer than its stale_after_s [s] is stale in fleet (``source_stale``);
+# without one, fleet's stale_after_days applies.
+STALE_AFTER_S = None
 
 
 @dataclass
@@ -28,7 +29,7 @@ class AxisConfig:
     channels: dict  # channel -> PV, node id or browse path
     gain: float = 1.0  # load = gain * received + offset (monitor's --reference-scale)
     offset: float = 0.0
-    stale_after_s: float = STALE_AFTER_S
+    stale_after_s: float | None = STALE_AFTER_S
 
     @property
     def key(self) -> str:
@@ -130,7 +131,8 @@ def _axis(entry, i: int, fail, protocol: str = "") -> AxisConfig:
             gain, offset = _scale(entry["reference_scale"])
         except InputError as err:
             fail(f"[[axis]] {i}: reference_scale {err.message}")
-    stale = _positive(entry.get("stale_after_s", STALE_AFTER_S), "stale_after_s", fail)
+    stale = entry.get("stale_after_s", STALE_AFTER_S)
+    stale = None if stale is None else _positive(stale, "stale_after_s", fail)
     return AxisConfig(machine.strip(), axis, channels, gain, offset, stale)
 
 

@@ -83,7 +83,13 @@ PARAMETERS = {
     "out": Param((str, os.PathLike, None), "write the fleet site into DIR (index.html, one page "
                  "per axis, fleet.json); it opens from disk", metavar="DIR", output="folder"),
     "store": python_only(str, os.PathLike, None),
+    "stale_after_days": Param((Interval(Real, 0, None, closed="neither"),),
+                              "an axis whose watched feed (backlash watch) has sent no sample "
+                              "for this long alerts source_stale, unless its WATCH.toml says "
+                              "(stale_after_s)", metavar="D"),
 }
+# A watched axis silent this long [d] is stale: a weekend without production is not.
+STALE_AFTER_DAYS = 2.0
 
 
 # --------------------------------------------------------------------------- one axis
@@ -143,6 +149,9 @@ class AxisView:
         analysis of the laser visits with the trace days shifted onto the laser's definition
         (``trace_analyses``), which the trend, change points, crossing, alerts, next visit and
         forecast come from; None when they come from the laser visits alone (``series``).
+    live : dict or None
+        A watched axis (``backlash watch``): ``last_sample`` (ISO, UTC), ``stale_after_s``
+        (the silence it alerts ``source_stale`` past [s]), ``source``; None when not watched.
     """
 
     series: object
@@ -163,6 +172,7 @@ class AxisView:
     evidence_notes: list = field(default_factory=list)
     voided: list = field(default_factory=list)
     analysis: object = None
+    live: dict | None = None
 
     @property
     def basis(self):
@@ -236,6 +246,8 @@ class AxisView:
             "days_overdue": self.days_overdue,
             "fleet_wear_rate_per_month": None if self.fleet_rate is None else _round(
                 self.fleet_rate["per_day"] * DAYS_PER_MONTH, 5),
+            "last_sample": None if self.live is None else self.live["last_sample"],
+            "stale_after_s": None if self.live is None else self.live["stale_after_s"],
             "alerts": [a["kind"] for a in self.alerts],
             "alert_messages": [a["message"] for a in self.alerts],
             "last_forecast": summary(self.forecasts[-1]) if self.forecasts else None,
@@ -356,7 +368,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
           threshold_arcsec: float | None = None, limits=None, as_of=None,
           interval_days: float = DEFAULT_INTERVAL_DAYS, warn_months: float = 6.0,
           alpha: float = 0.05, min_jump_sigma: float = 3.0, out=None,
-          store=None) -> FleetResult:
+          store=None, stale_after_days: float = STALE_AFTER_DAYS) -> FleetResult:
     """One view of every machine axis of the fleet, worst first.
 
     Parameters
@@ -393,6 +405,10 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         The fleet store (folder or ``postgresql://`` URL) whose recorded forecasts and
         compensations to show (``AxisView.forecasts``, ``compensations``); default ``data``
         when it names a store.
+    stale_after_days : float, default 2.0
+        A watched axis (``backlash watch``) whose last sample is older than this [d] at the
+        view's time (now, or the end of ``as_of``) alerts ``source_stale``, unless its
+        WATCH.toml gives its own ``stale_after_s``.
 
     Returns
     -------
@@ -408,7 +424,8 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     values = {"format": format, "threshold_um": threshold_um,
               "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
               "interval_days": interval_days, "warn_months": warn_months, "alpha": alpha,
-              "min_jump_sigma": min_jump_sigma, "out": out, "store": store}
+              "min_jump_sigma": min_jump_sigma, "out": out, "store": store,
+              "stale_after_days": stale_after_days}
     check_params(PARAMETERS, values, "fleet")
     from pipeline.steps.dated_view import as_of_date, dated_view
     from pipeline.steps.limits import limit_notes, read_limits
@@ -446,6 +463,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         note(text)
     views = axis_views(series, readings, parts, interval_days, records, as_of=day,
                        analyses=analyses)
+    live_alerts(views, data if store is None else store, day, stale_after_days)
     for text in (n for v in views for n in v.evidence_notes):
         notes.append(text)
         note(text)
@@ -457,6 +475,37 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     if out is not None:
         result.write(out)
     return result
+
+
+def live_alerts(views: list, store, day: dt.date, stale_after_days: float) -> None:
+    """Each watched axis's last sample (``AxisView.live``), and ``source_stale`` on one silent
+    longer than its limit at the view's time: now, or the end of an earlier ``as_of`` day."""
+    from pipeline.store.live import live_axes
+
+    if isinstance(store, (str, os.PathLike)) and "://" in str(store):
+        return  # a PostgreSQL store keeps no watcher's state
+    watched = {}
+    for a in live_axes(store):
+        known = watched.get((a["machine_id"], a["axis"]))
+        if known is None or (a["last_sample"] or "") > (known["last_sample"] or ""):
+            watched[(a["machine_id"], a["axis"])] = a  # the latest of several watchers
+    now = min(dt.datetime.now(dt.UTC), dt.datetime.combine(
+        day + dt.timedelta(days=1), dt.time(), dt.UTC))
+    for view in views:
+        a = watched.get((view.machine_id, view.axis))
+        if a is None:
+            continue
+        limit = a.get("stale_after_s") or stale_after_days * 86400.0
+        view.live = {"last_sample": a["last_sample"], "stale_after_s": limit,
+                     "source": a.get("source")}
+        last = (None if a["last_sample"] is None else
+                dt.datetime.fromisoformat(a["last_sample"]))
+        if last is None or (now - last).total_seconds() > limit:
+            silent = ("has sent no sample" if last is None else
+                      f"has sent nothing since {a['last_sample'][:19]}Z")
+            view.basis.alerts.append({"kind": "source_stale", "message": (
+                f"{view.machine_id} {view.axis}: the watched feed {silent} (limit "
+                f"{limit / 3600:g} h); is the watcher or the controller down?")})
 
 
 def store_records(data) -> dict:
