@@ -134,6 +134,7 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "crossing_date": (str, type(None)), "crossing_interval": list, "next_visit_due": str,
          "next_visit_reason": str, "fleet_wear_rate_per_month": (float, type(None)),
          "days_overdue": (int, type(None)),
+         "last_sample": type(None), "stale_after_s": type(None),  # a file: no watcher
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
          "page": str, "voided_tests": list, "evidence": dict, "offsets_um": dict,
