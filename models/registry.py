@@ -210,6 +210,45 @@ def table() -> list[dict]:
             for p in PREDICTORS.values()]
 
 
+def predictors_table() -> str:
+    """``table()`` as Markdown, for ``docs/train.md`` (filled in by ``docs/hooks.py`` as the
+    site is built)."""
+    rows = table()
+    columns = list(rows[0])
+
+    def cell(column: str, value) -> str:
+        if column == "name":
+            return f"`{value}`"
+        if isinstance(value, bool):
+            return "yes" if value else "no"
+        return str(value).replace("*", r"\*").replace("|", r"\|")
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(cell(c, row[c]) for c in columns) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def register(record: Predictor) -> Predictor:
+    """Add a predictor from outside this module: ``train``, ``compare``, ``--model``'s help and
+    the docs' table read it from then on (``models.persistence`` saves it by its
+    ``save_format``).
+
+    Raises
+    ------
+    ValueError
+        When a predictor of that name exists already.
+    """
+    if record.name in PREDICTORS:
+        raise ValueError(f"predictor {record.name!r} exists already")
+    PREDICTORS[record.name] = record
+    return record
+
+
+def unregister(name: str) -> None:
+    """Remove predictor ``name`` (one added by ``register``)."""
+    del PREDICTORS[predictor(name).name]
+
+
 def with_axes(X, meta):
     """The inputs ``X`` with the machine axis of each row (``AXIS_KEYS`` from ``meta``, as
     text) in front: what a per-axis predictor is fitted on and predicts from."""

@@ -29,8 +29,7 @@ import sys
 import warnings
 
 from features.readings.errors import VERBOSE, BacklashWarning, InputError
-from pipeline.commands import NAMES as COMMANDS  # the one command registry
-from pipeline.commands import command_of
+from pipeline.commands import command_of, names  # the one command registry
 from pipeline.commands.common import check_outputs, remove_created
 from pipeline.tracking import TRACKING_DIR
 
@@ -59,8 +58,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     command, and its ``--help``, imports its own modules only and ``backlash --help`` none."""
     from pipeline.commands.options import checked_types
 
-    chosen = argv[0] if argv and argv[0] in COMMANDS else None
-    build = COMMANDS if argv is None else (chosen,)  # None: every command, built (tests, docs)
+    commands = names()
+    chosen = argv[0] if argv and argv[0] in commands else None
+    build = commands if argv is None else (chosen,)  # None: every command, built (tests, docs)
     parser = Parser(
         prog="backlash",
         description="ISO 230-2 positioning tests to backlash predictions, drift alerts, "
@@ -68,7 +68,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     )
     parser.commands = {}
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
+    for name in commands:
         summary = _summary(name)
         cmd = sub.add_parser(name, help=summary, description=summary)
         if name not in build:

@@ -69,15 +69,17 @@ def test_site_builds_strictly(tmp_path):
 
 
 def test_every_page_is_in_the_nav():
+    """Every page is in mkdocs.yml's nav, or a job's page, which the hooks add to it."""
     config = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
-    missing = [p.name for p in DOCS.glob("*.md") if p.name not in config]
+    missing = [p.name for p in DOCS.glob("*.md")
+               if p.name not in config and p.stem not in JOBS]
     assert not missing, f"pages missing from mkdocs.yml nav: {missing}"
 
 
 def test_api_page_names_every_public_function():
     from pipeline import api
 
-    text = (DOCS / "api.md").read_text(encoding="utf-8")
+    text = load_hooks().render((DOCS / "api.md").read_text(encoding="utf-8"), "api.md")
     missing = [name for name in api.__all__ if not re.search(rf"\b{name}\b", text)]
     assert not missing, missing
 
@@ -103,65 +105,75 @@ def test_readme_links_resolve():
 
 
 # ------------------------------------------------------------------ tables read from the records
-def _cell(value) -> str:
-    """A value as a markdown table cell (``*`` and ``|`` escaped)."""
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    return str(value).replace("*", r"\*").replace("|", r"\|")
+def load_hooks():
+    """``docs/hooks.py``, the MkDocs hooks that fill in the tables as the site is built."""
+    spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    return hooks
 
 
-def layout_table() -> str:
-    """The input formats page's table, rendered from ``features.readings.layouts.LAYOUTS``."""
+def record_names() -> dict[str, tuple[str, list[str]]]:
+    """Per table marker: the page that holds it and the names its records give, read from
+    the records themselves."""
     from features.readings.layouts import LAYOUTS
+    from models.physics.effects import EFFECTS
+    from models.registry import PREDICTORS
+    from pipeline import api
+    from pipeline.compensation import CONTROLLERS
 
-    rows = ["| format | suffixes | help text | a file of it holds |", "|---|---|---|---|"]
-    rows += [f"| `{r.name}` | {', '.join(f'`{s}`' for s in r.suffixes)} | {_cell(r.help)} | "
-             f"{_cell(r.expected)} |" for r in LAYOUTS]
-    return "\n".join(rows) + "\n"
-
-
-def predictor_table() -> str:
-    """``models.registry.table()`` as markdown (the name in code font)."""
-    from models.registry import table
-
-    rows = table()
-    if isinstance(rows, str):  # already markdown
-        return rows
-    columns = list(rows[0])
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(f"`{row[c]}`" if c == "name" else _cell(row[c])
-                                for c in columns) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
+    return {"formats": ("input-formats.md", [r.name for r in LAYOUTS]),
+            "controllers": ("controllers.md", list(CONTROLLERS)),
+            "predictors": ("train.md", list(PREDICTORS)),
+            "effects": ("data-contract.md", [*EFFECTS, "none"]),
+            "commands": ("index.md", [f"backlash {job}" for job in JOBS]),
+            "jobs": ("api.md", [f"bl.{name}" for name in api.jobs()])}
 
 
-def test_the_input_formats_table_is_the_records():
-    from features.readings.layouts import LAYOUTS
-
-    text = (DOCS / "input-formats.md").read_text(encoding="utf-8")
-    assert layout_table() in text, (
-        "docs/input-formats.md: paste tests.test_docs.layout_table()\n" + layout_table())
-    contract = (DOCS / "data-contract.md").read_text(encoding="utf-8")
-    missing = [r.name for r in LAYOUTS if f"- **{r.name}**:" not in contract]
-    assert not missing, f"data-contract.md section 2 lacks a bullet for {missing}"
+def first_column(table: str) -> list[str]:
+    """The code-font names of a Markdown table's first column."""
+    return [re.match(r"\| `([^`]+)`", row)[1] for row in table.splitlines()[2:]]
 
 
-def test_the_predictor_table_is_the_registry():
-    text = (DOCS / "train.md").read_text(encoding="utf-8")
-    assert predictor_table() in text, (
-        "docs/train.md: paste models.registry.table() as markdown\n" + predictor_table())
+def test_every_table_the_hooks_make_has_its_marker_and_lists_every_record():
+    """The tables of records are not pasted: the page holds a marker that the site's build
+    fills in (``docs/hooks.py``), and the table made lists exactly the records, in order."""
+    hooks = load_hooks()
+    expected = record_names()
+    assert set(hooks.TABLES) == set(expected)
+    for name, (page, names) in expected.items():
+        text = (DOCS / page).read_text(encoding="utf-8")
+        assert f"\n<!-- table: {name} -->\n" in text, f"docs/{page} lacks its {name} marker"
+        rendered = hooks.render(text, page)
+        assert "<!-- table:" not in rendered
+        table = hooks.table(name)
+        assert table in rendered
+        shown = [n.split(" [")[0] for n in first_column(table)]
+        if name == "commands":  # a synopsis: the command's name, then its arguments
+            shown = [" ".join(n.split()[:2]) for n in shown]
+        assert shown == names, (name, shown)
 
 
 @pytest.mark.parametrize("job", JOBS)
-def test_every_job_page_shows_its_parameter_table(job):
-    """The table of options and Python names on a job's page is its parameter table, as
-    the command line generates its options from it."""
+def test_every_job_page_gets_its_parameter_table(job):
+    """A job's page holds the ``<!-- parameters -->`` marker and the built page the table the
+    command line generates its options from."""
     from pipeline.steps.parameters import parameters_table
 
-    table = parameters_table(job)
-    text = (DOCS / f"{job}.md").read_text(encoding="utf-8")
-    assert f"<!-- parameters -->\n{table}\n<!-- /parameters -->" in text, (
-        f"docs/{job}.md: paste pipeline.steps.parameters.parameters_table({job!r})\n"
-        + table)
+    page = "store.md" if job == "store" else f"{job}.md"
+    text = (DOCS / page).read_text(encoding="utf-8")
+    assert "\n<!-- parameters -->\n" in text, f"docs/{page} lacks its <!-- parameters --> marker"
+    rendered = load_hooks().render(text, page)
+    assert parameters_table(job) in rendered and "<!-- parameters -->" not in rendered
+
+
+def test_the_nav_lists_every_job_page_from_the_records():
+    hooks = load_hooks()
+    nav = [{"Getting started": "index.md"}, {"Jobs": [{"run (experiments)": "run.md"}]},
+           {"Fleet store": "store.md"}]
+    jobs = hooks.on_config({"nav": nav})["nav"][1]["Jobs"]
+    assert jobs == [{job: f"{job}.md"} for job in JOBS if job != "store"] + [
+        {"run (experiments)": "run.md"}]
 
 
 def test_run_page_example_is_an_excerpt_of_the_demo():

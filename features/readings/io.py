@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from features.readings import layouts  # read at call time: a registered layout counts
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path
-from features.readings.layouts import BY_NAME, FORMATS, detect_format
 from features.readings.validation import validate
 
 
@@ -34,13 +34,13 @@ def read_readings(path, format: str = "auto", **options) -> pd.DataFrame:
         The file cannot be read or breaks the readings contract (naming file, row, column).
     """
     path = Path(path)
-    if format not in FORMATS:
-        raise InputError(f"unknown format {format!r}; expected one of {', '.join(FORMATS)}",
-                         file=path, parameter="format")
+    if format not in layouts.FORMATS:
+        raise InputError(f"unknown format {format!r}; expected one of "
+                         f"{', '.join(layouts.FORMATS)}", file=path, parameter="format")
     check_readable(path)
     if format == "auto":
-        format = detect_format(path)
-    return validate(BY_NAME[format].read(path, **options), path, None)
+        format = layouts.detect_format(path)
+    return validate(layouts.BY_NAME[format].read(path, **options), path, None)
 
 
 def check_readable(path: Path) -> None:

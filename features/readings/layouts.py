@@ -169,19 +169,65 @@ LAYOUTS: tuple[Layout, ...] = (
         reader="features.readings.approaches:read_camonitor_readings",
         signature=_camonitor_signature, options=("channels", "reference_scale", "unit")),
 )
-BY_NAME = {record.name: record for record in LAYOUTS}
-# The ``--format`` choices: detection first, then every layout.
-FORMATS = ("auto", *BY_NAME)
 
 
 def _or_list(words: list[str]) -> str:
     return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
 
 
-# Help text of every readings (DATA) argument.
-DATA_HELP = "readings file: " + _or_list([record.help for record in LAYOUTS])
-# The "unknown format" error: what an accepted file holds.
-UNKNOWN_FORMAT = "unknown format: expected " + _or_list([r.expected for r in LAYOUTS])
+def _derive() -> None:
+    """The views read from ``LAYOUTS``, computed again whenever a record comes or goes (read
+    them as ``layouts.FORMATS``, not copied at import, to see a registered layout)."""
+    global BY_NAME, FORMATS, DATA_HELP, UNKNOWN_FORMAT
+    BY_NAME = {record.name: record for record in LAYOUTS}
+    # The ``--format`` choices: detection first, then every layout.
+    FORMATS = ("auto", *BY_NAME)
+    # Help text of every readings (DATA) argument.
+    DATA_HELP = "readings file: " + _or_list([record.help for record in LAYOUTS])
+    # The "unknown format" error: what an accepted file holds.
+    UNKNOWN_FORMAT = "unknown format: expected " + _or_list([r.expected for r in LAYOUTS])
+
+
+_derive()
+
+
+def register(record: Layout, before: str | None = None) -> Layout:
+    """Add a layout from outside this module (recognised after the layouts above, or just
+    before layout ``before`` when its signature or header must win over that one's).
+
+    Raises
+    ------
+    ValueError
+        When a layout of that name exists already.
+    """
+    global LAYOUTS
+    if record.name in BY_NAME or record.name == "auto":
+        raise ValueError(f"layout {record.name!r} exists already")
+    at = [r.name for r in LAYOUTS].index(before) if before else len(LAYOUTS)
+    LAYOUTS = (*LAYOUTS[:at], record, *LAYOUTS[at:])
+    _derive()
+    return record
+
+
+def unregister(name: str) -> None:
+    """Remove layout ``name`` (one added by ``register``)."""
+    global LAYOUTS
+    layout(name)
+    LAYOUTS = tuple(r for r in LAYOUTS if r.name != name)
+    _derive()
+
+
+def layouts_table() -> str:
+    """The docs' table of layouts (``docs/input-formats.md``, filled in by ``docs/hooks.py`` as
+    the site is built)."""
+    def cell(text: str) -> str:
+        return text.replace("*", r"\*").replace("|", r"\|")
+
+    rows = ["| format | suffixes | help text | a file of it holds | reader |",
+            "|---|---|---|---|---|"]
+    rows += [f"| `{r.name}` | {', '.join(f'`{s}`' for s in r.suffixes)} | {cell(r.help)} | "
+             f"{cell(r.expected)} | `{r.reader.replace(':', '.')}` |" for r in LAYOUTS]
+    return "\n".join(rows) + "\n"
 
 
 def layout(name: str) -> Layout:

@@ -14,10 +14,15 @@ from __future__ import annotations
 
 from features.readings import layouts
 
-# Input layouts a readings file may have (``--format`` choices) and the help text of every
-# readings (DATA) argument: generated from the records in features.readings.layouts.
-FORMATS = layouts.FORMATS
-DATA_HELP = layouts.DATA_HELP
+
+def __getattr__(name: str):
+    """``FORMATS`` (the input layouts a readings file may have: the ``--format`` choices) and
+    ``DATA_HELP`` (the help text of every readings argument), read from the records of
+    ``features.readings.layouts`` when asked for, so that a registered layout counts."""
+    if name in ("FORMATS", "DATA_HELP"):
+        return getattr(layouts, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 REQUIRED = ("machine_id", "axis", "test_id", "method", "target", "direction", "cycle")
 DEVIATION = "deviation_um"
@@ -52,13 +57,9 @@ DIRECTION_ALIASES = {
 }
 METHOD_ALIASES = {"linear": "linear", "lin": "linear", "pendulum": "pendulum", "pend": "pendulum"}
 
-# Named physical effects (docs/data-contract.md, section 4); models.physics.effects.EFFECTS has one record
-# per name (a test checks they agree).
-EFFECT_NAMES = (
-    "backlash", "backlash_position", "backlash_feed", "backlash_temperature",
-    "lead_error_linear", "lead_error_periodic", "lead_error_profile", "thermal_expansion",
-    "thermal_drift", "air_refraction", "abbe", "dwell_settling", "reversal_profile",
-)
+# The verdict that no physical effect is missing (docs/data-contract.md, section 4). The effect
+# names themselves are the keys of models.physics.effects.EFFECTS (``EFFECT_NAMES`` there):
+# one record per effect, so this layer, below the models, keeps no copy of the list.
 NO_EFFECT = "none"
 
 

@@ -580,9 +580,53 @@ EFFECTS: dict[str, Effect] = {r.name: r for r in (
                     "compensation tables correct (backlash compensate)"),
 )}
 
-# Derived views the twin reads.
-LOST_MOTION = tuple(name for name, r in EFFECTS.items() if r.kind == "lost_motion")
-DEFAULTS = {name: dict(r.defaults) for name, r in EFFECTS.items()}
+
+
+def _derive() -> None:
+    """The views read from ``EFFECTS``, computed again whenever a record comes or goes."""
+    global EFFECT_NAMES, LOST_MOTION, DEFAULTS
+    # The vocabulary (docs/data-contract.md, section 4, with ``schema.NO_EFFECT``).
+    EFFECT_NAMES = tuple(EFFECTS)
+    LOST_MOTION = tuple(name for name, r in EFFECTS.items() if r.kind == "lost_motion")
+    DEFAULTS = {name: dict(r.defaults) for name, r in EFFECTS.items()}
+
+
+_derive()
+
+
+def register(function: Callable, **fields) -> Effect:
+    """Add an effect from outside this module: ``function`` and the fields of its ``Effect``
+    record (``kind``, ``unit``, ``amplitude``, ``plausible``...), as the records above are
+    made. The twin, the effect model, ``discover`` and the docs' table read it from then on.
+
+    Raises
+    ------
+    ValueError
+        When an effect of that name exists already.
+    """
+    record = _record(function, **fields)
+    if record.name in EFFECTS:
+        raise ValueError(f"effect {record.name!r} exists already")
+    EFFECTS[record.name] = record
+    _derive()
+    return record
+
+
+def unregister(name: str) -> None:
+    """Remove effect ``name`` (one added by ``register``)."""
+    del EFFECTS[name]
+    _derive()
+
+
+def effects_table() -> str:
+    """The docs' table of effects (``docs/data-contract.md``, section 4, filled in by
+    ``docs/hooks.py`` as the site is built): every record, then the verdict ``none``."""
+    rows = ["| name | kind | amplitude [unit] | what it describes | what separates it |",
+            "|---|---|---|---|---|"]
+    rows += [f"| `{r.name}` | {r.kind.replace('_', ' ')} | `{r.amplitude}` [{r.unit or '-'}] | "
+             f"{r.reading} | {r.separating_test} |" for r in EFFECTS.values()]
+    rows.append("| `none` | | | the verdict that no effect is missing | |")
+    return "\n".join(row.replace("*", r"\*") for row in rows) + "\n"
 
 
 def contribution(name: str, position_mm, direction, conditions, **params) -> np.ndarray:

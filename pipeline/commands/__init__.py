@@ -7,10 +7,19 @@ work) and ``FLAGS``. A command parses, calls the runner, prints or writes its re
 
 import importlib
 
-from pipeline.workflows import NAMES as JOBS
+import pipeline.workflows as jobs
 
-# The one command registry: every job, then the experiment runner. Order is --help's order.
-NAMES = (*JOBS, "run")
+
+def names() -> tuple[str, ...]:
+    """The one command registry: every job, then the experiment runner, in --help's order
+    (read from the job records when asked, so a job added by ``register`` has its command)."""
+    return (*jobs.NAMES, "run")
+
+
+def __getattr__(name: str):
+    if name == "NAMES":
+        return names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def command_of(name: str):

@@ -193,6 +193,34 @@ def names() -> list[str]:
     return list(CONTROLLERS)
 
 
+def register(record: Controller) -> Controller:
+    """Add a controller from outside this package: its record here and its reader in the
+    twin's controller model (``models.physics.controller.READERS``), so that ``compensate``,
+    ``--controller``, the closed-loop check and the docs' table read it from then on.
+
+    Raises
+    ------
+    ValueError
+        When the name or an alias is taken already.
+    """
+    from models.physics.controller import READERS
+
+    taken = {alias for c in CONTROLLERS.values() for alias in (c.name, *c.aliases)} | {"all"}
+    clash = sorted(taken & {record.name, *record.aliases})
+    if clash:
+        raise ValueError(f"controller name {clash[0]!r} is taken already")
+    CONTROLLERS[record.name] = record
+    READERS[record.name] = record.reader
+    return record
+
+
+def unregister(name: str) -> None:
+    """Remove controller ``name`` (one added by ``register``) and its reader."""
+    from models.physics.controller import READERS
+
+    del CONTROLLERS[name], READERS[name]
+
+
 def resolve(controller) -> list[str]:
     """Controller names from ``controller``: a name or alias, a comma-separated text of them,
     a list of them, or ``"all"``; repeated names count once.
@@ -220,7 +248,8 @@ def help_text() -> str:
 
 
 def controllers_table() -> str:
-    """The docs' table of controllers (``docs/controllers.md`` holds it verbatim)."""
+    """The docs' table of controllers (``docs/controllers.md``, filled in by ``docs/hooks.py``
+    as the site is built)."""
     rows = [("| name | controller | aliases | writes | values in | table sign (`--sign`) | "
             "axes | compensates |"),
             "|---|---|---|---|---|---|---|---|"]

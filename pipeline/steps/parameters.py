@@ -207,8 +207,8 @@ SEED = (Interval(Integral, 0, 2**32 - 1, closed="both"),)  # numpy's and torch's
 def parameters_table(job: str) -> str:
     """The Markdown table of job ``job``'s parameters for its docs page, generated from its
     table: the Python name, the command line's option (as ``pipeline.commands.parameters``
-    generates it), the default and the meaning (``tests/test_docs.py`` checks each page holds
-    its job's table as generated here)."""
+    generates it), the default and the meaning (``docs/hooks.py`` puts it on the job's page at
+    its ``<!-- parameters -->`` marker as the site is built)."""
     import inspect
 
     from pipeline.workflows import workflow
@@ -223,7 +223,9 @@ def parameters_table(job: str) -> str:
         shown = "" if default in (None, inspect.Parameter.empty) else f"`{_shown(default)}`"
         option = param.option(name)
         option = f"`{option}`" + (f" {param.metavar}" if param.metavar else "")
-        rows.append(f"| `{name}` | {option} | {shown} | {param.help.replace('|', '/')} |")
+        # "[0, W] [mm]" would read as a Markdown reference link: the brackets are escaped
+        meaning = param.help.replace("|", "/").replace("[", r"\[").replace("]", r"\]")
+        rows.append(f"| `{name}` | {option} | {shown} | {meaning} |")
     return "\n".join(rows)
 
 
