@@ -44,7 +44,8 @@ class Recorded:
     @property
     def text(self) -> str:
         """One line for the command's summary."""
-        what = f"{self.kind}{'s' if self.added != 1 else ''}"
+        noun = f"{self.kind} record" if self.kind.endswith("s") else self.kind  # stiffness
+        what = f"{noun}{'s' if self.added != 1 else ''}"
         same = f" ({self.unchanged} already recorded)" if self.unchanged else ""
         return f"{self.added} {what} recorded in {self.location}{same}"
 
@@ -247,8 +248,51 @@ def check_probing(record) -> dict:
     return record
 
 
+STIFFNESS_KEYS = {"kind", "format", "machine_id", "axis", "date", "visit", "centres", "map",
+                  "source"}
+STIFFNESS_CENTRE_KEYS = {"centre_mm", "plane", "loads_n", "stiffness_n_per_um",
+                         "stiffness_u_n_per_um"}
+STIFFNESS_MAP_KEYS = {"form", "decided", "ram_top_mm"}
+
+
+def check_stiffness(record) -> dict:
+    """``record`` if it is one linear axis's static stiffness at the centres of one visit's
+    loaded circles [N/um] and the form of the machine's stiffness map (``stiffness``) this
+    version can interpret, else one ``InputError``."""
+    kind = "stiffness record"
+    _head(record, kind, STIFFNESS_KEYS)
+    if record["axis"] not in schema.LINEAR_AXES:
+        _fail(kind, f"axis {record['axis']} is not linear")
+    _date(record.get("date"), "date", kind)
+    for key in ("visit", "source"):
+        _text(record.get(key), key, kind)
+    centres = record.get("centres")
+    if not isinstance(centres, list) or not centres:
+        _fail(kind, "centres must list the centres of the visit")
+    for i, c in enumerate(centres):
+        if not isinstance(c, dict) or set(c) != STIFFNESS_CENTRE_KEYS:
+            _fail(kind, f"centres[{i}] must hold {', '.join(sorted(STIFFNESS_CENTRE_KEYS))}")
+        _numbers(c["centre_mm"], f"centres[{i}].centre_mm", kind, 3)
+        _numbers(c["loads_n"], f"centres[{i}].loads_n", kind, None)
+        if not isinstance(c["plane"], str) or record["axis"] not in c["plane"]:
+            _fail(kind, f"centres[{i}].plane is {c['plane']!r}, not a plane of axis "
+                        f"{record['axis']}")
+        _number(c["stiffness_n_per_um"], f"centres[{i}].stiffness_n_per_um", kind)
+        _number(c["stiffness_u_n_per_um"], f"centres[{i}].stiffness_u_n_per_um", kind,
+                optional=True, minimum=0)
+    found = record.get("map")
+    if not isinstance(found, dict) or set(found) != STIFFNESS_MAP_KEYS:
+        _fail(kind, f"map must hold {', '.join(sorted(STIFFNESS_MAP_KEYS))}")
+    _text(found["form"], "map.form", kind)
+    if not isinstance(found["decided"], bool):
+        _fail(kind, f"map.decided is {found['decided']!r}, not true or false")
+    _number(found["ram_top_mm"], "map.ram_top_mm", kind, optional=True)
+    return record
+
+
 CHECKS = {"forecast": check_forecast, "compensation": check_compensation,
-          "trace": check_trace, "ballbar": check_ballbar, "probing": check_probing}
+          "trace": check_trace, "ballbar": check_ballbar, "probing": check_probing,
+          "stiffness": check_stiffness}
 
 
 def rows_of(kind: str, records: list[dict], recorded_at: str | None = None) -> list[tuple]:
@@ -540,3 +584,39 @@ def probing_records(result) -> list[dict]:
         raise InputError("holds no machine; expected the result of kinematics",
                          parameter="result")
     return out
+
+
+def stiffness_records(result) -> list[dict]:
+    """One stiffness record per machine, visit and linear axis of a stiffness result
+    (``pipeline.workflows.stiffness.StiffnessResult``): per centre of that visit whose plane
+    holds the axis its stiffness [N/um] with its standard uncertainty, centre [mm], plane and
+    loads [N]; the form of the machine's map; dated by the earliest ``started_at`` of the
+    visit's runs (null when the table has none)."""
+    out = []
+    dates = getattr(result, "dates", None) or {}
+    for m in getattr(result, "machines", None) or []:
+        found = m["map"]
+        shape = {"form": found["form"], "decided": bool(found["decided"]),
+                 "ram_top_mm": _plain(found.get("ram_top_mm"))}
+        for visit in dict.fromkeys(c["visit"] for c in m["centres"]):
+            mine = [c for c in m["centres"] if c["visit"] == visit]
+            for axis in (a for a in schema.LINEAR_AXES if any(a in c["plane"] for c in mine)):
+                out.append({
+                    "kind": "stiffness", "format": RECORD_FORMAT, "machine_id": m["machine_id"],
+                    "axis": axis, "date": dates.get((m["machine_id"], visit)), "visit": visit,
+                    "centres": [{"centre_mm": _plain(c["centre_mm"]), "plane": c["plane"],
+                                 "loads_n": _plain(c["loads_n"]),
+                                 "stiffness_n_per_um": _plain(c["stiffness_n_per_um"][axis]),
+                                 "stiffness_u_n_per_um": _plain(
+                                     c["stiffness_u_n_per_um"][axis])}
+                                for c in mine if axis in c["plane"]],
+                    "map": shape, "source": getattr(result, "source", "") or "stiffness"})
+    if not out:
+        raise InputError("holds no machine; expected the result of stiffness",
+                         parameter="result")
+    return out
+
+
+def record_stiffness(store, result, recorded_at: str | None = None) -> Recorded:
+    """Record a stiffness result's stiffness records (``stiffness_records``) in ``store``."""
+    return record(store, "stiffness", stiffness_records(result), recorded_at)

@@ -19,7 +19,8 @@ TABLES = {"forecast": ("forecasts", "backlash_forecasts"),
           "compensation": ("compensations", "backlash_compensations"),
           "trace": ("trace_days", "backlash_trace_days"),
           "ballbar": ("ballbar_runs", "backlash_ballbar_runs"),
-          "probing": ("probing_runs", "backlash_probing_runs")}
+          "probing": ("probing_runs", "backlash_probing_runs"),
+          "stiffness": ("stiffness_runs", "backlash_stiffness_runs")}
 COLUMNS = ("machine_id", "axis", "sha256", "recorded_at", "record")
 VOIDED = ("voided", "backlash_voided")
 AUDIT = ("audit", "backlash_audit")

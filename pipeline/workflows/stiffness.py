@@ -40,6 +40,9 @@ PARAMETERS = {
                   choices=FORMS),
     "out": Param((str, os.PathLike, None), "output folder: stiffness.json, centres.csv and, "
                  "with --at, deflection.csv", metavar="DIR", output="folder"),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
+                   "record each visit's stiffness per centre and axis and the map's form in "
+                   "(docs/store.md)", metavar="STORE"),
 }
 FILES = {"json": "stiffness.json", "centres": "centres.csv", "deflection": "deflection.csv"}
 
@@ -60,6 +63,11 @@ class StiffnessResult(Result):
     deflection : DataFrame or None
         With ``at``: its points plus ``dx_um, dy_um[, dz_um]`` and their ``_u_um``.
     source : str
+    dates : dict
+        (machine_id, visit) -> ISO day of the visit's earliest ``started_at`` (the day a fleet
+        store dates its stiffness by); empty when the table has none.
+    recorded : pipeline.store.records.Recorded or None
+        What ``store`` recorded (the runner sets it).
     """
 
     machines: list
@@ -67,6 +75,8 @@ class StiffnessResult(Result):
     deflection: object = None  # pandas.DataFrame
     source: str = ""
     parameters: dict = field(default_factory=dict)
+    dates: dict = field(default_factory=dict, repr=False)
+    recorded: object = None
 
     def to_json(self) -> dict:
         """SCHEMA.md section 12: ``{"machines": [{"machine_id", "centres": [...], "map"}]}``;
@@ -165,7 +175,8 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
     from models.machine import stiffness as st
 
     file = data if isinstance(data, (str, os.PathLike)) else None
-    items = flc.centres(flc.read_loaded_circles(data))
+    frame = flc.read_loaded_circles(data)
+    items = flc.centres(frame)
     flc.check_loads(items, file)
     notes, machines, maps = [], [], {}
     for machine_id in dict.fromkeys(c.machine_id for c in items):
@@ -186,7 +197,16 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
         note(text)
     return StiffnessResult(machines=machines, maps=maps, deflection=deflection,
                            source=str(data) if file is not None else "<frame>",
-                           parameters={"ram_top_mm": ram_top_mm, "form": form}, notes=notes)
+                           parameters={"ram_top_mm": ram_top_mm, "form": form}, notes=notes,
+                           dates=_visit_days(frame))
+
+
+def _visit_days(frame) -> dict:
+    """(machine_id, visit) -> the ISO day of the visit's earliest ``started_at``."""
+    if "started_at" not in frame or frame["started_at"].isna().all():
+        return {}
+    first = frame.groupby(["machine_id", "visit"], sort=False)["started_at"].min().dropna()
+    return {(str(m), str(v)): t.date().isoformat() for (m, v), t in first.items()}
 
 
 def _centre_json(centre, pc) -> dict:
