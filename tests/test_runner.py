@@ -54,7 +54,9 @@ def cli_json(args: list[str], capsys, code: int | None = 0) -> dict:
 
 
 def py_json(job: str, *args, **params) -> dict:
-    name = "check_store" if job == "store" else job.replace("-", "_")
+    from pipeline import api
+
+    name = {job: name for name, job in api.jobs().items()}[job]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = getattr(bl, name)(*args, **params)
@@ -87,56 +89,26 @@ def test_compensate_selects_the_machine_and_axis_from_python_as_from_the_cli(two
     assert [a["axis"] for a in only_y["axes"]] == ["Y"]
 
 
-# Every job, from the CLI and from Python with the same arguments. "{side}" is a folder of
-# each side's own (an output, a store that side ingests first: "{store}"), the same name in
-# both, so the results compare with the folders dropped.
-AGREEMENT = [
-    ("convert", ["{two}", "--out", "{side}/r.csv"], {"data": "{two}", "out": "{side}/r.csv"}),
-    ("ingest", ["{two}", "--store", "{base}/new"], {"files": "{two}", "store": "{base}/new"}),
-    ("store", ["check", "{store}"], {"store": "{store}"}),
-    ("void", ["{store}", "--machine", "M01", "--axis", "Y", "--visit", "01", "--reason", "r"],
-     {"store": "{store}", "machine": "M01", "axis": "Y", "visit": "01", "reason": "r"}),
-    ("iso", ["{two}", "--machine", "M01", "--axis", "Y"], {"data": "{two}", "machine": "M01",
-                                                          "axis": "Y"}),
-    ("targets", ["{two}", "--axis", "Y", "--target", "iso"],
-     {"data": "{two}", "axis": "Y", "target": "iso"}),
-    ("report", ["{two}", "--axis", "Y", "--out", "{side}/rep"],
-     {"data": "{two}", "axis": "Y", "out": "{side}/rep"}),
-    ("simulate", ["--preset", "compensation", "--out", "{side}/sim"],
-     {"preset": "compensation", "out": "{side}/sim"}),
-    ("train", ["{twin}", "--model", "ridge", "--out", "{side}/m"],
-     {"data": "{twin}", "model": "ridge", "out": "{side}/m"}),
-    ("predict", ["{model}", "{two}", "--out", "{side}/p.csv"],
-     {"model": "{model}", "data": "{two}", "out": "{side}/p.csv"}),
-    ("compare", ["{twin}", "--models", "ridge,knn", "--seed", "2"],
-     {"data": "{twin}", "models": ["ridge", "knn"], "seed": 2}),
-    ("tune", ["{small}", "--trials", "2", "--folds", "2", "--storage", "sqlite:///{base}/o.db"],
-     {"data": "{small}", "trials": 2, "folds": 2, "storage": "sqlite:///{base}/o.db"}),
-    ("rank", ["{twin}", "--boot", "5", "--no-dropcolumn", "--out", "{side}/rank"],
-     {"data": "{twin}", "boot": 5, "dropcolumn": False, "out": "{side}/rank"}),
-    ("replicate", ["{twin}", "--boot", "5", "--out", "{side}/rep"],
-     {"data": "{twin}", "boot": 5, "out": "{side}/rep"}),
-    ("drift", ["{twin}", "--until", "2026-06-30", "--threshold-um", "8"],
-     {"data": "{twin}", "until": "2026-06-30", "threshold_um": 8.0}),
-    ("fleet", ["{twin}", "--as-of", "2026-06-30"], {"data": "{twin}", "as_of": "2026-06-30"}),
-    ("discover", ["{ess}", "--out", "{side}/d"], {"data": "{ess}", "out": "{side}/d"}),
-    ("hidden-effects", ["--scenarios", "{scenarios}", "--seeds", "1", "--out", "{side}/h"],
-     {"scenarios": "{scenarios}", "seeds": 1, "out": "{side}/h"}),
-    ("compensate", ["{two}", "--machine", "M01", "--axis", "Y", "--controller", "csv", "--out",
-                    "{side}/c"], {"data": "{two}", "machine": "M01", "axis": "Y",
-                                  "controller": "csv", "out": "{side}/c"}),
-    ("uncertainty", ["{budget}"], {"budget": "{budget}"}),
-    ("volumetric", ["--targets", "5", "--seed", "3"], {"targets": 5, "seed": 3}),
-    ("circle", ["{circle}"], {"data": "{circle}"}),
-    ("stiffness", ["{ldbb}", "--ram-top", "200"], {"data": "{ldbb}", "ram_top_mm": 200.0}),
-    ("monitor", ["{trace}"], {"traces": "{trace}"}),
-    ("kinematics", ["{probes}"], {"data": "{probes}"}),
-]
+def examples() -> list[tuple[str, list, dict]]:
+    """Every job's ``EXAMPLE``: one call as the command line spells it (the arguments after
+    ``backlash JOB``) and as Python does (keyword parameters), declared in the job's own module
+    so that a new job brings its case with it. The calls use the names of ``inputs`` below in
+    braces; "{side}" is a folder of each side's own (an output, a store that side ingests
+    first: "{store}"), the same name in both, so the results compare with the folders
+    dropped."""
+    from pipeline import workflows
+
+    return [(w.name, *w.module.EXAMPLE) for w in workflows.WORKFLOWS
+            if hasattr(w.module, "EXAMPLE")]
+
+
+AGREEMENT = examples()
 TIMES = re.compile(r"(^|_)(seconds|elapsed|duration|recorded_at|created|datetime_start|"
                    r"datetime_complete|run_id|study)($|_)")
 
 
 def test_the_agreement_covers_every_job():
+    """Every job's module names its example call (``EXAMPLE``)."""
     assert sorted(job for job, *_ in AGREEMENT) == sorted(NAMES)
 
 
@@ -176,6 +148,13 @@ def comparable(value):
 @pytest.mark.parametrize("job, cli, python", AGREEMENT, ids=[a[0] for a in AGREEMENT])
 def test_every_job_gives_the_cli_and_python_the_same_result(job, cli, python, inputs,
                                                             tmp_path, capsys):
+    results = both_ways(job, cli, python, inputs, tmp_path, capsys)
+    assert comparable(results["cli"]) == comparable(results["python"])
+
+
+def both_ways(job: str, cli: list, python: dict, inputs: dict, tmp_path, capsys) -> dict:
+    """The JSON of ``backlash JOB CLI... --json`` and of ``bl.<job>(**PYTHON)``, each side
+    with folders of its own under ``tmp_path``."""
     results = {}
     for side in ("cli", "python"):
         where = {**inputs, "side": str(tmp_path / side / "x"), "store": str(tmp_path / side / "s"),
@@ -191,7 +170,7 @@ def test_every_job_gives_the_cli_and_python_the_same_result(job, cli, python, in
             params = {k: v.format(**where) if isinstance(v, str) else v
                       for k, v in python.items()}
             results[side] = py_json(job, **params, track=False)
-    assert comparable(results["cli"]) == comparable(results["python"])
+    return results
 
 
 def test_selection_changes_what_a_job_sees(two_axes):

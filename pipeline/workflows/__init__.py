@@ -209,6 +209,9 @@ class Workflow:
         (``pipeline.runner``).
     function_name : str or None
         The workflow function's name in its module, when not the module's own name.
+    module_name : str or None
+        The job's module, when not ``pipeline.workflows.<name>`` (a job added by ``register``
+        from a package of its own).
     """
 
     name: str
@@ -216,10 +219,12 @@ class Workflow:
     inputs: tuple[str, ...] = ()
     tracked: bool = False
     function_name: str | None = None
+    module_name: str | None = None
 
     @property
     def module(self):
-        return importlib.import_module(f"pipeline.workflows.{self.name.replace('-', '_')}")
+        return importlib.import_module(
+            self.module_name or f"pipeline.workflows.{self.name.replace('-', '_')}")
 
     @property
     def function(self):
@@ -238,8 +243,8 @@ class Workflow:
 # (``PARAMETERS`` and the function), its command module and its docs page.
 WORKFLOWS = (
     Workflow('convert',
-             'Read a readings file (canonical, paper Table 2, ecmc, Renishaw .rtl or an EPICS '
-             'camonitor log of an ISO 230-2 run) or a fleet store, validate it, write CSV/Parquet.',
+             'Read a readings file (any input format: --format lists them) or a fleet store, '
+             'validate it, write CSV/Parquet.',
              inputs=('data',)),
     Workflow('ingest',
              'Validate readings files (any accepted layout) and add their tests to a fleet store (a '
@@ -308,9 +313,9 @@ WORKFLOWS = (
              'Benchmark the missing-effect workflow on twin data in which effects were hidden.',
              inputs=('scenarios',), tracked=True),
     Workflow('compensate',
-             'Write controller compensation files (LinuxCNC, Siemens SINUMERIK, Fanuc, Heidenhain '
-             'TNC, Marlin, RepRapFirmware, grblHAL, CSV) from ISO tests or a predictor; optionally '
-             're-measure the twin with them applied.',
+             'Write compensation files for CNC controllers, 3D-printer firmware or CSV (--controller '
+             'lists them) from ISO tests or a predictor; optionally re-measure the twin with them '
+             'applied.',
              inputs=('data', 'active')),
     Workflow('uncertainty',
              'ISO/TR 230-9 measurement-uncertainty budget of a positioning test: each contributor, '
@@ -354,3 +359,30 @@ def workflow(name: str) -> Workflow:
         raise InputError(f"unknown job {name!r}; expected one of {', '.join(NAMES)}",
                          parameter="name")
     return _BY_NAME[name]
+
+
+def register(record: Workflow) -> Workflow:
+    """Add a job from a package of its own (``record.module_name``): the CLI's command, the
+    Python name ``bl.<job>``, experiment steps and the docs read it from then on, as they read
+    the records above (read ``pipeline.workflows.NAMES`` when needed, not copied at import).
+
+    Raises
+    ------
+    ValueError
+        When a job of that name exists already.
+    """
+    global WORKFLOWS, NAMES, _BY_NAME
+    if record.name in _BY_NAME:
+        raise ValueError(f"job {record.name!r} exists already")
+    WORKFLOWS = (*WORKFLOWS, record)
+    NAMES, _BY_NAME = (*NAMES, record.name), {**_BY_NAME, record.name: record}
+    return record
+
+
+def unregister(name: str) -> None:
+    """Remove job ``name`` (one added by ``register``)."""
+    global WORKFLOWS, NAMES, _BY_NAME
+    workflow(name)
+    WORKFLOWS = tuple(w for w in WORKFLOWS if w.name != name)
+    NAMES = tuple(w.name for w in WORKFLOWS)
+    _BY_NAME = {w.name: w for w in WORKFLOWS}

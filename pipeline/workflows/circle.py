@@ -25,6 +25,13 @@ from pipeline.steps.parameters import Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{circle}"],
+    {"data": "{circle}"},
+)
+
 PARAMETERS = {
     "data": Param((str, os.PathLike, "pandas.DataFrame"), "circular-test table, CSV or Parquet "
                   "(docs/circle.md)", flag="FILE"),

@@ -38,6 +38,13 @@ COLUMNS = ("model", "test_rmse_um", "test_mae_um", "test_r2", "test_mape_pct", "
 # and, on twin data, the true one
 BACKTEST_COLUMNS = ("model", "origins", "rmse_um", "truth_rmse_um", "cover95_measured_pct",
                     "cover95_true_pct", "skill_vs_persistence")
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--models", "ridge,knn", "--seed", "2"],
+    {"data": "{twin}", "models": ["ridge", "knn"], "seed": 2},
+)
+
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,

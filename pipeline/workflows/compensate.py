@@ -42,6 +42,13 @@ def controller_help() -> str:
 
 
 _PATHS = (str, os.PathLike)
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--machine", "M01", "--axis", "Y", "--controller", "csv", "--out", "{side}/c"],
+    {"data": "{two}", "machine": "M01", "axis": "Y", "controller": "csv", "out": "{side}/c"},
+)
+
 PARAMETERS = {
     "data": readings("model directory (backlash train) or readings file (ISO tests)",
                      flag="DATA|MODEL_DIR",

@@ -21,6 +21,13 @@ from pipeline.steps.parameters import FORMAT, RAW_LOG, Param, python_only, readi
 from pipeline.workflows import check_params, readings_of
 
 # convert's table; read, validate and write check their parameters (path, source) in it too
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--out", "{side}/r.csv"],
+    {"data": "{two}", "out": "{side}/r.csv"},
+)
+
 PARAMETERS = {
     "data": readings(flag="FILE"),
     "format": FORMAT,

@@ -20,6 +20,13 @@ from pipeline.workflows import check_params, readings_of, source_of
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{ess}", "--out", "{side}/d"],
+    {"data": "{ess}", "out": "{side}/d"},
+)
+
 PARAMETERS = {
     "data": readings("readings file (columns of docs/data-contract.md; measured_at for time "
                      "effects)"),

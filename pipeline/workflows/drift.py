@@ -31,6 +31,13 @@ from pipeline.steps.parameters import (
 )
 from pipeline.workflows import check_params, readings_of, source_of
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--until", "2026-06-30", "--threshold-um", "8"],
+    {"data": "{twin}", "until": "2026-06-30", "threshold_um": 8.0},
+)
+
 PARAMETERS = {
     "data": readings("readings with several visits (visit, started_at)"),
     "format": FORMAT,

@@ -67,6 +67,13 @@ MIN_WEAR_VISITS = 3  # visits since the last change point a wear-rate map needs
 FLEET_RATE_QUANTILE = 0.9
 
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--as-of", "2026-06-30"],
+    {"data": "{twin}", "as_of": "2026-06-30"},
+)
+
 PARAMETERS = {
     "data": readings("readings with several visits per machine axis (visit, started_at)"),
     "format": FORMAT,

@@ -25,6 +25,13 @@ SCENARIOS = SHIPPED / "hidden_effect_scenarios.toml"  # the product's, whatever 
 FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "score": "score.json"}
 
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["--scenarios", "{scenarios}", "--seeds", "1", "--out", "{side}/h"],
+    {"scenarios": "{scenarios}", "seeds": 1, "out": "{side}/h"},
+)
+
 PARAMETERS = {
     "out": Param((str, os.PathLike, None), "output folder for the scenario table",
                  required=True, output="folder"),

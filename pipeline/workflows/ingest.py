@@ -26,6 +26,13 @@ from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, readings
 from pipeline.workflows import check_params, readings_of
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--store", "{base}/new"],
+    {"files": "{two}", "store": "{base}/new"},
+)
+
 PARAMETERS = {
     "files": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
     "format": FORMAT,

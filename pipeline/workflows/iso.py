@@ -11,3 +11,10 @@ from __future__ import annotations
 from pipeline.steps.iso import PARAMETERS, iso
 
 __all__ = ["PARAMETERS", "iso"]
+
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--machine", "M01", "--axis", "Y"],
+    {"data": "{two}", "machine": "M01", "axis": "Y"},
+)

@@ -31,6 +31,13 @@ TILT_TABLE = (0.0, 30.0, 60.0, 90.0)     # seed 003 Table 4 (C = 0) and Table 5 
 FIELD_TILTS = (0.0, 30.0, 45.0, 60.0, 90.0)  # seed 003 Figure 11
 _PATHS = (str, os.PathLike)
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{probes}"],
+    {"data": "{probes}"},
+)
+
 PARAMETERS = {
     "data": Param((*_PATHS, "pandas.DataFrame"), "probing table, CSV or Parquet (SCHEMA "
                   "section 13, docs/kinematics.md)", flag="PROBES"),

@@ -35,6 +35,13 @@ from pipeline.workflows.constraints import Interval, StrOptions
 
 _RAW = "raw controller logs (--log-format camonitor or halsampler)"
 _POSITIVE = Interval(Real, 0, None, closed="neither")
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{trace}"],
+    {"traces": "{trace}"},
+)
+
 PARAMETERS = {
     "traces": Param((str, os.PathLike, list, tuple, "pandas.DataFrame"), "trace table (CSV, "
                     "Parquet) or Parquet dataset folder partitioned by machine_id=, axis=, "

@@ -24,6 +24,13 @@ if TYPE_CHECKING:
 
 KEYS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target")
 INTERVAL = ("backlash_low_um", "backlash_high_um")
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (  # the model answers for the axis it was trained on (M01 X) only
+    ["{model}", "{two}", "--axis", "X", "--out", "{side}/p.csv"],
+    {"model": "{model}", "data": "{two}", "axis": "X", "out": "{side}/p.csv"},
+)
+
 PARAMETERS = {
     "model": Param((str, os.PathLike, TrainedModel), "model directory written by backlash "
                    "train", flag="DIR"),

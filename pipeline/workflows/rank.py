@@ -28,6 +28,13 @@ from pipeline.steps.parameters import (
 from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval, StrOptions
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--boot", "5", "--no-dropcolumn", "--out", "{side}/rank"],
+    {"data": "{twin}", "boot": 5, "dropcolumn": False, "out": "{side}/rank"},
+)
+
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,

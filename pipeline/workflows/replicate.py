@@ -19,6 +19,13 @@ from pipeline.steps.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, reading
 from pipeline.workflows import check_params, readings_of, source_of
 from pipeline.workflows.constraints import Interval
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--boot", "5", "--out", "{side}/rep"],
+    {"data": "{twin}", "boot": 5, "out": "{side}/rep"},
+)
+
 PARAMETERS = {
     "data": readings("readings file with paired linear and pendulum tests"),
     "format": FORMAT,

@@ -26,6 +26,13 @@ from pipeline.steps import iso as iso_workflow
 from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, Param
 from pipeline.workflows import check_params
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--axis", "Y", "--out", "{side}/rep"],
+    {"data": "{two}", "axis": "Y", "out": "{side}/rep"},
+)
+
 PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
     "data": iso_workflow.PARAMETERS["data"],
     "format": FORMAT,

@@ -20,6 +20,13 @@ from pipeline.steps.parameters import SEED, Param, python_only
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["--preset", "compensation", "--out", "{side}/sim"],
+    {"preset": "compensation", "out": "{side}/sim"},
+)
+
 PARAMETERS = {
     "preset": Param((str, None), f"shipped campaign: {', '.join(PRESETS)} (default paper: the "
                     "campaign's defaults)"),  # checked against the presets by ``load_config``

@@ -25,6 +25,13 @@ from pipeline.workflows.constraints import Interval, StrOptions
 
 FORMS = ("auto", "constant", "linear", "cubic", "quadratic")
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{ldbb}", "--ram-top", "200"],
+    {"data": "{ldbb}", "ram_top_mm": 200.0},
+)
+
 PARAMETERS = {
     "data": Param((str, os.PathLike, "pandas.DataFrame"), "loaded circular-test table (LDBB), "
                   "CSV or Parquet (docs/stiffness.md)", flag="FILE"),

@@ -20,6 +20,13 @@ from pipeline.results import Result
 from pipeline.steps.parameters import STORE, Param
 from pipeline.workflows import check_params
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["check", "{store}"],
+    {"store": "{store}"},
+)
+
 PARAMETERS = {
     "store": STORE,
     "repair": Param(("boolean",), "relink tests to the part that holds their readings intact "

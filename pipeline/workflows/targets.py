@@ -22,6 +22,13 @@ TABLE_COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repea
                  "target_kind", "backlash_um", "backlash_u_um", "backlash_U_um")
 
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{two}", "--axis", "Y", "--target", "iso"],
+    {"data": "{two}", "axis": "Y", "target": "iso"},
+)
+
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,

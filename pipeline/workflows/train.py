@@ -29,6 +29,13 @@ from pipeline.steps.parameters import (
 )
 from pipeline.workflows import check_params
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{twin}", "--model", "ridge", "--out", "{side}/m"],
+    {"data": "{twin}", "model": "ridge", "out": "{side}/m"},
+)
+
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,

@@ -29,6 +29,13 @@ from pipeline.workflows.constraints import Interval
 
 DEFAULT_STUDY = "backlash-network"  # the default study name: this, then the data's digest
 _COUNT = Interval(Integral, 1, None, closed="left")
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{small}", "--trials", "2", "--folds", "2", "--storage", "sqlite:///{base}/o.db"],
+    {"data": "{small}", "trials": 2, "folds": 2, "storage": "sqlite:///{base}/o.db"},
+)
+
 PARAMETERS = {
     "data": readings(),
     "format": FORMAT,

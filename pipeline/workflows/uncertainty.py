@@ -24,6 +24,13 @@ from pipeline.steps.parameters import Param
 from pipeline.workflows import check_params
 from pipeline.workflows.constraints import StrOptions
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{budget}"],
+    {"budget": "{budget}"},
+)
+
 PARAMETERS = {
     "budget": Param((str, os.PathLike, dict, unc.UncertaintyBudget),
                     "uncertainty budget (e.g. experiments/data/paper_uncertainty.toml)",

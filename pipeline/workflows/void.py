@@ -18,6 +18,13 @@ from pipeline.results import Result
 from pipeline.steps.parameters import STORE, Param
 from pipeline.workflows import check_params
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["{store}", "--machine", "M01", "--axis", "Y", "--visit", "01", "--reason", "r"],
+    {"store": "{store}", "machine": "M01", "axis": "Y", "visit": "01", "reason": "r"},
+)
+
 PARAMETERS = {
     "store": STORE,
     "machine": Param((str,), "the machine", metavar="ID", required=True),

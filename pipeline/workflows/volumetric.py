@@ -45,6 +45,13 @@ PAPER_TABLE1 = {
 CIRCLE_PLANES = ("XY", "YZ", "ZX")
 
 
+# One call as the command line and as Python spell it, which tests/test_runner.py runs both
+# ways and compares (the {names} are its input files and each side's own folders).
+EXAMPLE = (
+    ["--targets", "5", "--seed", "3"],
+    {"targets": 5, "seed": 3},
+)
+
 PARAMETERS = {
     "seed": Param(SEED, "random seed of the measurement noise"),
     "targets": Param((Interval(Integral, 5, 101, closed="both"),), "targets along each axis and "
