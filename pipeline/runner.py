@@ -7,8 +7,11 @@ done here, the same way for every entry point (kedro's runner and hooks):
 1. **parameters**: bound to the workflow's signature and checked against its table
    (``PARAMETERS``; exact names: an unknown one is an error naming it, never skipped);
 2. **data selection**: ``machine``, ``axis``, ``since``, ``until`` select the tests of the
-   job's readings (``data``; ingest's ``files``) in every job (a workflow that declares one of them itself, as ``void`` and
-   ``compensate`` do, applies it itself);
+   job's readings (``data`` or ``files``) in every job: the runner reads them with only the
+   selected tests, or, for a job whose record says ``source=True``, hands it a ``Source``
+   (``pipeline.steps.source``: the data as given, their format, the selection and a raw log's
+   reader options), from which the job reads the selected tests or the whole fleet and the
+   store the readings came from (a workflow that declares a filter itself applies it itself);
 3. **tracking** (``track``): a tracked job (``Workflow.tracked``) logs its result's
    ``tracking_record()`` to MLflow (parameters, metrics, artifacts, a model to register and
    the champion alias) through ``pipeline.tracking.background``: from the ``backlash`` program the
@@ -16,17 +19,20 @@ done here, the same way for every entry point (kedro's runner and hooks):
    file's) the record is logged as a nested run;
 4. **output**: ``out`` is written by ``result.write(out)`` (a workflow that takes ``out``
    itself writes it);
-5. **store recording** (``store``): a job whose result is recorded in a fleet store
-   (``RECORDERS``: compensate) records it there after writing; the store is opened first,
-   so a bad store is refused before any work (a workflow that takes ``store`` itself, as
-   ``predict`` does, records it itself);
+5. **store recording** (``store``): a job whose record names its recorder
+   (``Workflow.records``) records its result there after writing; the store is opened first,
+   so a bad store is refused before any work (a workflow that takes ``store`` itself records
+   it itself);
 6. **progress**: ``progress(done, total, what)`` goes to workflows that report it.
 
 Tracking default: ``TRACK = True``, for every entry point (the CLI's ``--no-track``,
 ``track=False`` in Python and in an experiment step's ``with``): a tracked job logs what it
 did wherever it runs, so a model trained from Python is registered as one trained by the CLI.
-Only tracked jobs (train, compare, tune, rank, drift, fleet, discover, hidden-effects) touch
-MLflow; the others never import it.
+Only tracked jobs (``Workflow.tracked``) touch MLflow; the others never import it.
+
+Everything that differs from one job to another is declared on its record
+(``pipeline.workflows.Workflow``: ``tracked``, ``source``, ``records``, ``model_logging``,
+``reader_options``); this module names no job.
 
 What the tracking gave (``run_id``; ``version`` and ``champion`` of a registered model) is
 ``result.tracking``; a store's record line is ``result.recorded``.
@@ -42,23 +48,6 @@ from features.readings.selection import NAMES as SELECTION
 
 TRACK = True  # the one default of every entry point
 READINGS = ("data", "files")  # the parameter of a workflow that takes the readings
-RAW = ("channels", "reference_scale", "unit")  # a raw log's reader options (steps.RAW_LOG)
-
-
-def _record_compensation(store, result):
-    from pipeline.store.records import record_compensation
-
-    return record_compensation(store, result)
-
-
-def _record_probing(store, result):
-    from pipeline.store.records import probing_records, record
-
-    return record(store, "probing", probing_records(result))
-
-
-# job -> function(store, result) recording the result in an open fleet store
-RECORDERS = {"compensate": _record_compensation, "kinematics": _record_probing}
 
 
 def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=None,
@@ -79,7 +68,7 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
         Where the result writes its files.
     store : str, path-like or Store, optional
         Fleet store: the one a workflow takes, else where the result is recorded
-        (``RECORDERS``).
+        (``Workflow.records``).
     progress : callable, optional
         ``progress(done, total, what)``, for the workflows that report progress.
 
@@ -98,19 +87,21 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
     extra = {"out": out, "store": store, "progress": progress}
     params.update({k: v for k, v in extra.items() if k in declared and v is not None})
     nested = _active_run()
-    if "track" in declared:  # a workflow that logs while it runs (tune): not inside a run
+    if "track" in declared:  # a workflow that logs while it runs: not inside a run
         params["track"] = track and not nested
     bound = _bound(record, declared, args, params)
     _checked(record, bound)
-    bound = _selected(job, declared, bound)
-    opened = _opened(job, declared, store)
+    bound = _selected(record, declared, bound)
+    opened = _opened(record, declared, store)
     with _tracking(record, track and not params.get("track"), nested) as tracking:
         result = record.function(**bound)
         tracking.write_and_log(result, None if "out" in declared else out)
     result.tracking = tracking.logged
     if opened is not None:
-        result.recorded = RECORDERS[job](opened, result)
-    elif not hasattr(result, "recorded"):  # a workflow that records (predict) says it itself
+        from pipeline.workflows import imported
+
+        result.recorded = imported(record.records)(opened, result)
+    elif not hasattr(result, "recorded"):  # a workflow that records says it itself
         result.recorded = None
     return result
 
@@ -118,7 +109,7 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
 def _bound(record, declared, args: tuple, params: dict) -> dict:
     """The keyword parameters of the call, bound to the workflow's signature: an unknown
     name is an error naming it (nothing is skipped)."""
-    known = set(declared) | set(SELECTION) | (set(RAW) & set(record.parameters))
+    known = set(declared) | set(SELECTION) | set(record.reader_options)
     for name in params:
         if name not in known:
             raise InputError(f"is not a parameter of {record.name}; expected one of "
@@ -143,22 +134,27 @@ def _checked(record, bound: dict) -> None:
                  record.name)
 
 
-def _selected(job: str, declared, params: dict) -> dict:
+def _selected(record, declared, params: dict) -> dict:
     """``machine``, ``axis``, ``since``, ``until`` not taken by the workflow itself: its
-    ``data`` read with only the selected tests (``pipeline.workflows.convert.read``)."""
+    ``data`` read with only the selected tests (``pipeline.workflows.readings_of``), or, for
+    a job that takes a Source (``Workflow.source``), the Source of its data."""
     chosen = {k: params.pop(k) for k in SELECTION if k in params and k not in declared}
-    # a raw log's reader options the workflow does not take itself (iso's, report's)
-    raw = {k: params.pop(k) for k in RAW if k in params and k not in declared}
+    # a raw log's reader options the workflow's table declares but its function does not take
+    options = record.reader_options
+    raw = {k: params.pop(k) for k in options if k in params and k not in declared}
     raw = {k: v for k, v in raw.items() if v is not None}
+    if record.source:
+        return _with_source(params, chosen, raw)
     if not chosen and not raw:
         return params
     name = next((n for n in READINGS if n in declared), None)
     if name is None or params.get(name) is None:
-        raise InputError(f"selects tests of readings; {job} reads none",
+        raise InputError(f"selects tests of readings; {record.name} reads none",
                          parameter=next(iter(chosen or raw)))
     data, fmt = params[name], params.get("format", "auto")
-    # the reader takes the options (convert's own too): the workflow gets the frame
-    raw |= {k: params.pop(k) for k in RAW if params.get(k) is not None}
+    # the reader takes the options (those of a function that takes them too): the workflow
+    # gets the frame
+    raw |= {k: params.pop(k) for k in options if params.get(k) is not None}
     if isinstance(data, (list, tuple)):
         params[name] = [_select(one, fmt, chosen, raw) for one in data]
     else:
@@ -166,30 +162,40 @@ def _selected(job: str, declared, params: dict) -> dict:
     return params
 
 
+def _with_source(params: dict, chosen: dict, raw: dict) -> dict:
+    """The job's ``data`` as a Source: as given, with its format, selection and reader
+    options; the job reads what it needs from it."""
+    from features.readings.selection import selection
+    from pipeline.steps.source import Source
+
+    params["data"] = Source(params["data"], params.get("format", "auto"),
+                            selection(**chosen), raw)
+    return params
+
+
 def _select(data, format: str, chosen: dict, raw: dict):
     import os
 
-    if isinstance(data, (str, os.PathLike)):
-        from pipeline.store import is_store
-        from pipeline.workflows.convert import read
-
-        if os.path.isdir(data) and not is_store(data):  # a model directory (compensate's)
-            raise InputError(f"selects tests of readings; {data} is a folder, not a fleet "
-                             "store", parameter=next(iter(chosen)))
-        return read(data, format, **chosen, **raw)
     from features.readings.selection import selection
     from pipeline.workflows import readings_of
 
+    if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import is_store
+
+        if os.path.isdir(data) and not is_store(data):  # a model directory, not readings
+            raise InputError(f"selects tests of readings; {data} is a folder, not a fleet "
+                             "store", parameter=next(iter(chosen)))
+        return readings_of(data, format, selection=selection(**chosen), options=raw)
     return readings_of(data, selection=selection(**chosen))
 
 
-def _opened(job: str, declared, store):
+def _opened(record, declared, store):
     """The store a result is recorded in, opened before any work (a bad store is refused
     first); None when nothing is recorded by the runner."""
     if store is None or "store" in declared:
         return None
-    if job not in RECORDERS:
-        raise InputError(f"{job} records nothing in a fleet store", parameter="store")
+    if record.records is None:
+        raise InputError(f"{record.name} records nothing in a fleet store", parameter="store")
     from pipeline.store.records import open_for_records
 
     return open_for_records(store)
@@ -215,8 +221,8 @@ class _Tracked(_Untracked):
     the ``backlash`` program (forked as the job begins, so importing mlflow overlaps the
     work), nested under an active run (an experiment's), else in this process."""
 
-    def __init__(self, job: str, nested: bool):
-        self.job, self.nested = job, nested
+    def __init__(self, record, nested: bool):
+        self.record, self.nested = record, nested
 
     def __enter__(self):
         import pandas  # noqa: F401 - imported once, before the MLflow child is forked: both use it
@@ -227,9 +233,11 @@ class _Tracked(_Untracked):
         self.logged, self._tracking, self._run = {}, tracking, None
         tracking.check_uri()
         if not self.nested:
-            self._run = BackgroundRun(self.job, tracking.log_into,
-                                      tracking.prepare_model_logging if self.job == "train"
-                                      else None)
+            from pipeline.workflows import imported
+
+            prepare = self.record.model_logging
+            self._run = BackgroundRun(self.record.name, tracking.log_into,
+                                      None if prepare is None else imported(prepare))
         return self
 
     def __exit__(self, *exc_info):
@@ -253,7 +261,7 @@ class _Tracked(_Untracked):
         self.logged = self._run.finish()
 
     def _drawn_beside(self, result, out) -> None:
-        """A result that saves and draws (train's): a second child draws the figures while
+        """A result that saves and draws (a trained model's): a second child draws the figures while
         this process scores what the record needs and the MLflow child logs the model."""
         from pipeline.tracking.background import BackgroundTask
 
@@ -269,7 +277,7 @@ class _Tracked(_Untracked):
 
 
 def _tracking(record, track: bool, nested: bool):
-    return _Tracked(record.name, nested) if track and record.tracked else _Untracked()
+    return _Tracked(record, nested) if track and record.tracked else _Untracked()
 
 
 def _active_run() -> bool:

@@ -83,7 +83,18 @@ class Selection:
         """No filter given: every test is kept."""
         return not self.text
 
-    def apply(self, readings, source: str):
+    def keeps(self, machine_id: str, axis: str) -> bool:
+        """Whether the machine and axis filters keep the machine axis ``(machine_id, axis)``
+        (the dates select its tests, not the axis)."""
+        return ((self.machine is None or machine_id in self.machine)
+                and (self.axis is None or axis in self.axis))
+
+    def dates(self) -> Selection:
+        """The date filters alone: every machine axis's tests within them."""
+        parts = [p for p in self.text.split("; ") if p.startswith(("since ", "until "))]
+        return Selection(since=self.since, until=self.until, text="; ".join(parts))
+
+    def apply(self, readings, source: str, axes: bool = True):
         """The readings of the tests this selection keeps.
 
         Parameters
@@ -93,6 +104,11 @@ class Selection:
         source : str
             Its name, for notes and errors; the result's ``attrs["source"]`` is
             ``"source (filters)"``.
+        axes : bool, default True
+            False: the machine and axis filters keep every machine axis (they still name a
+            file that states none, and a selection that keeps no test is still refused); the
+            dates select the tests. What a fleet-wide figure is computed on, the selected
+            axes being picked from it afterwards (``keeps``).
 
         Raises
         ------
@@ -103,9 +119,12 @@ class Selection:
             _note_taken(readings, source)
             return readings
         readings, named = self._name_unstated(readings, source)
-        keep = self._labels(readings, skip=named) & self._times(readings, source)
+        times = self._times(readings, source)
+        keep = self._labels(readings, skip=named) & times
         if not keep.any():
             raise InputError(f"no test matches {self.text}; {_holdings(readings)}", file=source)
+        if not axes:
+            keep = times
         out = (readings.copy(deep=False) if keep.all()
                else readings[keep].reset_index(drop=True))
         out.attrs["source"] = f"{source} ({self.text})"

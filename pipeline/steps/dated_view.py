@@ -83,3 +83,19 @@ def dated_view(readings, as_of: dt.date | None, source: str = "readings"):
                      f"{as_of.isoformat()} left out: the view is computed as of that day")
         readings = readings[~later]
     return readings, notes
+
+
+def kept_view(source, readings, as_of: dt.date):
+    """The rows of the dated view ``readings`` (every machine axis) of the machine axes that
+    ``source``'s selection keeps (``pipeline.steps.source.Source``).
+
+    Raises
+    ------
+    InputError
+        None of them has a test started by ``as_of``.
+    """
+    kept = source.kept(readings)
+    if kept.empty:
+        raise InputError(f"no test of {source.selection.text} started by {as_of.isoformat()}",
+                         parameter="as_of")
+    return kept

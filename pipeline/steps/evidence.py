@@ -121,14 +121,16 @@ def read_evidence(store) -> dict:
 
 def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=None,
                   coverage_factor: float | None = None,
-                  min_days: int = MIN_SHARED_DAYS) -> tuple[pd.DataFrame, dict, list]:
+                  min_days: int = MIN_SHARED_DAYS,
+                  keeps=None) -> tuple[pd.DataFrame, dict, list]:
     """The laser visits of every machine axis with the points of the other ``sources``
     shifted onto the laser's definition (``models.evidence.combined``), the offsets per
     machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
     a point of another source gets ``backlash_U_um`` = k u and ``backlash_u_visit_um`` = u
     (all of its uncertainty changes from day to day). A source sharing fewer than
     ``min_days`` days with the laser stays out of the axis's series, with a note; its offset
-    is still returned."""
+    is still returned. ``keeps(machine_id, axis)``: the axes whose notes are wanted (a
+    selection's; default all)."""
     from features.visits import SERIES_KEYS
     from models.evidence import combined
 
@@ -139,7 +141,8 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
         found, more = axis_offsets(group, evidence)
         few = {s: o["days_in_common"] for s, o in found.items()
                if o is not None and s in sources and o["days_in_common"] < min_days}
-        notes += more + [few_days_note(key, s, n, min_days) for s, n in few.items()]
+        if keeps is None or keeps(*key):
+            notes += more + [few_days_note(key, s, n, min_days) for s, n in few.items()]
         found_all[key] = found
         frames.append(combined(group, evidence, {
             s: o for s, o in found.items() if o is not None and s not in few}, sources))

@@ -586,6 +586,11 @@ def probing_records(result) -> list[dict]:
     return out
 
 
+def record_probing(store, result, recorded_at: str | None = None) -> Recorded:
+    """Record a kinematics result's probing records (``probing_records``) in ``store``."""
+    return record(store, "probing", probing_records(result), recorded_at)
+
+
 def stiffness_records(result) -> list[dict]:
     """One stiffness record per machine, visit and linear axis of a stiffness result
     (``pipeline.workflows.stiffness.StiffnessResult``): per centre of that visit whose plane

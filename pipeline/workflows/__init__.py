@@ -119,7 +119,7 @@ def each_once(names: list, parameter: str) -> list:
 
 
 def readings_of(data, format: str = "auto", parameter: str = "data", selection=None,
-                options: dict | None = None):
+                options: dict | None = None, axes: bool = True):
     """The validated readings frame a workflow works on.
 
     Parameters
@@ -137,6 +137,9 @@ def readings_of(data, format: str = "auto", parameter: str = "data", selection=N
     options : dict, optional
         Options of a raw log's reader (``channels``, ``reference_scale``: the ``camonitor``
         layout); only a file of that layout takes them.
+    axes : bool, default True
+        False: every machine axis within the selection's dates, the machine and axis filters
+        only checked and naming a file that states none (``Selection.apply``).
     """
     import os
 
@@ -151,7 +154,11 @@ def readings_of(data, format: str = "auto", parameter: str = "data", selection=N
             if format != "auto":
                 raise InputError(f"is {format!r}, but a fleet store holds validated readings; "
                                  "expected 'auto'", parameter="format")
-            return open_store(data).read(selection)
+            store = open_store(data)
+            if axes or selection.empty:
+                return store.read(selection)
+            # the dates read in the store (by partition or in SQL), the axes kept here
+            return selection.apply(store.read(selection.dates()), store.location, axes=False)
         from features.readings.io import read_readings
 
         frame = read_readings(data, format, **(options or {}))
@@ -160,7 +167,7 @@ def readings_of(data, format: str = "auto", parameter: str = "data", selection=N
 
         _no_options(options, parameter)
         frame = check_readings(data, parameter)
-    return selection.apply(frame, frame.attrs.get("source", parameter))
+    return selection.apply(frame, frame.attrs.get("source", parameter), axes=axes)
 
 
 def _no_options(options: dict | None, source) -> None:
@@ -212,6 +219,21 @@ class Workflow:
     module_name : str or None
         The job's module, when not ``pipeline.workflows.<name>`` (a job added by ``register``
         from a package of its own).
+    source : bool
+        The job takes a ``pipeline.steps.source.Source`` for its readings (``data``): the data
+        as given with the test selection, rather than a frame the runner read with only the
+        selected tests. A job whose answer about an axis depends on the other axes or on the
+        store the readings came from (its records, its voids) says so here.
+    records : str or None
+        The dotted name of ``function(store, result) -> Recorded`` that records the job's
+        result in the fleet store given as ``store`` (the runner opens the store before any
+        work); None: the job records nothing there (unless it takes ``store`` itself).
+    model_logging : str or None
+        The dotted name of the function the MLflow child runs before the result is ready, to
+        prepare logging a model (the imports it needs, while the job computes).
+    reader_options : tuple of str
+        A raw log's reader options (``pipeline.steps.parameters.RAW_LOG``) the job's table
+        declares: the runner hands those its function does not take to the reader.
     """
 
     name: str
@@ -220,6 +242,10 @@ class Workflow:
     tracked: bool = False
     function_name: str | None = None
     module_name: str | None = None
+    source: bool = False
+    records: str | None = None
+    model_logging: str | None = None
+    reader_options: tuple[str, ...] = ()
 
     @property
     def module(self):
@@ -239,13 +265,23 @@ class Workflow:
         return self.module.PARAMETERS
 
 
+def imported(dotted: str):
+    """The object a record names by its dotted path (``package.module.name``): the records
+    stay plain data, the module loads when the object is asked for."""
+    module, _, name = dotted.rpartition(".")
+    return getattr(importlib.import_module(module), name)
+
+
+# A raw ISO 230-2 log's reader options (``pipeline.steps.parameters.RAW_LOG``'s names).
+RAW_LOG_OPTIONS = ("channels", "reference_scale", "unit")
+
 # Every job, in the order the CLI lists it: adding a job is a line here, its module
 # (``PARAMETERS`` and the function), its command module and its docs page.
 WORKFLOWS = (
     Workflow('convert',
              'Read a readings file (any input format: --format lists them) or a fleet store, '
              'validate it, write CSV/Parquet.',
-             inputs=('data',)),
+             inputs=('data',), reader_options=RAW_LOG_OPTIONS),
     Workflow('ingest',
              'Validate readings files (any accepted layout) and add their tests to a fleet store (a '
              'folder, or PostgreSQL for a team); the same test twice changes nothing.',
@@ -259,7 +295,7 @@ WORKFLOWS = (
              'audit table (--undo restores them).'),
     Workflow('iso',
              'ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.',
-             inputs=('data', 'uncertainty')),
+             inputs=('data', 'uncertainty'), reader_options=RAW_LOG_OPTIONS),
     Workflow('targets',
              'Backlash per point (pendulum minus linear or the ISO reversal value) with its '
              'uncertainty; with --uncertainty also its expanded uncertainty from a budget.',
@@ -267,14 +303,15 @@ WORKFLOWS = (
     Workflow('report',
              'Printable test report (HTML and PDF): conditions, per-target table, axis figures and '
              'chart of every test, one page each.',
-             inputs=('data', 'uncertainty')),
+             inputs=('data', 'uncertainty'), reader_options=RAW_LOG_OPTIONS),
     Workflow('simulate',
              'Simulate ISO 230-2 test campaigns on the feed-drive twin; write readings and truth.',
              inputs=('config',)),
     Workflow('train',
              'Train a backlash predictor on paired tests and save it (default: the recommended '
              'model).',
-             inputs=('data', 'truth', 'uncertainty'), tracked=True),
+             inputs=('data', 'truth', 'uncertainty'), tracked=True,
+             model_logging='pipeline.tracking.runs.prepare_model_logging'),
     Workflow('predict',
              'Predict backlash with a trained model directory from new tests or from a plan table '
              '(targets and conditions); write a CSV.',
@@ -299,12 +336,12 @@ WORKFLOWS = (
              'Follow backlash across maintenance visits: robust trend, change points, the date it '
              'crosses a threshold, and (with --model) residual and input drift of a trained model. '
              'Exit 3 when an alert fires.',
-             inputs=('data', 'model', 'uncertainty'), tracked=True),
+             inputs=('data', 'model', 'uncertainty'), tracked=True, source=True),
     Workflow('fleet',
              "One view of the fleet: every machine axis's backlash now, trend, change points, "
              "threshold crossing and next visit due, worst first, with a static site (--out). Exit 3 "
              "when an alert fires.",
-             inputs=('data',), tracked=True),
+             inputs=('data',), tracked=True, source=True),
     Workflow('discover',
              'Find where simulation and measurement disagree, name the missing physical effect, add '
              'it and show the gap shrink.',
@@ -316,7 +353,7 @@ WORKFLOWS = (
              'Write compensation files for CNC controllers, 3D-printer firmware or CSV (--controller '
              'lists them) from ISO tests or a predictor; optionally re-measure the twin with them '
              'applied.',
-             inputs=('data', 'active')),
+             inputs=('data', 'active'), records='pipeline.store.records.record_compensation'),
     Workflow('uncertainty',
              'ISO/TR 230-9 measurement-uncertainty budget of a positioning test: each contributor, '
              'u_P and the expanded uncertainties of A, E, M, R, R+/R- and B.',
@@ -334,12 +371,12 @@ WORKFLOWS = (
              'Static stiffness from loaded double-ballbar (LDBB) circles: per centre the stiffness '
              'in X and Y and the compliance with their uncertainty, a map over the workspace chosen '
              'by cross-validation, and the deflection under given forces (--at).',
-             inputs=('data', 'at')),
+             inputs=('data', 'at'), records='pipeline.store.records.record_stiffness'),
     Workflow('kinematics',
              "Five-axis rotary axes from probed spheres: seed 003's 12 geometric errors of a dual "
              'turntable with their uncertainty (inseparable ones named, never split), each '
              "rotary axis's play and the error field over the workspace.",
-             inputs=('data', 'at')),
+             inputs=('data', 'at'), records='pipeline.store.records.record_probing'),
     Workflow('monitor',
              'Lost motion per machine axis and day from controller traces with motor- and load-side '
              'positions, with its uncertainty, change points and trend.',

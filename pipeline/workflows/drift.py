@@ -29,7 +29,8 @@ from pipeline.steps.parameters import (
     Param,
     readings,
 )
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.steps.source import Source
+from pipeline.workflows import check_params, source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -171,9 +172,13 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
 
     Parameters
     ----------
-    data : str, path or DataFrame
-        Readings with several visits (``visit``, ``started_at``): a file or a frame as
-        ``read`` returns it.
+    data : str, path, DataFrame or pipeline.steps.source.Source
+        Readings with several visits (``visit``, ``started_at``): a file, a fleet store or a
+        frame as ``read`` returns it; from the runner, a Source with the test selection. Each
+        axis is computed as on the whole data within the selection's dates (a store's trace
+        and ballbar records read whatever the selection) and the series of the machine axes
+        the selection keeps are reported: a selection never changes what is said about an
+        axis it keeps.
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
@@ -210,7 +215,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         <visit>``.
     store : str or path, optional
         The fleet store (folder or ``postgresql://`` URL) holding the trace and ballbar
-        records; default ``data`` when it names a store.
+        records; default the store the readings came from (``data`` naming one).
 
     Returns
     -------
@@ -233,8 +238,9 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
 
     sources = sources_of(evidence)
     values["evidence"] = ",".join(sources)
-    records = _evidence_records(data if store is None else store, sources)
-    from pipeline.steps.dated_view import as_of_date, dated_view
+    source = Source.of(data, format)
+    records = _evidence_records(source.store if store is None else store, sources)
+    from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
     from pipeline.steps.limits import limit_notes, read_limits
 
     day = as_of_date(as_of)
@@ -252,18 +258,23 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         predictor = load_model(model)
     # today as any other day: a test dated ahead (a mistyped year) is no visit yet, and
     # taken for the latest one it would hide an overdue axis
-    readings, notes = dated_view(readings_of(data, format), day)
-    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, data, readings,
+    whole, notes = dated_view(source.all_readings(), day)
+    readings = kept_view(source, whole, day)
+    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, source.data, readings,
                          limits)
-    visits = visit_backlash(readings, budget=budget)
+    # every axis computed as without a selection (the scatter is pooled over the fleet);
+    # the selected axes reported
+    visits = visit_backlash(whole, budget=budget)
     k = None if budget is None else budget.coverage_factor
     offsets = {}
     if records is not None:
         from pipeline.steps.evidence import with_evidence
 
-        visits, offsets, more = with_evidence(visits, records, sources, day, k)
+        visits, offsets, more = with_evidence(visits, records, sources, day, k,
+                                              keeps=source.keeps)
+        offsets = {key: o for key, o in offsets.items() if source.keeps(*key)}
         notes += more
-    counts = visits.groupby(list(SERIES_KEYS)).size()
+    counts = source.kept(visits).groupby(list(SERIES_KEYS)).size()
     notes += [f"{m} axis {a}: a single visit, no drift analysis"
               for (m, a), c in counts.items() if c < 2]
     for text in notes:
@@ -273,13 +284,14 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
                                         alpha=alpha,
                                         min_jump_sigma=min_jump_sigma,
                                         warn_months=warn_months, coverage_factor=k)
+    series = [s for s in series if source.keeps(s.machine_id, s.axis)]
     for s in series:
         s.alerts += [a for a in [drift_model.limit_passed_alert(s, day)] if a is not None]
     for text in drift_model.two_visit_notes(series):
         notes.append(text)
         note(text)
     if predictor is not None:
-        drift_model.attach_model(series, monitoring.monitor_model(predictor, readings))
+        drift_model.attach_model(series, monitoring.monitor_model(predictor, whole))
     for s in series:
         for w in s.within_uncertainty:
             text = (f"{s.machine_id} axis {s.axis}: {drift_model.WITHIN_KINDS[w['kind']]} of "
@@ -288,12 +300,12 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
                     f"{w['U_um']:.2f} {s.unit}, k = {k:g}): not an alert")
             notes.append(text)
             note(text)
-    source = source_of(data, readings)
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
 
         values["store"] = redact(store)
-    return DriftResult(series, source, readings, values, notes=notes, offsets=offsets)
+    return DriftResult(series, source_of(source.data, whole), readings, values, notes=notes,
+                       offsets=offsets)
 
 
 def _evidence_records(store, sources: tuple) -> dict | None:
@@ -312,5 +324,5 @@ def _evidence_records(store, sources: tuple) -> dict | None:
 
     if not isinstance(store, (str, os.PathLike)) or not is_store(store):
         raise InputError("trace and ballbar evidence is read from a fleet store; give the "
-                         "store as data or store", parameter="evidence")
+                         "store as data or as store", parameter="evidence")
     return read_evidence(store)

@@ -53,7 +53,8 @@ from pipeline.steps.parameters import (
     python_only,
     readings,
 )
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.steps.source import Source
+from pipeline.workflows import check_params, source_of
 from pipeline.workflows.constraints import Interval
 
 DEFAULT_INTERVAL_DAYS = 90.0
@@ -380,9 +381,13 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
 
     Parameters
     ----------
-    data : str, path or DataFrame
+    data : str, path, DataFrame or pipeline.steps.source.Source
         Readings with visits (``visit``, ``started_at``): a file, a fleet store or a frame as
-        ``read`` returns it.
+        ``read`` returns it; from the runner, a Source with the test selection. Everything is
+        computed on the whole data within the selection's dates (the fleet's wear rate of an
+        axis without a trend comes from every axis; the store's records are read whatever the
+        selection), and the view shows the machine axes the selection keeps: a selection never
+        changes what is said about an axis it keeps.
     format : str, default 'auto'
         Input layout of a file.
     threshold_um : float, optional
@@ -434,7 +439,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
               "min_jump_sigma": min_jump_sigma, "out": out, "store": store,
               "stale_after_days": stale_after_days}
     check_params(PARAMETERS, values, "fleet")
-    from pipeline.steps.dated_view import as_of_date, dated_view
+    from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
     from pipeline.steps.limits import limit_notes, read_limits
 
     day = as_of_date(as_of)
@@ -446,31 +451,36 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     from features.visits import visit_backlash
     from models.drift import analyse_visits, two_visit_notes
 
+    source = Source.of(data, format)
     # today as any other day: a test dated ahead (a mistyped year) is no visit yet, and
     # taken for the latest one it would hide an overdue axis
-    readings, notes = dated_view(readings_of(data, format), day)
-    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, data, readings,
+    whole, notes = dated_view(source.all_readings(), day)
+    readings = kept_view(source, whole, day)
+    notes += limit_notes(per_axis, threshold_um, threshold_arcsec, source.data, readings,
                          limits)
-    # once, for the series and the pages alike
-    parts = fleet_parts(readings, iso230.per_target(readings))
-    visits = visit_backlash(readings, parts.stats, points=parts.points, figures=parts.figures)
-    series = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
-                            threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
-                            min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+    # once, for the series and the pages alike; on every axis, as the fleet's wear rate is
+    parts = fleet_parts(whole, iso230.per_target(whole))
+    visits = visit_backlash(whole, parts.stats, points=parts.points, figures=parts.figures)
+    every = analyse_visits(visits, min_visits=1, threshold_um=threshold_um,
+                           threshold_arcsec=threshold_arcsec, limits=per_axis, alpha=alpha,
+                           min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+    series = [s for s in every if source.keeps(s.machine_id, s.axis)]
     notes += [f"{s.machine_id} axis {s.axis}: a single visit, no trend" for s in series
               if len(s.visits) < 2]
     notes += two_visit_notes(series)
-    records = store_records(data if store is None else store)
-    analyses, more = trace_analyses(visits, records, day, threshold_um=threshold_um,
+    keeping = source.store if store is None else store  # the store of the records
+    records = store_records(keeping)
+    analyses, more = trace_analyses(visits, records, day, keeps=source.keeps,
+                                    threshold_um=threshold_um,
                                     threshold_arcsec=threshold_arcsec, limits=per_axis,
                                     alpha=alpha, min_jump_sigma=min_jump_sigma,
                                     warn_months=warn_months)
     notes += more
     for text in notes:
         note(text)
-    views = axis_views(series, readings, parts, interval_days, records, as_of=day,
-                       analyses=analyses)
-    live_alerts(views, data if store is None else store, day, stale_after_days)
+    views = axis_views(series, whole, parts, interval_days, records, as_of=day,
+                       analyses=analyses, fleet=every)
+    live_alerts(views, keeping, day, stale_after_days)
     for text in (n for v in views for n in v.evidence_notes):
         notes.append(text)
         note(text)
@@ -478,7 +488,7 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         from pipeline.store import redact
 
         values["store"] = redact(store)
-    result = FleetResult(views, source_of(data, readings), readings, values, notes=notes)
+    result = FleetResult(views, source_of(source.data, whole), readings, values, notes=notes)
     if out is not None:
         result.write(out)
     return result
@@ -532,13 +542,16 @@ def store_records(data) -> dict:
     return records
 
 
-def trace_analyses(visits, records: dict, as_of: dt.date, **options) -> tuple[dict, list]:
+def trace_analyses(visits, records: dict, as_of: dt.date, keeps=None,
+                   **options) -> tuple[dict, list]:
     """The drift analysis (``models.drift.analyse_visits`` with ``options``) of each machine
     axis whose store holds trace days sharing ``MIN_SHARED_DAYS`` days or more with its laser
     visits: the laser visits with the trace days shifted onto the laser's definition and
     weighted by their uncertainty, as ``drift --evidence laser,trace``
     (``pipeline.steps.evidence.with_evidence``). Returns {(machine_id, axis): DriftSeries}
-    and the notes of the axes whose trace days are too few to be used."""
+    and the notes of the axes whose trace days are too few to be used (of those
+    ``keeps(machine_id, axis)`` keeps, default all: the analysis pools the scatter over every
+    axis given, so a selection's axes are given with the others)."""
     if not records.get("trace"):
         return {}, []
     from models.drift import analyse_visits
@@ -548,7 +561,8 @@ def trace_analyses(visits, records: dict, as_of: dt.date, **options) -> tuple[di
     shared = {key: off["trace"]["days_in_common"] for key, off in found.items()
               if off.get("trace") is not None}
     used = {key for key, n in shared.items() if n >= MIN_SHARED_DAYS}
-    notes = [few_days_note(key, "trace", n) for key, n in shared.items() if n < MIN_SHARED_DAYS]
+    notes = [few_days_note(key, "trace", n) for key, n in shared.items()
+             if n < MIN_SHARED_DAYS and (keeps is None or keeps(*key))]
     series = analyse_visits(joined, min_visits=1, **options) if used else []
     return {(s.machine_id, s.axis): s for s in series if (s.machine_id, s.axis) in used}, notes
 
@@ -565,14 +579,17 @@ def fleet_parts(readings, stats) -> _Parts:
 
 def axis_views(series: list, readings, parts: _Parts, interval_days: float,
                records: dict | None = None, as_of: dt.date | None = None,
-               analyses: dict | None = None) -> list[AxisView]:
+               analyses: dict | None = None, fleet: list | None = None) -> list[AxisView]:
     """One ``AxisView`` per analysed series, worst first, each with its page name; ``parts``
     the readings' statistics, points and figures (``fleet_parts``), ``records`` what
     ``store_records`` found, ``analyses`` the axes' analyses with their trace days
-    (``trace_analyses``); with ``as_of`` the alerts of that day (``as_of_alerts``)."""
+    (``trace_analyses``); with ``as_of`` the alerts of that day (``as_of_alerts``).
+    ``fleet``: the series of every axis of the fleet when ``series`` are some of them (a
+    selection's): the fleet's wear rates and the page names come from all of them."""
     from models.wear.wear_clock import usage_rates
 
-    rates = fleet_wear_rates(series, parts)
+    fleet = series if fleet is None else fleet
+    rates = fleet_wear_rates(fleet, parts)
     usage = {(u["machine_id"], u["axis"]): u["hours_per_day"] for u in usage_rates(readings)}
     views = []
     for s in series:
@@ -583,8 +600,9 @@ def axis_views(series: list, readings, parts: _Parts, interval_days: float,
         view.as_of = as_of
         view.basis.alerts += as_of_alerts(view, as_of)
     views.sort(key=worst_first)
-    for view, name in zip(views, page_names(views)):
-        view.page = name
+    names = page_names([(s.machine_id, s.axis) for s in fleet])
+    for view in views:
+        view.page = names[(view.machine_id, view.axis)]
     return views
 
 
@@ -708,17 +726,19 @@ def worst_first(view: AxisView) -> tuple:
             -float(view.last["backlash_um"]), view.machine_id, view.axis)
 
 
-def page_names(views: list[AxisView]) -> list[str]:
-    """``<machine>_<axis>.html`` per axis, characters other than letters, digits, ``.``,
-    ``-`` and ``_`` replaced by ``_``; a name taken twice gets ``-2``, ``-3``..."""
-    names, taken = [], set()
-    for v in views:
-        stem = re.sub(r"[^\w.-]", "_", f"{v.machine_id}_{v.axis}", flags=re.ASCII).lstrip(".")
+def page_names(keys: list[tuple[str, str]]) -> dict[tuple[str, str], str]:
+    """``<machine>_<axis>.html`` per machine axis ``(machine_id, axis)``, characters other
+    than letters, digits, ``.``, ``-`` and ``_`` replaced by ``_``; a name taken twice gets
+    ``-2``, ``-3``... in the order of machine and axis (not worst first), so an axis keeps
+    its page's name from one day to the next and whatever the selection."""
+    names, taken = {}, set()
+    for machine_id, axis in sorted(set(keys)):
+        stem = re.sub(r"[^\w.-]", "_", f"{machine_id}_{axis}", flags=re.ASCII).lstrip(".")
         name, k = f"{stem}.html", 2
         while name.lower() in taken or name == "index.html":
             name, k = f"{stem}-{k}.html", k + 1
         taken.add(name.lower())
-        names.append(name)
+        names[(machine_id, axis)] = name
     return names
 
 

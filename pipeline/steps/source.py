@@ -1,0 +1,118 @@
+"""A job's data as the user gave it: the readings, where they came from, and the selection.
+
+The runner hands a job whose record says ``source=True`` (``pipeline.workflows.Workflow``) a
+``Source`` instead of a frame it read itself: the file, store or frame as given, its format,
+the test selection (``features.readings.selection``) and a raw log's reader options. The job
+then reads what it needs: the selected tests (``readings``), or every machine axis
+(``all_readings``) when what it says about one axis depends on the others (the fleet's wear
+rate) or on the store the readings came from (its recorded compensations, voided tests, trace
+days and ballbar runs). Such a job computes on the whole data and reports the axes the
+selection keeps (``keeps``), so a selection never changes what is said about an axis it
+keeps.
+
+This module is light (no pandas at import): a job's module imports it at the top.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from features.readings.selection import Selection
+
+
+@dataclass
+class Source:
+    """The data of a job, read when asked for.
+
+    Attributes
+    ----------
+    data : str, path-like or DataFrame
+        A readings file, a fleet store (a folder or a ``postgresql://`` URL) or a validated
+        readings frame, as given.
+    format : str
+        Layout of a readings file (``"auto"``: detect); a store takes only ``"auto"``.
+    selection : features.readings.selection.Selection
+        The tests to work on (machines, axes, dates); empty: all.
+    options : dict
+        A raw log's reader options (``channels``, ``reference_scale``, ``unit``), those given.
+    parameter : str
+        The job's parameter that passed ``data`` (named in errors).
+    """
+
+    data: object
+    format: str = "auto"
+    selection: Selection = field(default_factory=Selection)
+    options: dict = field(default_factory=dict)
+    parameter: str = "data"
+    _selected: object = field(default=None, init=False, repr=False, compare=False)
+    _all: object = field(default=None, init=False, repr=False, compare=False)
+
+    @classmethod
+    def of(cls, data, format: str = "auto", parameter: str = "data") -> Source:
+        """``data`` itself when it is a Source already (the runner's), else the Source of
+        ``data`` without a selection (a workflow called directly)."""
+        return data if isinstance(data, Source) else cls(data, format, parameter=parameter)
+
+    def readings(self):
+        """The validated readings of the tests the selection keeps (read once)."""
+        from pipeline.workflows import readings_of
+
+        if self._selected is None:
+            self._selected = readings_of(self.data, self.format, self.parameter,
+                                         self.selection, self.options)
+        return self._selected
+
+    def all_readings(self):
+        """The validated readings of every machine axis within the selection's dates (read
+        once). The machine and axis filters keep every axis here, but they still name a file
+        that states none, and a selection that keeps no test is still refused."""
+        from pipeline.workflows import readings_of
+
+        if self._all is None:
+            self._all = readings_of(self.data, self.format, self.parameter, self.selection,
+                                    self.options, axes=False)
+        return self._all
+
+    def keeps(self, machine_id: str, axis: str) -> bool:
+        """Whether the selection keeps the machine axis ``(machine_id, axis)``."""
+        return self.selection.keeps(str(machine_id), str(axis))
+
+    def kept(self, frame):
+        """The rows of ``frame`` (any frame with ``machine_id`` and ``axis``) of the machine
+        axes the selection keeps; ``frame`` itself when it keeps them all."""
+        import numpy as np
+
+        keep = np.ones(len(frame), dtype=bool)
+        for wanted, column in ((self.selection.machine, "machine_id"),
+                               (self.selection.axis, "axis")):
+            if wanted is not None:
+                keep &= frame[column].astype(str).isin(wanted).to_numpy()
+        if keep.all():
+            return frame
+        out = frame[keep]
+        out.attrs = dict(frame.attrs)
+        return out
+
+    @property
+    def is_store(self) -> bool:
+        """The data name a fleet store (a folder or a ``postgresql://`` URL)."""
+        from pipeline.store import is_store
+
+        return isinstance(self.data, (str, os.PathLike)) and is_store(self.data)
+
+    @property
+    def store(self):
+        """The fleet store the readings came from (its records and voids are read there), or
+        None for a file or a frame."""
+        return self.data if self.is_store else None
+
+    def name(self, readings=None) -> str:
+        """The name a result gives its data: the path or store as given (a URL without its
+        password), else the frame's ``attrs["source"]`` (of ``readings`` when given)."""
+        from pipeline.workflows import source_of
+
+        if isinstance(self.data, (str, os.PathLike)):
+            return source_of(self.data, None)
+        frame = readings if readings is not None else self.data
+        return frame.attrs.get("source", "readings")
