@@ -25,10 +25,14 @@ of leaving the fit undetermined. It uses only the samples where the play is sure
 the clearance never counts) and the axis moves steadily or rests (no acceleration within ``settle_s``). With several feeds c and L separate;
 with reversals at many positions e(x) and L do.
 
-The standard uncertainty of L is the cluster-robust (sandwich) one with the motions between
-two reversals as clusters (pooled into ``GROUPS`` groups): samples of one move share their
-errors (the servo's, the scale's interpolation), so the moves, not the samples, are the
-independent evidence.
+The standard uncertainty of L is a delete-one-cluster jackknife (CR3) with the motions between
+two reversals as clusters (pooled into ``GROUPS`` groups), stated for k = 2 with the t
+quantile of its G - 1 degrees of freedom: samples of one move share their errors (the
+servo's, the scale's interpolation, the lead-error fit's misfit where it passed), so the
+moves, not the samples, are the independent evidence; each refit refits the lead error and the
+lag without the move. Fewer than ``MIN_CLUSTERS`` moves, or a move without which the play
+cannot be told from the lead error or the lag, give the day's value without an uncertainty
+(NaN).
 
 The fit is written as sufficient statistics that add up per move and a combiner per day
 (``models.lost_motion_stream``): ``monitor`` on a file and ``watch`` on a live feed run the same
@@ -38,7 +42,12 @@ References: [Mechta2022] (B-spline intra-axis error model); Eilers & Marx (1996)
 smoothing with B-splines and penalties", Statistical Science 11(2) (P-splines); Siemens,
 SINUMERIK Analyze MyMachine /Condition (a second, load-side encoder for backlash); Liang & Zeger (1986),
 "Longitudinal data analysis using generalized linear models", Biometrika 73(1) (cluster-robust
-variance).
+variance); Bell & McCaffrey (2002), "Bias reduction in standard errors for linear regression
+with multi-stage samples", Survey Methodology 28(2); MacKinnon & Webb (2017), "Wild bootstrap
+inference for wildly different cluster sizes", J. Applied Econometrics 32(2) (the cluster
+jackknife CR3); Cameron & Miller (2015), "A practitioner's guide to cluster-robust
+inference", J. Human Resources 50(2) (few clusters); JCGM 100:2008 (GUM) G.3, G.6.4 (t
+quantiles for few degrees of freedom).
 """
 
 from __future__ import annotations
@@ -74,7 +83,8 @@ class DayFit:
     lost_motion : float
         L [mm or deg] (NaN when the day cannot show it).
     lost_motion_u : float
-        Its standard uncertainty [mm or deg].
+        Its standard uncertainty stated for k = 2 (``models.lost_motion_stream``'s
+        jackknife) [mm or deg]; NaN when the day's moves cannot give one.
     reversals : int
         Reversals of the commanded path whose play was taken up on both sides.
     samples : int
@@ -444,7 +454,8 @@ def _scale_problem(row, names: dict, min_travel: float) -> str | None:
 def _negative(row, names: dict) -> str | None:
     """A lost motion negative beyond its uncertainty: the load leads the motor."""
     value, u = row.lost_motion_um, row.lost_motion_u_um
-    if value < -max(NEGATIVE_U * u, NEGATIVE_FLOOR):
+    # a day without an uncertainty (too few moves) is judged by the floor alone
+    if value < -max(NEGATIVE_U * u if np.isfinite(u) else 0.0, NEGATIVE_FLOOR):
         return (f"lost motion {value:.6g} +- {u:.3g} {row.unit} is negative beyond its "
                 "uncertainty: the load leads the motor at reversals; are the motor side "
                 f"{names['motor']} and the load side {names['load']} swapped, or one of them "

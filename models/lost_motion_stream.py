@@ -52,6 +52,10 @@ MAX_COLUMNS = 20_000
 # day 31 degrees of freedom give the uncertainty within about 13 % of itself, and the day's
 # state stays a few hundred kB whatever its length.
 GROUPS = 32
+# Fewer clusters (moves) than this give no uncertainty: the jackknife's spread of 4 or fewer
+# refits has 3 or fewer degrees of freedom, where t(0.975) is 3.2 or more and the spread
+# itself uncertain by half or more (Cameron & Miller 2015, section VI).
+MIN_CLUSTERS = 5
 # Bins at the start of a day from which the gap threshold is taken.
 GAP_PROBE = 2001
 # Per column of a group: C[j,j], C[j,j+1], C[j,j+2], B[j,0], B[j,1], S'y[j]
@@ -168,28 +172,54 @@ def combine(stats: DayStats) -> tuple:
     solved = solveh_banded(band, np.c_[cross, cols[:, 5]], check_finite=False)
     schur = a_dense - cross.T @ solved[:, :2]
     rhs = dense[3:5] - cross.T @ solved[:, 2]
-    z_dense = np.linalg.solve(schur, np.c_[rhs, [1.0, 0.0]])  # (2, 2): beta, the lever
-    z_spline = np.c_[solved[:, 2], np.zeros(k)] - solved[:, :2] @ z_dense
-    beta_d, lever_d = z_dense[:, 0], z_dense[:, 1]
-    beta_s, lever_s = z_spline[:, 0], z_spline[:, 1]
-    # each group's score a'(X_g'y_g - X_g'X_g beta), from its normal equations alone
-    g_dense = stats.dense
-    xx_d = np.stack([g_dense[:, 0] * beta_d[0] + g_dense[:, 1] * beta_d[1],
-                     g_dense[:, 1] * beta_d[0] + g_dense[:, 2] * beta_d[1]], -1)
-    xx_d += np.einsum("gjq,j->gq", groups[:, :, 3:5], beta_s)
-    c_beta = groups[:, :, 0] * beta_s
-    c_beta[:, :-1] += groups[:, :-1, 1] * beta_s[1:]
-    c_beta[:, 1:] += groups[:, :-1, 1] * beta_s[:-1]
-    c_beta[:, :-2] += groups[:, :-2, 2] * beta_s[2:]
-    c_beta[:, 2:] += groups[:, :-2, 2] * beta_s[:-2]
-    xx_s = c_beta + groups[:, :, 3:5] @ beta_d
-    scores = ((g_dense[:, 3:5] - xx_d) @ lever_d + (groups[:, :, 5] - xx_s) @ lever_s)
-    used = g_dense[:, 5] > 0
-    g = int(used.sum())
-    u = float(np.sqrt(g / max(g - 1, 1) * np.sum(scores[used] ** 2)))
+    beta_d = np.linalg.solve(schur, rhs)
     if 1.0 - r2 < SEPARABLE:
         return (np.nan, np.nan, stats.reversals, samples, np.nan, k)
+    u = _jackknife_u(stats, groups, band, a_dense, cross, cols, dense)
     return (float(beta_d[0]), u, stats.reversals, samples, float(beta_d[1]), k)
+
+
+def _jackknife_u(stats: DayStats, groups, band, a_dense, cross, cols, dense) -> float:
+    """The standard uncertainty of L stated for k = 2: the delete-one-cluster jackknife (CR3)
+    over the groups of moves, times t(0.975, G - 1)/2 so that +-2u is the 95 % interval with
+    the G - 1 degrees of freedom G clusters leave; NaN when the clusters cannot give one.
+
+    Each refit leaves one group's normal equations out of the day's (the spline and the lag
+    are refitted too, so what their fits take from the moves is in the spread). The plain
+    cluster sandwich divides by G - 1 clusters' worth of scores that the fit has already
+    shrunk; with the 6-10 moves of a working minute it was 1.5-2x too small (Bell &
+    McCaffrey 2002; Cameron & Miller 2015), which the jackknife's refits are not
+    (MacKinnon & Webb 2017)."""
+    from scipy.linalg import LinAlgError, solveh_banded
+    from scipy.stats import t as student
+
+    used = np.flatnonzero(stats.dense[:, 5] > 0)
+    g = len(used)
+    if g < MIN_CLUSTERS:
+        return np.nan
+    out = np.empty(g)
+    for i, j in enumerate(used):
+        part, dense_g = groups[j], stats.dense[j]
+        band_g = band.copy()
+        band_g[2] -= part[:, 0]
+        band_g[1, 1:] -= part[:-1, 1]
+        band_g[0, 2:] -= part[:-2, 2]
+        a_g = a_dense - np.array([[dense_g[0], dense_g[1]], [dense_g[1], dense_g[2]]])
+        cross_g = cross - part[:, 3:5]
+        try:
+            solved = solveh_banded(band_g, np.c_[cross_g, cols[:, 5] - part[:, 5]],
+                                   check_finite=False)
+        except LinAlgError:
+            return np.nan
+        schur = a_g - cross_g.T @ solved[:, :2]
+        # the day without this group must still tell the play from the lead error and the
+        # lag: the direction keeps a share of its own variance (one direction left: none)
+        if not schur[0, 0] > SEPARABLE * a_g[0, 0] or np.linalg.det(schur) <= 0:
+            return np.nan
+        rhs = dense[3:5] - dense_g[3:5] - cross_g.T @ solved[:, 2]
+        out[i] = np.linalg.solve(schur, rhs)[0]
+    spread = float(np.sqrt((g - 1) / g * np.sum((out - out.mean()) ** 2)))
+    return spread * float(student.ppf(0.975, g - 1)) / 2.0
 
 
 def _penalty_band(k: int) -> np.ndarray:

@@ -55,7 +55,7 @@ def test_lost_motion_of_an_independent_generator_within_015_um(fleet):
     # the uncertainty is honest: errors within a few u (not a thousand)
     both = result.daily.merge(truth, on=["machine_id", "axis", "date"], suffixes=("", "_t"))
     z_scores = (both["lost_motion_um"] - both["lost_motion_um_t"]) / both["lost_motion_u_um"]
-    assert np.median(np.abs(z_scores)) < 3
+    assert np.nanmedian(np.abs(z_scores)) < 3  # a day of 3 reversals has no u (too few moves)
 
 
 def test_monitor_costs_a_few_times_reading_the_parquet_file(fleet):

@@ -18,6 +18,8 @@ import pytest
 
 import backlash as bl
 from features.readings.errors import InputError
+from features.traces.validation import check_trace
+from models.lost_motion import daily_lost_motion
 from models.lost_motion_stream import AxisStream, Binner, stream_days
 from pipeline.store.records import read_records
 from pipeline.workflows.monitor import monitor
@@ -93,7 +95,12 @@ def test_a_growing_log_gives_monitors_days_once_though_killed(store):
     first.send_signal(signal.SIGKILL)
     first.wait()
     recorded_before = sum(len(v) for v in read_records(fleet, "trace").values())
-    assert recorded_before == 3  # the first day of each axis
+    # the first day of each axis that has an uncertainty (a day of 3 reversals has too few
+    # moves for one and is not recorded: docs/monitor.md)
+    stated = daily_lost_motion(check_trace(trace, "trace")).dropna(
+        subset=["lost_motion_um", "lost_motion_u_um"])
+    first_day = stated["date"] == stated["date"].min()
+    assert recorded_before == int(first_day.sum()) >= 2
     with open(log, "a") as out:  # the rest, while no watcher runs and after it restarts
         out.writelines(lines[third + third // 2:2 * third])
     second = _watch(config, fleet, 6)
@@ -105,9 +112,9 @@ def test_a_growing_log_gives_monitors_days_once_though_killed(store):
     for axis in AXES:
         days = records[("M1", axis)]  # each day once, whatever the restart
         batch = monitor(log, format="camonitor", channels=_pvs(axis), machine="M1").daily
-        batch = batch.dropna(subset=["lost_motion_um"])
+        batch = batch.dropna(subset=["lost_motion_um", "lost_motion_u_um"])
         assert [d["date"] for d in days] == list(batch["date"]), out_text[-2000:]
-        assert len(days) == 3
+        assert len(days) >= 2
         for day, row in zip(days, batch.itertuples(), strict=True):
             assert day["reversals"] == row.reversals
             assert abs(day["lost_motion_um"] - row.lost_motion_um) < 1e-9

@@ -403,10 +403,22 @@ def _axis_monitor(days, threshold_um) -> AxisMonitor:
 
 
 def _notes(daily) -> list[str]:
+    from models.lost_motion_stream import MIN_CLUSTERS
+
+    notes = []
+    loose = daily[daily["lost_motion_um"].notna() & daily["lost_motion_u_um"].isna()]
+    if not loose.empty:
+        notes.append(
+            f"{len(loose)} day(s) have a lost motion without an uncertainty (e.g. "
+            f"{loose.iloc[0].machine_id} {loose.iloc[0].axis} on {loose.iloc[0].date}, "
+            f"{loose.iloc[0].reversals} reversals): fewer than {MIN_CLUSTERS} moves between "
+            "reversals, or a move without which the play cannot be told from the lead error "
+            "or the lag, leave the jackknife no degrees of freedom; a store does not record "
+            "them")
     blind = daily[daily["lost_motion_um"].isna()]
     if blind.empty:
-        return []
-    return [(f"{len(blind)} day(s) show no lost motion (e.g. {blind.iloc[0].machine_id} "
+        return notes
+    return notes + [(f"{len(blind)} day(s) show no lost motion (e.g. {blind.iloc[0].machine_id} "
             f"{blind.iloc[0].axis} on {blind.iloc[0].date}): fewer than two reversals took up "
             "the play, or every move ran at one feed without rests, so that lost motion and "
             "servo lag cannot be told apart; they are listed without a value")]
