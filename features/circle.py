@@ -62,12 +62,22 @@ class Run:
         The run and its direction (CW or CCW).
     angle_deg, deviation_um : ndarray
         Angle from the plane's first axis [deg], radial deviation [um], sorted by angle.
+    travel_deg : ndarray, optional
+        Travel [deg] of each reading since the run's first in the order of the file (the
+        order of capture), aligned with ``angle_deg``: the run's clock for its drift
+        (``travel_deg``).
     """
 
     test_id: str
     direction: str
     angle_deg: np.ndarray
     deviation_um: np.ndarray
+    travel_deg: np.ndarray | None = None
+
+    def fit_run(self) -> tuple:
+        """(direction, angle_deg, deviation_um, travel_deg): a run as ``models.circle``'s
+        fits take it."""
+        return (self.direction, self.angle_deg, self.deviation_um, self.travel_deg)
 
 
 @dataclass(frozen=True)
@@ -98,6 +108,15 @@ class Circle:
 
 
 # --------------------------------------------------------------------------- reading
+def travel_deg(direction: str, theta_deg: np.ndarray) -> np.ndarray:
+    """Travel [deg] of each reading since the run's first one, the readings in the order of
+    capture: the run's clock for its drift (``models.circle``). Readings sorted by angle instead
+    give a ramp from the smallest angle: a column the fit does not need, never a bias."""
+    s = 1.0 if direction == "CCW" else -1.0
+    theta = np.asarray(theta_deg, float)
+    return np.mod(s * (theta - theta[0]), 360.0) if len(theta) else theta
+
+
 
 
 def read_circles(data, parameter: str = "data") -> pd.DataFrame:
@@ -273,11 +292,16 @@ def circles(frame: pd.DataFrame) -> list[Circle]:
     for key, rows in frame.groupby(list(CIRCLE_KEYS), sort=False):
         runs = {}
         for direction in DIRECTIONS:
-            run = rows[rows["direction"] == direction].sort_values("angle_deg", kind="stable")
-            if len(run):
+            captured = rows[rows["direction"] == direction]
+            if len(captured):
+                # the travel in the file's order (capture), before sorting by angle
+                travel = pd.Series(travel_deg(direction, captured["angle_deg"].to_numpy(float)),
+                                   index=captured.index)
+                run = captured.sort_values("angle_deg", kind="stable")
                 runs[direction] = Run(str(run["test_id"].iloc[0]), direction,
                                       run["angle_deg"].to_numpy(float),
-                                      run["deviation_um"].to_numpy(float))
+                                      run["deviation_um"].to_numpy(float),
+                                      travel[run.index].to_numpy(float))
         machine, plane, visit, radius, feed = key
         out.append(Circle(str(machine), str(plane), str(visit), float(radius), float(feed),
                           runs))

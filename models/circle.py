@@ -28,18 +28,34 @@ found. A reversal spike is the axis sticking after it reverses, a short peak dec
 few degrees; its shape is not assumed: it is a sum of exponentials of decay lengths
 ``SPIKE_BASIS_DEG`` (0.75 to 12 deg), and its height is the peak of that sum over the first
 ``SPIKE_SPAN_DEG`` after the reversal. Each run also gets its own mean radius
-and centre offset (ISO 230-4's least-squares centre: :math:`1, \\cos\\theta, \\sin\\theta`).
+and centre offset (ISO 230-4's least-squares centre: :math:`1, \\cos\\theta, \\sin\\theta`)
+and its own drift: the bar's length changing steadily with the time of the run (a thermal
+drift), linear in the travel since the run's first reading in the order of capture
+(``features.circle.travel_deg``). Unfitted,
+a drift of a few tenths of a um over a run leaks into the 2-per-revolution terms (its sawtooth
+holds sin 2θ) and moved the squareness by 0.3 um/m, three times its uncertainty.
 The 2-per-revolution terms of squareness and servo mismatch share :math:`\\sin 2\\theta`; they
 separate because servo mismatch changes sign with the direction, so both runs are needed.
 
-The standard uncertainty of each effect is from the residual covariance,
-:math:`s^2 (A^T A)^{-1}` with :math:`s^2 = \\mathrm{RSS}/(n - p)`, widened by
-:math:`(1 + \\rho)/(1 - \\rho)` for the lag-1 autocorrelation :math:`\\rho > 0` of the
-residuals along the path (neighbouring readings are not independent).
+The standard uncertainty of each effect is a delete-one-block jackknife over the path
+([Kunsch1989]; the cluster jackknife CR3 of [MacKinnon2017] with blocks as clusters): each
+run is cut into sectors of ``SPIKE_SPAN_DEG`` (30 deg) from 0 deg, the fit is repeated
+leaving out one sector at a time, and the spread of the refits is the covariance. Readings
+of one sector share what the signatures do not hold (the shape of a spike, of a take-up, a
+bar's wobble), so neighbouring readings are not independent evidence, and the signatures are
+shared between the axes and the runs; a refit without a sector carries both into the spread,
+which a residual covariance :math:`s^2 (A^T A)^{-1}` does not. With G sectors the standard
+uncertainty is stated for k = 2: the jackknife's standard error times
+:math:`t_{0.975, G-1}/2`, so that :math:`\\pm 2u` is the 95 % interval ([GUM] G.3, G.6.4).
+Fewer than ``MIN_SECTORS`` sectors, or a signature that rests on one sector, give no
+uncertainty (NaN) and a note.
 
 References
 ----------
-ISO 230-4:2022, Circular tests for numerically controlled machine tools, annex on the
+[Kunsch1989] Künsch H. R., The jackknife and the bootstrap for general stationary
+observations, Annals of Statistics 17(3), 1989. [MacKinnon2017] MacKinnon J. G., Webb M. D.,
+Wild bootstrap inference for wildly different cluster sizes, J. Applied Econometrics 32(2),
+2017. [GUM] JCGM 100:2008, annex G. ISO 230-4:2022, Circular tests for numerically controlled machine tools, annex on the
 interpretation of the path. Kakino Y., Ihara Y., Shinohara A., Accuracy inspection of NC
 machine tools by double ball bar method, Hanser, 1993.
 """
@@ -49,6 +65,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from features.circle import travel_deg
 
 # The effects reported; "_1"/"_2": the plane's first/second axis.
 TERMS = ("backlash_1", "backlash_2", "spike_1", "spike_2", "squareness", "scale", "servo")
@@ -66,6 +84,12 @@ NEGATIVE_K = 2.0
 # CW and CCW read as swapped when the fit with the labels exchanged leaves residuals this many
 # times smaller (root mean square): the steps and spikes then follow the reversals.
 SWAPPED_RMS_RATIO = 1.5
+# Fewer jackknife sectors (over both runs) than this give no uncertainty: t(0.975) of fewer
+# than 7 degrees of freedom exceeds 2.4 and the spread of so few refits is itself uncertain
+# by a third or more.
+MIN_SECTORS = 8
+# Columns of each run's own: mean radius, centre (cos, sin), drift over a revolution.
+OWN = 4
 
 
 @dataclass(frozen=True)
@@ -80,11 +104,14 @@ class Diagnosis:
         runs do not hold the effect, e.g. an arc without that axis's reversal).
     rms_residual_um : float
         Root mean square of what the signatures leave unexplained [um].
+    notes : tuple of str
+        Why the uncertainties are missing, when they are.
     """
 
     value: dict
     u: dict
     rms_residual_um: float
+    notes: tuple = ()
 
 
 def _travel_since(theta_deg: np.ndarray, s: float, reversal_deg: float) -> np.ndarray:
@@ -156,24 +183,19 @@ def signatures(theta_deg: np.ndarray, direction: str, radius_mm: float, feed_mm_
 
 
 def _design(runs, radius_mm: float, feed_mm_min: float, play_um) -> np.ndarray:
-    """Signature columns of every run, then each run's own radius and centre columns."""
+    """Signature columns of every run, then each run's own radius, centre and drift columns
+    (``OWN`` each)."""
     blocks = []
-    for k, (direction, theta, _) in enumerate(runs):
+    for k, run in enumerate(runs):
+        direction, theta = run[0], run[1]
         t = np.radians(theta)
-        own = np.zeros((len(theta), 3 * len(runs)))
-        own[:, 3 * k:3 * k + 3] = np.column_stack([np.ones_like(t), np.cos(t), np.sin(t)])
+        travel = run[3] if len(run) > 3 and run[3] is not None else travel_deg(direction, theta)
+        own = np.zeros((len(theta), OWN * len(runs)))
+        own[:, OWN * k:OWN * k + OWN] = np.column_stack(
+            [np.ones_like(t), np.cos(t), np.sin(t), np.asarray(travel, float) / 360.0])
         blocks.append(np.hstack([signatures(theta, direction, radius_mm, feed_mm_min, play_um),
                                  own]))
     return np.vstack(blocks)
-
-
-def _lag1(residual: np.ndarray, sizes: list[int]) -> float:
-    """Pooled lag-1 autocorrelation of the residuals along each run's path."""
-    num = den = 0.0
-    for part in np.split(residual, np.cumsum(sizes)[:-1]):
-        num += float(np.dot(part[1:], part[:-1]))
-        den += float(np.dot(part, part))
-    return num / den if den > 0 else 0.0
 
 
 def _least_squares(a: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -190,8 +212,8 @@ def _least_squares(a: np.ndarray, y: np.ndarray) -> np.ndarray:
 def _fit(runs, y: np.ndarray, radius_mm: float, feed_mm_min: float, rounds: int = 4):
     """Least squares; the plays' take-up (a fraction of a degree) depends on the plays
     themselves, so the fit is repeated with the last plays until they settle. Returns the
-    coefficients and covariance over every column (NaN where a column has no support) and the
-    residuals."""
+    coefficients and covariance over every column (NaN where a column has no support), the
+    residuals and why the covariance is missing (None when it is not)."""
     play = (0.0, 0.0)
     for _ in range(rounds):
         design = _design(runs, radius_mm, feed_mm_min, play)
@@ -204,13 +226,53 @@ def _fit(runs, y: np.ndarray, radius_mm: float, feed_mm_min: float, rounds: int 
         play = (max(full[0], 0.0), max(full[1], 0.0))
     a = design[:, used]
     residual = y - a @ coef
-    n, p = a.shape
-    rho = min(max(_lag1(residual, [len(dev) for _, _, dev in runs]), 0.0), 0.95)
-    cov_used = (residual @ residual) / max(n - p, 1) * np.linalg.pinv(a.T @ a)
+    cov_used, why = _block_jackknife(a, y, _sectors(runs))
     cov = np.full((used.size, used.size), np.nan)
-    cov[np.ix_(used, used)] = cov_used * (1.0 + rho) / (1.0 - rho)
+    cov[np.ix_(used, used)] = cov_used
     full[~used] = np.nan
-    return full, cov, residual
+    return full, cov, residual, why
+
+
+def _sectors(runs) -> np.ndarray:
+    """The jackknife's block of each reading: its run and its sector of ``SPIKE_SPAN_DEG``
+    from 0 deg (reversals at 0, 90, 180, 270 deg fall on the sectors' edges, so a sector
+    holds the spike span after at most one reversal)."""
+    per_run = int(np.ceil(360.0 / SPIKE_SPAN_DEG))
+    return np.concatenate([k * per_run + np.floor(np.mod(run[1], 360.0) / SPIKE_SPAN_DEG)
+                           for k, run in enumerate(runs)]).astype(int)
+
+
+def _block_jackknife(a: np.ndarray, y: np.ndarray, block: np.ndarray):
+    """Covariance of the least-squares coefficients of ``a c = y`` by the delete-one-block
+    jackknife, stated for k = 2 (module docstring): (G - 1)/G times the sum of the squared
+    deviations of the G refits from their mean, times (t(0.975, G - 1)/2)². Returns
+    (covariance, None), or (NaN covariance, why) when the blocks cannot give one."""
+    from scipy.stats import t as student
+
+    p = a.shape[1]
+    labels = np.unique(block)
+    g = len(labels)
+    nan = np.full((p, p), np.nan)
+    if g < MIN_SECTORS:
+        return nan, (f"the runs hold {g} sectors of {SPIKE_SPAN_DEG:g} deg, fewer than the "
+                     f"{MIN_SECTORS} the jackknife needs: no uncertainty")
+    scale = np.linalg.norm(a, axis=0)
+    b = a / scale
+    xtx, xty = b.T @ b, b.T @ y
+    refits = np.empty((g, p))
+    for i, label in enumerate(labels):
+        rows = block == label
+        part = b[rows]
+        reduced = xtx - part.T @ part
+        # a signature that rests on this one sector is not estimable without it
+        if np.linalg.cond(reduced) > 1e12:
+            return nan, (f"a signature rests on the readings of one {SPIKE_SPAN_DEG:g} deg "
+                         "sector alone: no uncertainty")
+        refits[i] = np.linalg.solve(reduced, xty - part.T @ y[rows])
+    refits /= scale
+    spread = refits - refits.mean(axis=0)
+    factor = (float(student.ppf(0.975, g - 1)) / 2.0) ** 2
+    return (g - 1) / g * (spread.T @ spread) * factor, None
 
 
 def _spike_peak(coef: np.ndarray, cov: np.ndarray, travel: np.ndarray) -> tuple[float, float]:
@@ -232,10 +294,10 @@ def diagnose(runs, radius_mm: float, feed_mm_min: float) -> Diagnosis:
 
     Parameters
     ----------
-    runs : list of (direction, theta_deg, deviation_um)
-        Each run's direction ('CW' or 'CCW'), angles [deg] and radial deviations [um], in the
-        order of travel (sorted by angle is fine: the fit does not depend on the order, only
-        the autocorrelation of the residuals does). Both directions are needed to separate
+    runs : list of (direction, theta_deg, deviation_um[, travel_deg])
+        Each run's direction ('CW' or 'CCW'), angles [deg] and radial deviations [um], and the
+        travel of each reading since the run's first ([deg], ``travel_deg``; without it the
+        readings are taken in the order of capture). Both directions are needed to separate
         squareness from servo mismatch.
     radius_mm : float
         Nominal radius R [mm].
@@ -246,19 +308,19 @@ def diagnose(runs, radius_mm: float, feed_mm_min: float) -> Diagnosis:
     -------
     Diagnosis
     """
-    y = np.concatenate([dev for _, _, dev in runs])
-    coef, cov, residual = _fit(runs, y, radius_mm, feed_mm_min)
+    y = np.concatenate([run[2] for run in runs])
+    coef, cov, residual, why = _fit(runs, y, radius_mm, feed_mm_min)
     value = {name: float(coef[i]) for i, name in enumerate(LINEAR)}
     u = {name: float(np.sqrt(cov[i, i])) for i, name in enumerate(LINEAR)}
     k = len(SPIKE_BASIS_DEG)
     for axis, first in ((0, len(LINEAR)), (1, len(LINEAR) + k)):
         part = slice(first, first + k)
         travel = np.concatenate([_travel_since(theta, 1.0 if direction == "CCW" else -1.0, r)
-                                 for direction, theta, _ in runs for r in REVERSALS_DEG[axis]])
+                                 for direction, theta, *_ in runs for r in REVERSALS_DEG[axis]])
         value[f"spike_{axis + 1}"], u[f"spike_{axis + 1}"] = _spike_peak(
             coef[part], cov[part, part], travel)
     return Diagnosis({t: value[t] for t in TERMS}, {t: u[t] for t in TERMS},
-                     float(np.sqrt(np.mean(residual ** 2))))
+                     float(np.sqrt(np.mean(residual ** 2))), (why,) if why else ())
 
 
 def negative_plays(diagnosis: Diagnosis, k: float = NEGATIVE_K) -> list[str]:
@@ -269,8 +331,14 @@ def negative_plays(diagnosis: Diagnosis, k: float = NEGATIVE_K) -> list[str]:
 
 
 def exchanged(runs) -> list:
-    """The runs with CW and CCW exchanged."""
-    return [("CW" if direction == "CCW" else "CCW", theta, dev) for direction, theta, dev in runs]
+    """The runs with CW and CCW exchanged (a travel given counts the other way round too)."""
+    out = []
+    for run in runs:
+        other = ("CW" if run[0] == "CCW" else "CCW", *run[1:3])
+        if len(run) > 3 and run[3] is not None:
+            other += (np.mod(-np.asarray(run[3], float), 360.0),)
+        out.append(other)
+    return out
 
 
 def swapped_fit(runs, radius_mm: float, feed_mm_min: float,

@@ -257,7 +257,7 @@ def evaluate(circle) -> CircleFigures:
              if d in circle.runs else None) for d in fc.DIRECTIONS}
     if len(circle.runs) < 2:
         return CircleFigures(circle, g, None, None)
-    runs = [(d, r.angle_deg, r.deviation_um) for d, r in circle.runs.items()]
+    runs = [r.fit_run() for r in circle.runs.values()]
     return CircleFigures(circle, g, fc.hysteresis(circle.runs["CW"], circle.runs["CCW"]),
                          mc.diagnose(runs, circle.radius_mm, circle.feed_mm_min))
 
@@ -280,7 +280,7 @@ def _negative_play(item: CircleFigures, file) -> str | None:
     axes = dict(zip(("backlash_1", "backlash_2"), c.axes))
     found = ", ".join(f"{axes[t]} {d.value[t]:.2f} ± {d.u[t]:.2f} um" for t in negative)
     increasing = f"{c.plane}: from +{c.axes[0]} towards +{c.axes[1]}"
-    runs = [(direction, r.angle_deg, r.deviation_um) for direction, r in c.runs.items()]
+    runs = [r.fit_run() for r in c.runs.values()]
     other = mc.swapped_fit(runs, c.radius_mm, c.feed_mm_min, d)
     if other is not None:
         exchanged = ", ".join(f"{axes[t]} {other.value[t]:.2f} um" for t in axes)
