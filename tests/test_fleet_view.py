@@ -146,7 +146,8 @@ def test_json_keys_and_types(mixed):
 
     data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
     assert set(data) == {"source", "as_of", "threshold_um", "threshold_arcsec", "limits",
-                         "interval_days", "n_alerts", "axes"}
+                         "interval_days", "n_alerts", "axes", "probing"}
+    assert data["probing"] == []  # a file: no probing records (tests/test_fleet_probing.py)
     assert data["threshold_um"] == MIXED_UM and data["interval_days"] == 90.0
     for a in data["axes"]:
         assert set(a) == set(TYPES)

@@ -134,6 +134,8 @@ def _crossing_text(j: dict) -> str:
 # --------------------------------------------------------------------------- index.html
 def index_body(result) -> str:
     """The fleet table, worst first, with a sparkline per axis and notes."""
+    from pipeline.steps.rotary_evidence import probing_section
+
     p = result.parameters
     rows = "".join(_index_row(i, view) for i, view in enumerate(result.axes, 1))
     notes = "".join(f"<li>{_esc(n)}</li>" for n in result.notes)
@@ -159,6 +161,7 @@ hours); last compensation: its day, controller and reversal compensation.</p>
 <th>change points</th><th>crossing [interval]</th><th>next visit due</th>
 <th>last forecast</th><th>last compensation</th><th>alerts</th></tr>
 {rows}</table>
+{probing_section(result)}
 <p>Files: <a href="{JSON}">{JSON}</a> (the same as <code>backlash fleet --json</code>).</p>"""
 
 

@@ -318,17 +318,21 @@ class FleetResult(Result):
         The validated readings.
     parameters : dict
         The workflow's parameters as given (logged with the run).
+    probing : list of pipeline.steps.rotary_evidence.ProbingView
+        Each rotary axis's play per visit from a store's probing records, trended.
     """
 
     axes: list
     source: str
     readings: object = field(repr=False)
     parameters: dict = field(default_factory=dict)
+    probing: list = field(default_factory=list)
 
     @property
     def alerts(self) -> list[dict]:
-        """Every alert of every axis (``kind``, ``message``, ``machine_id``, ``axis``)."""
-        return axis_alerts(self.axes)
+        """Every alert of every axis (``kind``, ``message``, ``machine_id``, ``axis``), those
+        of a rotary axis's probing plays too (``source``: probing)."""
+        return axis_alerts([*self.axes, *self.probing])
 
     def write(self, out) -> dict[str, Path]:
         """The static site (``pipeline.reports.fleet_report``): ``index.html``, ``fleet.json`` and
@@ -347,7 +351,8 @@ class FleetResult(Result):
                 "limits": None if limits is None else str(limits) if isinstance(
                     limits, (str, os.PathLike)) else "given",
                 "interval_days": p.get("interval_days"), "n_alerts": len(self.alerts),
-                "axes": [v.to_json() for v in self.axes]}
+                "axes": [v.to_json() for v in self.axes],
+                "probing": [p.to_json() for p in self.probing]}
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``fleet``: parameters, per-axis figures, the site's files."""
@@ -476,6 +481,13 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
                                     alpha=alpha, min_jump_sigma=min_jump_sigma,
                                     warn_months=warn_months)
     notes += more
+    from pipeline.steps.rotary_evidence import probing_views
+
+    probing, more = probing_views(  # a rotary axis's probing plays, beside or without a laser
+        records, day, keeps=source.keeps, laser={(s.machine_id, s.axis) for s in series},
+        threshold_um=threshold_um, threshold_arcsec=threshold_arcsec, limits=per_axis,
+        alpha=alpha, min_jump_sigma=min_jump_sigma, warn_months=warn_months)
+    notes += more
     for text in notes:
         note(text)
     views = axis_views(series, whole, parts, interval_days, records, as_of=day,
@@ -488,7 +500,8 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
         from pipeline.store import redact
 
         values["store"] = redact(store)
-    result = FleetResult(views, source_of(source.data, whole), readings, values, notes=notes)
+    result = FleetResult(views, source_of(source.data, whole), readings, values, notes=notes,
+                         probing=probing)
     if out is not None:
         result.write(out)
     return result
