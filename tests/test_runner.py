@@ -50,7 +50,11 @@ def cli_json(args: list[str], capsys, code: int | None = 0) -> dict:
     capsys.readouterr()
     done = main(args)
     assert done == code if code is not None else done in (0, 3), capsys.readouterr().err
-    return json.loads(capsys.readouterr().out)
+    out = capsys.readouterr().out
+    try:
+        return json.loads(out)
+    except json.JSONDecodeError:  # JSON lines (watch's status feed): the result is the last
+        return json.loads(out.strip().splitlines()[-1])
 
 
 def py_json(job: str, *args, **params) -> dict:
@@ -128,7 +132,13 @@ def inputs(two_axes, tmp_path_factory) -> dict:
     text = (ROOT / "experiments/hidden_effect_scenarios.toml").read_text()
     head, design = text.split("[designs.A]")[0], text.split("[designs.A]")[1].split("\n[")[0]
     (folder / "scenarios.toml").write_text(f"{head}[designs.A]{design}\nhidden = []\nnulls = 1\n")
+    log = ROOT / "experiments/data/camonitor/mc_x_routine.log"
+    (folder / "WATCH.toml").write_text(
+        f'[source]\nprotocol = "log"\naddress = "{log}"\n[[axis]]\nmachine_id = "MC"\n'
+        'axis = "X"\ncommanded = "MC:X-PosSet"\nmotor = "MC:X-PosAct"\n'
+        'load = "MC:ec0-s4-EL5101-Enc-PosAct"\n')
     return {"two": str(two_axes), "twin": str(TWIN), "model": str(folder / "model"),
+            "watch": str(folder / "WATCH.toml"),
             "trace": str(folder / "trace.parquet"), "small": str(folder / "small.csv"),
             "scenarios": str(folder / "scenarios.toml"), "ess": str(ESS),
             "circle": str(ROOT / "experiments/data/circle/ballbar_xy.csv"),

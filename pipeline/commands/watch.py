@@ -1,5 +1,6 @@
 """``backlash watch``: the watcher's events as they happen, one line each: JSON on stdout with
-``--json`` (a service's status feed), else a short line on stderr."""
+``--json`` (a service's status feed, its last line the result), else a short line on
+stderr."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pipeline.commands.parameters import add_parameters
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "watch")
     parser.add_argument("--json", action="store_true",
-                        help="print one JSON status line per event on stdout")
+                        help="print one JSON status line per event on stdout, the result last")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,5 +30,8 @@ def run(args: argparse.Namespace) -> int:
                   flush=True)
 
     result = run_job("watch", args, status=status)
-    print(repr(result), file=sys.stderr)
+    if args.json:  # the last line: the result, as bl.watch returns it
+        print(json.dumps(result.to_json(), allow_nan=False, default=str), flush=True)
+    else:
+        print(repr(result), file=sys.stderr)
     return 0

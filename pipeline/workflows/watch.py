@@ -23,6 +23,13 @@ from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
 _POSITIVE = Interval(Real, 0, None, closed="neither")
+# One call as the command line and Python spell it (tests/test_runner.py's agreement): a
+# finished log read for a second, its day closed and recorded.
+EXAMPLE = (
+    ["{watch}", "--store", "{store}", "--for", "1"],
+    {"config": "{watch}", "store": "{store}", "seconds": 1.0},
+)
+
 PARAMETERS = {
     "config": Param((str, os.PathLike), "WATCH.toml: the source (ca, pva, opcua or log) and "
                     "the channels of each machine axis (docs/watch.md)", flag="WATCH"),
