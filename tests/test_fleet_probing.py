@@ -79,6 +79,7 @@ def test_the_fleet_trends_the_play_and_its_crossing(store):
 
 def test_limits_per_axis_move_the_crossing(store):
     view = bl.fleet(store, limits={MACHINE: {"A_arcsec": 30.0}}, as_of=AS_OF, track=False)
+    assert not any("applies to nothing" in n for n in view.notes), view.notes  # A is probed
     a = by_axis(view.to_json())[(MACHINE, "A")]
     assert a["threshold_arcsec"] == 30.0
     assert abs((pd.Timestamp(a["crossing_date"]) - true_crossing(30.0)).days) <= 20

@@ -79,15 +79,16 @@ def _limit(machine: str, key: str, value, file, parameter: str) -> float:
 
 
 def limit_notes(limits: dict | None, threshold_um, threshold_arcsec, data, readings,
-                source=None) -> list[str]:
+                source=None, also=frozenset()) -> list[str]:
     """Notes on limits that can apply to nothing: a limit of a machine or axis the data do
     not hold (a store: anywhere in it, so a selection of other machines says nothing), and a
     threshold whose unit no axis of the readings has (``threshold_um`` on rotary axes only,
     which are in arcsec). A slip here would otherwise pass as "no alert". ``source`` is the
-    limits file (or the dict) as given, named in the notes."""
+    limits file (or the dict) as given, named in the notes. ``also``: (machine, axis) pairs a
+    limit applies to beyond the readings (a rotary axis's probing records in a store)."""
     from features.readings.schema import ROTARY_AXES
 
-    held = _held_axes(data, readings)
+    held = _held_axes(data, readings) | set(also)
     notes = []
     machines = {m for m, _ in held}
     name = str(source) if isinstance(source, (str, os.PathLike)) else "limits"
@@ -100,7 +101,7 @@ def limit_notes(limits: dict | None, threshold_um, threshold_arcsec, data, readi
             axes = sorted(a for m, a in held if m == machine)
             notes.append(f"{name}: {key}: machine {machine} has no axis {axis} in the data "
                          f"(axes {', '.join(axes)}); the limit applies to nothing")
-    axes = set(readings["axis"].unique())
+    axes = set(readings["axis"].unique()) | {a for _, a in also}
     rotary = axes <= set(ROTARY_AXES)
     if threshold_um is not None and rotary:
         notes.append(f"threshold_um (--threshold-um {threshold_um:g}) is a limit in um of the "

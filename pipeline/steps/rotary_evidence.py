@@ -156,6 +156,19 @@ def probing_views(records: dict, as_of: dt.date | None = None, *, keeps=None,
     return views, notes
 
 
+def probed_axes(store) -> set[tuple[str, str]]:
+    """The (machine_id, axis) pairs with probing records in ``store`` (none for a file or a
+    frame): a limit of such an axis applies to its probing plays."""
+    import os
+
+    from pipeline.store import is_store, open_store
+    from pipeline.store.records import read_records
+
+    if not isinstance(store, (str, os.PathLike)) or not is_store(store):
+        return set()
+    return set(read_records(open_store(store, parameter="store"), "probing"))
+
+
 # --------------------------------------------------------------------------- the site
 def probing_section(result) -> str:
     """The index page's table of the rotary axes' probing plays (``result.probing``); empty

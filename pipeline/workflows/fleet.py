@@ -461,8 +461,10 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     # taken for the latest one it would hide an overdue axis
     whole, notes = dated_view(source.all_readings(), day)
     readings = kept_view(source, whole, day)
+    from pipeline.steps.rotary_evidence import probed_axes
+
     notes += limit_notes(per_axis, threshold_um, threshold_arcsec, source.data, readings,
-                         limits)
+                         limits, also=probed_axes(source.store if store is None else store))
     # once, for the series and the pages alike; on every axis, as the fleet's wear rate is
     parts = fleet_parts(whole, iso230.per_target(whole))
     visits = visit_backlash(whole, parts.stats, points=parts.points, figures=parts.figures)
