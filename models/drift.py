@@ -44,6 +44,16 @@ view is computed as of) and, with a monitored model (``models.monitoring``), ``r
 (``DriftSeries.unit``: um, or arcsec for a rotary axis); ``limit_of`` gives each axis a limit
 in its own unit, so no alert compares unlike units.
 
+Forecast of the next visit (``forecast_interval``, ``forecast_terms``; the next visit is the
+last plus the median time between the series' visits): the OLS line of the visits since the
+last change point with two 1 - alpha intervals that answer two questions. The **measurement**
+interval holds the value the laser will give (the line's uncertainty, the scatter between
+visits pooled over the fleet's segments, the model error of rolling-origin backtests inside
+the fleet's segments); the **lost-motion** interval holds the axis's lost motion itself (the
+line's uncertainty, the part of the scatter that is the axis's own, the measured target's own
+uncertainty, the model error). Fewer than three visits since the last change point give no
+interval (``DriftSeries.forecast_note`` says why).
+
 With a measurement uncertainty budget (ISO/TR 230-9; the series then carries
 ``backlash_U_um``, the expanded uncertainty of each visit's value, and ``backlash_u_visit_um``,
 the standard uncertainty of the parts that change from visit to visit) a step counts only when
@@ -58,12 +68,16 @@ U(Δ) is listed in ``within_uncertainty`` instead of raising ``level_jump``, ``l
 or ``increasing_trend``.
 
 References: Sen (1968), Theil (1950); Mann (1945), Kendall (1975); Jackson et al. (2005),
-"An algorithm for optimal partitioning of data on an interval", IEEE SPL 12(2).
+"An algorithm for optimal partitioning of data on an interval", IEEE SPL 12(2); Tashman (2000),
+"Out-of-sample tests of forecasting accuracy", IJF 16(4); Hyndman & Athanasopoulos (2021),
+Forecasting: Principles and Practice, 3rd ed., 5.5 and 5.10; Montgomery, Peck & Vining (2012),
+Introduction to Linear Regression Analysis, 5th ed., 2.4; JCGM 100:2008 (GUM) 6.3, F.2.4.5, G.4.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 import pandas as pd
@@ -361,6 +375,152 @@ def prediction_band(t_month, y_um, sigma_um, at_month, alpha: float = 0.05):
     return fit, fit - half, fit + half
 
 
+# --------------------------------------------------------------------------- forecast intervals
+@dataclass(frozen=True)
+class ForecastTerms:
+    """What a fleet tells each of its series' forecasts (``forecast_terms``).
+
+    ``scatter_um``: the pooled residual scatter [um] of straight lines through the fleet's
+    segments between change points, with ``scatter_dof`` degrees of freedom (0: none);
+    ``model_error_um``: the standard deviation [um] of the error the line and the scatter do not
+    explain, from ``backtests`` one-visit-ahead forecasts (NaN below ``MIN_BACKTESTS``).
+    """
+
+    scatter_um: float = float("nan")
+    scatter_dof: int = 0
+    model_error_um: float = float("nan")
+    backtests: int = 0
+
+
+# Backtests the model error needs: fewer give a mean square too uncertain to add.
+MIN_BACKTESTS = 5
+# Visits since the last change point a forecast interval needs: three give the first residual,
+# the first estimate of the scatter between visits.
+MIN_FORECAST_VISITS = 3
+
+
+def _segments(series) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(t [month], y [um], u [um]) of every segment between change points of every series."""
+    out = []
+    for s in series:
+        v = s.visits
+        t, y = v["t_month"].to_numpy(float), v["backlash_um"].to_numpy(float)
+        u = v[uncertainty_column(v)].fillna(0.0).to_numpy(float)
+        bounds = [0, *[c["index"] for c in s.change_points], len(v)]
+        out += [(t[a:b], y[a:b], u[a:b]) for a, b in pairwise(bounds)]
+    return out
+
+
+def _own_scatter(t, y) -> tuple[float, int]:
+    """Residual sum of squares [um²] of the OLS line through (t, y) and its m - 2 dof."""
+    slope, level = np.polyfit(t, y, 1)
+    return float(np.sum((y - level - slope * t) ** 2)), len(t) - 2
+
+
+def forecast_terms(series) -> ForecastTerms:
+    """The fleet's pooled scatter and model error for the forecasts of ``series`` (one unit).
+
+    Scatter: s² = Σ RSS / Σ (m - 2) over every segment between change points with three visits
+    or more (the segments' lines are fitted separately, so a step between them is no scatter;
+    the pooled within-group variance of a one-way layout). Model error: rolling-origin
+    one-visit-ahead backtests inside every segment [Tashman2000], [Hyndman2021] 5.10: visit
+    j + 1 forecast from the segment's visits 1..j (j >= 3) with ``forecast_interval``'s
+    variance v_j (no model error), e² = max(0, mean(r_j² - v_j)): the method-of-moments
+    estimate of the variance the straight line and the scatter leave unexplained (wear that
+    bends, a change too small to be found).
+    """
+    segments = [seg for seg in _segments(series) if len(seg[0]) >= MIN_FORECAST_VISITS
+                and np.ptp(seg[0]) > 0]
+    rss_dof = [_own_scatter(t, y) for t, y, _ in segments]
+    dof = sum(d for _, d in rss_dof)
+    scatter = float(np.sqrt(sum(r for r, _ in rss_dof) / dof)) if dof else float("nan")
+    excess = []
+    for t, y, u in segments:
+        for j in range(MIN_FORECAST_VISITS, len(t)):
+            f = forecast_interval(t[:j], y[:j], u[:j], t[j], scatter_um=scatter,
+                                  scatter_dof=dof)
+            if f is not None:
+                excess.append((y[j] - f["fit_um"]) ** 2 - f["measurement_var_um2"])
+    error = (float(np.sqrt(max(np.mean(excess), 0.0))) if len(excess) >= MIN_BACKTESTS
+             else float("nan"))
+    return ForecastTerms(scatter, dof, error, len(excess))
+
+
+def forecast_interval(t_month, y_um, u_um, at_month, *, alpha: float = 0.05,
+                      scatter_um: float = float("nan"), scatter_dof: int = 0,
+                      model_error_um: float = float("nan"), target_u_um=None) -> dict | None:
+    """The forecast of a segment's straight line at ``at_month`` with its two intervals.
+
+    Parameters
+    ----------
+    t_month : times of the visits since the last change point [month]
+    y_um : their measured backlash [um]; u_um : its standard uncertainty [um]
+        (``backlash_u_um``, the repeatability of each visit's value)
+    at_month : float or array, when [month]
+    alpha : 1 - the intervals' coverage
+    scatter_um, scatter_dof : the fleet's pooled scatter between visits and its dof
+        (``forecast_terms``); NaN, 0 for a series alone
+    model_error_um : the backtests' model error [um] (``forecast_terms``); NaN: none
+    target_u_um : the measured target's own standard uncertainty for the axis's lost motion
+        [um] per visit (with a budget ``backlash_U_um`` / k: the parts that do not average out
+        over the visit's points); default ``u_um``
+
+    Returns
+    -------
+    dict or None
+        None with fewer than ``MIN_FORECAST_VISITS`` visits or one date (no scatter can be
+        estimated). Else ``fit_um`` (the OLS line), ``measurement_low_um``/``_high_um`` (the
+        next laser visit's value), ``lost_motion_low_um``/``_high_um`` (the axis's lost
+        motion), ``measurement_var_um2``, ``scatter_um``, ``dof``.
+
+    Notes
+    -----
+    The line's scatter s² pools the segment's own residuals (m - 2 dof) with the fleet's, the
+    fleet weighing at most ``SCATTER_PRIOR_RESIDUALS`` residuals (as ``shrunk_scatter_um``),
+    never below the visits' own ū² = mean(u²) (a visit cannot repeat better than its laser
+    does). With se² = s²(1/m + (t - t̄)²/Sxx) the variance of the line at t and e the model
+    error ([Montgomery2012] 2.4, [Hyndman2021] 5.5):
+
+    - measurement: var = se² + s² + e², the next visit's value scatters about the line by s;
+    - lost motion: var = se² + (s² - ū²) + u_T² + e²: the line's own uncertainty (confidence
+      band), the part of the scatter that is the axis's (s² - ū², the lost motion itself moving
+      from visit to visit) and the measured target's own uncertainty u_T instead of its
+      repeatability: the line runs through measured values, so a target that reads low or high
+      moves the line with it ([GUM] 6.3, F.2.4.5: an uncorrected bias enters as a standard
+      uncertainty). Without a budget u_T = u and the two variances agree: only the budget knows
+      more of the target's own error than its repeatability.
+
+    Both are ± t(1 - alpha/2, nu) sqrt(var), nu the dof of s² (Welch-Satterthwaite's count for a
+    pooled variance, [GUM] G.4).
+    """
+    t, y = np.asarray(t_month, float), np.asarray(y_um, float)
+    u = np.nan_to_num(np.asarray(u_um, float))
+    at = np.asarray(at_month, float)
+    m = len(t)
+    if m < MIN_FORECAST_VISITS or np.ptp(t) <= 0:
+        return None
+    rss, nu = _own_scatter(t, y)
+    s2 = rss / nu
+    if np.isfinite(scatter_um) and scatter_dof > 0:
+        prior = min(float(scatter_dof), SCATTER_PRIOR_RESIDUALS)
+        s2, nu = (nu * s2 + prior * scatter_um ** 2) / (nu + prior), nu + prior
+    u2 = float(np.mean(u ** 2))
+    s2 = max(s2, u2)
+    target = u if target_u_um is None else np.nan_to_num(np.asarray(target_u_um, float))
+    ut2 = float(np.mean(target ** 2))
+    e2 = model_error_um ** 2 if np.isfinite(model_error_um) else 0.0
+    slope, level = np.polyfit(t, y, 1)
+    se2 = s2 * (1 / m + (at - t.mean()) ** 2 / float(np.sum((t - t.mean()) ** 2)))
+    q = float(stats.t.ppf(1 - alpha / 2, nu))
+    fit = level + slope * at
+    meas = np.sqrt(se2 + s2 + e2)
+    lost = np.sqrt(se2 + (s2 - u2) + ut2 + e2)
+    return {"fit_um": fit, "measurement_low_um": fit - q * meas,
+            "measurement_high_um": fit + q * meas, "lost_motion_low_um": fit - q * lost,
+            "lost_motion_high_um": fit + q * lost, "measurement_var_um2": se2 + s2 + e2,
+            "scatter_um": float(np.sqrt(s2)), "dof": float(nu)}
+
+
 # --------------------------------------------------------------------------- one series
 @dataclass
 class DriftSeries:
@@ -381,6 +541,10 @@ class DriftSeries:
     # {"visit", "kind" ('change_point', 'last_visit' or 'trend'), "jump_um", "U_um"}
     within_uncertainty: list = field(default_factory=list)
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
+    # the fleet's pooled scatter and backtests' model error (``forecast_terms``); None alone
+    terms: ForecastTerms | None = None
+    # the forecast as a report draws it (``forecast_curve``), set by the workflow
+    curve: dict | None = None
 
     @property
     def unit(self) -> str:
@@ -405,6 +569,82 @@ class DriftSeries:
             return None
         return (self.origin + pd.Timedelta(days=t_month * DAYS_PER_MONTH)).date().isoformat()
 
+    @property
+    def next_visit_month(self) -> float:
+        """When the next visit is expected [month]: the last visit plus the median time
+        between the series' visits (the pace it has been measured at)."""
+        t = self.visits["t_month"].to_numpy(float)
+        return float(t[-1] + (np.median(np.diff(t)) if len(t) > 1 else 0.0))
+
+    @property
+    def forecast_note(self) -> str | None:
+        """Why the series has no forecast interval, or None when it has one."""
+        n = len(self.visits) - self.segment_start
+        if n >= MIN_FORECAST_VISITS:
+            return None
+        since = self.visits["visit"].iloc[self.segment_start]
+        if n == 1:
+            return (f"one visit since visit {since}: no trend, so no forecast interval")
+        return (f"two visits since visit {since}: a line through two points leaves no "
+                "residual, so the scatter between visits cannot be estimated and no forecast "
+                "interval can be stated")
+
+    def forecast_at(self, at_month) -> dict | None:
+        """``forecast_interval`` of the visits since the last change point at ``at_month``
+        [month], with the fleet's ``terms``; with a budget the target's own uncertainty is
+        ``backlash_U_um`` / k. None where ``forecast_note`` says why."""
+        if self.forecast_note is not None:
+            return None
+        seg = self.visits.iloc[self.segment_start:]
+        terms = self.terms or ForecastTerms()
+        target = (seg["backlash_U_um"].to_numpy(float) / self.coverage_factor
+                  if self.coverage_factor is not None and "backlash_U_um" in seg else None)
+        return forecast_interval(seg["t_month"].to_numpy(float), seg["backlash_um"].to_numpy(float),
+                                 seg[uncertainty_column(seg)].to_numpy(float), at_month,
+                                 alpha=self.alpha, scatter_um=terms.scatter_um,
+                                 scatter_dof=terms.scatter_dof,
+                                 model_error_um=terms.model_error_um, target_u_um=target)
+
+    def forecast_json(self) -> dict:
+        """The forecast of the next visit as the JSON of ``drift`` and ``fleet`` carry it."""
+        f = self.forecast_at(self.next_visit_month)
+        terms = self.terms or ForecastTerms()
+
+        def r(key):
+            return None if f is None else round(float(f[key]), 4)
+
+        return {"forecast_date": None if f is None else self.date_at(self.next_visit_month),
+                "forecast_um": r("fit_um"),
+                "forecast_measurement_low_um": r("measurement_low_um"),
+                "forecast_measurement_high_um": r("measurement_high_um"),
+                "forecast_lost_motion_low_um": r("lost_motion_low_um"),
+                "forecast_lost_motion_high_um": r("lost_motion_high_um"),
+                "forecast_model_error_um": (round(terms.model_error_um, 4)
+                                            if np.isfinite(terms.model_error_um) else None),
+                "forecast_backtests": terms.backtests,
+                "forecast_note": self.forecast_note}
+
+    @property
+    def forecast_end_month(self) -> float:
+        """How far ahead [month] ``drift`` draws the forecast: the next visit, or the end of
+        the crossing interval (its date without one) when later."""
+        late = self.crossing[2] if self.crossing[2] is not None else self.crossing[0]
+        return max(self.next_visit_month, late if late is not None else -np.inf)
+
+    def forecast_curve(self, end_month: float, steps: int = 40) -> dict | None:
+        """The forecast from the last visit to ``end_month`` [month]: ``t_month``, ``fit``,
+        ``measurement_low``/``_high`` and ``lost_motion_low``/``_high`` [um]; None without
+        an interval."""
+        t_last = float(self.visits["t_month"].iloc[-1])
+        ahead = np.linspace(t_last, max(end_month, t_last), steps)
+        f = self.forecast_at(ahead)
+        if f is None:
+            return None
+        return {"t_month": ahead, "fit": f["fit_um"], "measurement_low": f["measurement_low_um"],
+                "measurement_high": f["measurement_high_um"],
+                "lost_motion_low": f["lost_motion_low_um"],
+                "lost_motion_high": f["lost_motion_high_um"]}
+
     def to_json(self) -> dict:
         v = self.visits
         return {
@@ -425,6 +665,7 @@ class DriftSeries:
             "threshold_crossing": self.date_at(self.crossing[0]),
             "crossing_interval": [self.date_at(self.crossing[1]), self.date_at(self.crossing[2])],
             "alerts": self.alerts,
+            **self.forecast_json(),
             **(self._uncertainty_json() if self.coverage_factor is not None else {}),
             **({"model": self.model} if self.model is not None else {}),
         }
@@ -643,16 +884,25 @@ def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
                    limits: dict | None = None, **options) -> list[DriftSeries]:
     """``analyse_series`` of every machine axis in ``visits`` (``visit_backlash`` rows) with
     ``min_visits`` or more, in (machine_id, axis) order, each with its fleet's pooled scatter
-    (``fleet_scatter_um``) and its limit in its own unit (``limit_of``)."""
+    (``fleet_scatter_um``), its limit in its own unit (``limit_of``) and the terms of its
+    forecast intervals from the series of its unit (``forecast_terms``: the pooled scatter of
+    their segments and the model error of their backtests)."""
     from features.readings.schema import deviation_unit
 
     fleet = fleet_scatter_um(visits)
-    return [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)),
-                           threshold_um=limit_of(str(machine), str(axis), threshold_um,
-                                                 threshold_arcsec, limits), **options)
-            for (machine, axis), group in visits.groupby(list(SERIES_KEYS), sort=True,
-                                                         observed=True)
-            if len(group) >= min_visits]
+    series = [analyse_series(group, fleet_scatter=fleet.get(deviation_unit(axis)),
+                             threshold_um=limit_of(str(machine), str(axis), threshold_um,
+                                                   threshold_arcsec, limits), **options)
+              for (machine, axis), group in visits.groupby(list(SERIES_KEYS), sort=True,
+                                                           observed=True)
+              if len(group) >= min_visits]
+    # the forecasts' scatter and model error are the fleet's, per unit (never um with arcsec)
+    for unit in {s.unit for s in series}:
+        mine = [s for s in series if s.unit == unit]
+        terms = forecast_terms(mine)
+        for s in mine:
+            s.terms = terms
+    return series
 
 
 def limit_of(machine: str, axis: str, threshold_um: float | None = None,
@@ -669,11 +919,13 @@ def limit_of(machine: str, axis: str, threshold_um: float | None = None,
 
 
 def two_visit_notes(series: list[DriftSeries]) -> list[str]:
-    """One note per series whose trend comes from two visits: its interval cannot be
-    estimated."""
+    """One note per series whose trend comes from two visits: its interval and a forecast
+    interval cannot be estimated."""
     return [f"{s.machine_id} axis {s.axis}: the trend since visit "
             f"{s.visits['visit'].iloc[s.segment_start]} comes from two visits; its interval "
-            "cannot be estimated" for s in series if len(s.visits) - s.segment_start == 2]
+            "cannot be estimated, nor a forecast interval (two visits leave no residual to "
+            "estimate the scatter between visits from)"
+            for s in series if len(s.visits) - s.segment_start == 2]
 
 
 # --------------------------------------------------------------------------- model alerts

@@ -138,7 +138,14 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "alerts": list, "alert_messages": list,
          "last_forecast": type(None), "last_compensation": type(None), "history": dict,
          "page": str, "voided_tests": list, "evidence": dict, "offsets_um": dict,
-         "forecast_uses": list, "forecast_offset_um": (dict, type(None))}
+         "forecast_uses": list, "forecast_offset_um": (dict, type(None)),
+         "forecast_date": (str, type(None)), "forecast_um": (float, type(None)),
+         "forecast_measurement_low_um": (float, type(None)),
+         "forecast_measurement_high_um": (float, type(None)),
+         "forecast_lost_motion_low_um": (float, type(None)),
+         "forecast_lost_motion_high_um": (float, type(None)),
+         "forecast_model_error_um": (float, type(None)), "forecast_backtests": int,
+         "forecast_note": (str, type(None))}
 
 
 def test_json_keys_and_types(mixed):

@@ -5,7 +5,10 @@ folder can be moved or logged to MLflow as is): ``drift.png``, ``drift.html``, `
 Each panel shows the axis's backlash at each visit (``features.visits.visit_backlash``:
 ``backlash_um``, its lost motion by the axis's measuring system) with its ±2 sigma bars (and,
 with an uncertainty budget, a band of ± its expanded uncertainty ``backlash_U_um``), the
-Theil-Sen trend since the last change point, the change points (dashed), the threshold and the forecast band of the crossing.
+Theil-Sen trend since the last change point, the change points (dashed), the threshold, the crossing
+interval and the forecast interval of the next measurement (``DriftSeries.curve``, computed by
+the workflow; the page's table gives both intervals of the next visit: the measurement's and
+the axis's lost motion's).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import pandas as pd
 
 from features.readings import fileio
 from features.visits import DAYS_PER_MONTH
-from models.drift import WITHIN_KINDS, prediction_band
+from models.drift import WITHIN_KINDS
 from pipeline.reports.fleet_charts import unit_label
 from pipeline.reports.report_page import new_figure, save_figure, write_page
 
@@ -78,16 +81,17 @@ def _panel(ax, s) -> None:
     t_end = float(v["t_month"].iloc[-1])
     if s.crossing[0] is not None:
         t_end = max(t_end, s.crossing[2] or s.crossing[0])
+    if s.curve is not None:
+        t_end = max(t_end, float(s.curve["t_month"][-1]))
     if np.isfinite(tr.get("slope", np.nan)):
         tt = np.linspace(seg["t_month"].iloc[0], t_end, 50)
         ax.plot(dates(tt), tr["intercept"] + tr["slope"] * tt, color="C1",
                 label="Theil-Sen trend since the last change point")
-        ahead = np.linspace(seg["t_month"].iloc[-1], t_end, 50)
-        if len(seg) >= 2 and ahead[-1] > ahead[0]:
-            _, lo, hi = prediction_band(seg["t_month"], seg["backlash_um"], seg["sigma_um"],
-                                        ahead, s.alpha)
-            ax.fill_between(dates(ahead), lo, hi, color="C1", alpha=0.2, lw=0,
-                            label=f"{100 * (1 - s.alpha):g} % prediction band")
+    if s.curve is not None:  # the next measurement's interval (models.drift)
+        ahead = s.curve["t_month"]
+        ax.fill_between(dates(ahead), s.curve["measurement_low"], s.curve["measurement_high"],
+                        color="C1", alpha=0.2, lw=0,
+                        label=f"{100 * (1 - s.alpha):g} % forecast of the next measurement")
     for c in s.change_points:
         ax.axvline(dates(v["t_month"].iloc[c["index"]]), ls="--", color="0.4", lw=1)
     unit = unit_label(s.unit)
@@ -134,6 +138,17 @@ def _interval(j: dict) -> str:
     return f"[{_fmt(low)}, {_fmt(high)}]"
 
 
+def _forecast_cells(j: dict) -> str:
+    """The next visit's date and the forecast's two intervals, or why there are none."""
+    if j["forecast_date"] is None:
+        return f"<td colspan='3'>{html.escape(j['forecast_note'] or '–')}</td>"
+    return (f"<td>{_fmt(j['forecast_date'])}</td>"
+            f"<td>{_fmt(j['forecast_um'])} [{_fmt(j['forecast_measurement_low_um'])}, "
+            f"{_fmt(j['forecast_measurement_high_um'])}]</td>"
+            f"<td>[{_fmt(j['forecast_lost_motion_low_um'])}, "
+            f"{_fmt(j['forecast_lost_motion_high_um'])}]</td>")
+
+
 def _visit_row(r: dict) -> str:
     """One visit of a series as a table row (columns a hand-built series lacks show –)."""
     def num(key, fmt=".3f"):
@@ -176,7 +191,7 @@ def render_body(series, *, source: str = "", notes=(), as_of: str | None = None)
             f"<td>{_fmt(j['slope_um_per_month'])} {_interval(j)}</td>"
             f"<td>{html.escape(', '.join(j['change_points']) or '–')}</td>"
             f"<td>{_fmt(j['threshold_crossing'])} [{_fmt(j['crossing_interval'][0])}, "
-            f"{_fmt(j['crossing_interval'][1])}]</td>"
+            f"{_fmt(j['crossing_interval'][1])}]</td>{_forecast_cells(j)}"
             f"<td>{html.escape('; '.join(a['kind'] for a in s.alerts) or '–')}</td></tr>")
     details = []
     for s in series:
@@ -218,12 +233,19 @@ its standard uncertainty from the tests' repeatability and σ the larger of u an
 scatter between visits. The mean signed ISO reversal value and B = max|B_i| (means over the
 visit's tests) are shown for reference: with a direct system they are not the lost motion. Slope: Theil-Sen since the last change point ({level} interval); change points by
 optimal partitioning into straight-line segments; crossing: Theil-Sen line, interval from the
-OLS prediction band of a future visit.</p>
+OLS prediction band of a future visit. Next visit (the last plus the median time between the
+axis's visits): the forecast with two {level} intervals, <em>measurement</em> (the value the
+laser will read: the trend's uncertainty, the scatter between visits and the model error of
+backtests) and <em>lost motion</em> (the axis's lost motion itself: the trend's uncertainty,
+the axis's own part of the scatter and the measured target's own uncertainty); the figure's
+band is the measurement's. Fewer than three visits since the last change point: no interval,
+and the reason.</p>
 {_uncertainty_text(series)}
 {f'<ul>{note_html}</ul>' if note_html else ''}
 <p>Each axis in its own unit: µm for a linear axis, arcsec for a rotary one.</p>
 <table><tr><th>machine</th><th>axis</th><th>unit</th><th>visits</th><th>last backlash</th>
-<th>slope [per month]</th><th>change points</th><th>threshold crossing</th><th>alerts</th></tr>
+<th>slope [per month]</th><th>change points</th><th>threshold crossing</th>
+<th>next visit</th><th>forecast: measurement</th><th>forecast: lost motion</th><th>alerts</th></tr>
 {''.join(rows)}</table>
 <p><img src="{FILES['png']}" alt="backlash series"></p>
 {''.join(details)}

@@ -342,7 +342,7 @@ def history_chart(history: dict, forecast: dict | None, trend: dict | None, orig
         items.append(("band", RED, "crossing interval"))
     if forecast:
         plot.band(ahead["days"], ahead["low"], ahead["high"], ORANGE, 0.22)
-        items.append(("band", ORANGE, "forecast band"))
+        items.append(("band", ORANGE, "forecast: the next measurement (95 %)"))
     if trend:
         plot.line(trend["days"], trend["fit"], ORANGE, 1.8)
         items.append(("line", ORANGE, "Theil-Sen trend"))

@@ -151,7 +151,8 @@ first: axes at or above the threshold, then other alerting axes, then the rest; 
 earliest next visit due, the earliest crossing, the highest backlash. Next visit due: the
 earlier of the last visit + the interval and the early end of the crossing interval (the day a
 future visit's upper prediction bound reaches the threshold); due now when already above it.
-History: backlash per visit, change points dashed, forecast band orange, threshold red, last
+History: backlash per visit, change points dashed, forecast orange (the interval of the next
+measurement, the value a laser will read), threshold red, last
 recorded forecast purple with its 95 % interval. Last forecast: the mean over its points of the
 recorded forecast [95 % interval] and the day it is for (~ estimated from the axis's operating
 hours); last compensation: its day, controller and reversal compensation.</p>
@@ -306,7 +307,20 @@ def _summary(view, j: dict) -> str:
 Threshold crossing{_threshold_text(j, unit)}: {_crossing_text(j)}.<br>
 Next visit due: <strong>{_esc(j['next_visit_due'])}</strong>
 ({_esc(REASONS[j['next_visit_reason']])}){_overdue_text(view, j)}.<br>
+{_esc(_forecast_text(j, unit))}<br>
 {_esc(_uses_text(j, unit))}</p></div>"""
+
+
+def _forecast_text(j: dict, unit: str) -> str:
+    """The forecast of the next visit with its two 95 % intervals, or why there is none."""
+    if j["forecast_date"] is None:
+        return f"Forecast: none, {j['forecast_note']}."
+    return (f"Forecast for {j['forecast_date']} (the visits' usual pace): "
+            f"{_fmt(j['forecast_um'])} {unit}; the next measurement "
+            f"[{_fmt(j['forecast_measurement_low_um'])}, "
+            f"{_fmt(j['forecast_measurement_high_um'])}] (drawn orange), the axis's lost "
+            f"motion [{_fmt(j['forecast_lost_motion_low_um'])}, "
+            f"{_fmt(j['forecast_lost_motion_high_um'])}] {unit} (95 %).")
 
 
 def _uses_text(j: dict, unit: str) -> str:

@@ -287,6 +287,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     series = [s for s in series if source.keeps(s.machine_id, s.axis)]
     for s in series:
         s.alerts += [a for a in [drift_model.limit_passed_alert(s, day)] if a is not None]
+        s.curve = s.forecast_curve(s.forecast_end_month)  # what the report draws
     for text in drift_model.two_visit_notes(series):
         notes.append(text)
         note(text)

@@ -249,6 +249,7 @@ class AxisView:
             "crossing_interval": [b.date_at(b.crossing[1]), b.date_at(b.crossing[2])],
             "forecast_uses": self.forecast_uses,
             "forecast_offset_um": self.forecast_offset(),
+            **b.forecast_json(),
             "next_visit_due": self.next_visit_due.isoformat(),
             "next_visit_reason": self.next_visit_reason,
             "days_overdue": self.days_overdue,
@@ -812,27 +813,20 @@ def _shifted(curve: dict | None, days: float) -> dict | None:
     return {**curve, "days": curve["days"] + days}
 
 
-def _segment(s):
-    """The visits since the last change point: times [month], values and sigma [um]."""
-    seg = s.visits.iloc[s.segment_start:]
-    return (seg["t_month"].to_numpy(float), seg["backlash_um"].to_numpy(float),
-            seg["sigma_um"].to_numpy(float))
-
-
 def forecast(s, end_month: float) -> dict | None:
-    """The prediction band of a future visit (``models.drift.prediction_band``) from the
-    last visit to ``end_month``, in days since the first visit; None without a trend."""
-    import numpy as np
-
+    """The forecast from the last visit to ``end_month`` (``DriftSeries.forecast_curve``), in
+    days since the first visit: ``low``/``high`` the interval of the next measurement (the
+    band the pages draw), ``lost_motion_low``/``_high`` the axis's lost motion's; None
+    without an interval (fewer than three visits since the last change point)."""
     from features.visits import DAYS_PER_MONTH
-    from models.drift import prediction_band
 
-    t, y, sigma = _segment(s)
-    if len(t) < 2 or not np.isfinite(s.trend.get("slope", np.nan)):
+    curve = s.forecast_curve(end_month, FORECAST_STEPS)
+    if curve is None:
         return None
-    ahead = np.linspace(t[-1], max(end_month, t[-1]), FORECAST_STEPS)
-    fit, low, high = prediction_band(t, y, sigma, ahead, s.alpha)
-    return {"days": ahead * DAYS_PER_MONTH, "fit": fit, "low": low, "high": high}
+    return {"days": curve["t_month"] * DAYS_PER_MONTH, "fit": curve["fit"],
+            "low": curve["measurement_low"], "high": curve["measurement_high"],
+            "lost_motion_low": curve["lost_motion_low"],
+            "lost_motion_high": curve["lost_motion_high"]}
 
 
 def trend_line(s, end_month: float) -> dict | None:
