@@ -23,7 +23,7 @@ MARGIN_DAYS = 150    # the truth crosses the threshold this long after the last 
 
 def _traces(axis: str, days: list[pd.Timestamp], clearance_um: list[float], seed: int):
     rng = np.random.default_rng(seed)
-    t, cmd, motor, load = independent_traces.axis_days(rng, clearance_um, seconds=30.0)
+    t, cmd, motor, load = independent_traces.axis_days(rng, clearance_um, seconds=90.0)
     return pd.concat([pd.DataFrame({
         "time": day.normalize() + pd.Timedelta(hours=13) + pd.to_timedelta(t, unit="s"),
         "machine_id": "M1", "axis": axis, "commanded_mm": cmd[k], "motor_mm": motor[k],
