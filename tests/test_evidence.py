@@ -31,7 +31,7 @@ ADJUST_AFTER = 5      # trace days after the last visit before it
 def _traces(days: list[pd.Timestamp], clearance_um: list[float], seed: int = 3) -> pd.DataFrame:
     """Dual-feedback traces of M1 X on ``days``, one clearance [um] each (30 s a day)."""
     rng = np.random.default_rng(seed)
-    t, cmd, motor, load = independent_traces.axis_days(rng, clearance_um, seconds=30.0)
+    t, cmd, motor, load = independent_traces.axis_days(rng, clearance_um, seconds=90.0)
     return pd.concat([pd.DataFrame({
         "time": day.normalize() + pd.Timedelta(hours=13) + pd.to_timedelta(t, unit="s"),
         "machine_id": "M1", "axis": "X", "commanded_mm": cmd[k], "motor_mm": motor[k],
