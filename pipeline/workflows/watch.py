@@ -69,9 +69,6 @@ class WatchResult(Result):
     def to_json(self) -> dict:
         return {"days": self.days, "updates": self.updates, "notes": list(self.notes)}
 
-    def __repr__(self) -> str:
-        return f"watch {self.config}: {len(self.days)} day(s) closed, {self.updates} updates"
-
 
 def watch(config, *, store, until: str | None = None, seconds: float | None = None,
           take_up_mm: float = 0.05, settle_s: float = 0.1, status=None) -> WatchResult:
