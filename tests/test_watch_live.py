@@ -317,7 +317,8 @@ def _killed_mid_day(protocol: str, samples, fleet: Path, tmp: Path, extra: str =
         watcher.process.send_signal(signal.SIGTERM)  # keeps day 3 open
         watcher.wait_for(_event("stopped"))
         assert watcher.process.wait(timeout=30) == 0
-    events = [json.loads(line) for line in watcher.lines if line.startswith("{")]
+    lines = [json.loads(line) for line in watcher.lines if line.startswith("{")]
+    events = [e for e in lines if "event" in e]  # the last line is the result
     keep = np.r_[0:a, b:n]
     return store, keep, (a, b), events
 
