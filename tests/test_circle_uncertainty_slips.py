@@ -354,8 +354,8 @@ def test_report_checks_the_calibration_against_the_tests_it_signs(cli, capsys, t
     assert "is dated 2026-02-10, after the test of 2026-01-05" in line
     assert not out.exists()
     old = meta_file(tmp_path, ("instrument_calibrated_on = 2026-02-10",
-                               "instrument_calibrated_on = 2025-10-01\n"
-                               "calibration_valid_months = 1"),
+                               ("instrument_calibrated_on = 2025-10-01\n"
+                                "calibration_valid_months = 1")),
                     ("calibrated_on = 2026-01-15", "calibrated_on = 2025-10-01"))
     assert cli(["report", str(twin), "--meta", str(old), "--out", str(out)]) == 0
     assert "the instrument's calibration of 2025-10-01 expired on 2025-11-01" in (

@@ -130,7 +130,7 @@ def test_drift_leaves_out_trace_days_sharing_too_few_days_with_the_laser(case):
     """One rule for drift and the fleet: the axis whose traces share 2 days with the laser
     keeps the laser's series in ``drift --evidence laser,trace`` too, with the note; the axis
     sharing more gets its trace days."""
-    store, as_of, threshold, _ = case
+    store, as_of, _, _ = case
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         both = bl.drift(store, as_of=as_of, evidence="laser,trace", track=False).to_json()
