@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(BIN)/backlash run experiments/demo.toml || [ $$? -eq 3 ]
 
 # -rs prints why a test was skipped (the browser test without Chromium, PostgreSQL tests);
-# -n 2 runs the tests on two processes (the machines have two cores; about 7 minutes).
+# -n 2 runs the tests on two processes (the machines have two cores; about 9 minutes).
 test: $(STAMP)
 	$(BIN)/python -m pytest -rs -n 2
 
