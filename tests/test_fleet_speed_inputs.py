@@ -12,7 +12,7 @@ import pytest
 from features.readings import read_readings
 from features.readings.errors import InputError
 from features.readings.validation import to_float, to_int
-from pipeline.tracking.runs import data_hash
+from pipeline.results import data_hash
 
 TARGETS = (0.0, 50.0, 100.0)
 

@@ -29,7 +29,7 @@ class ModelData:
 
     @property
     def digest(self) -> str:
-        from pipeline.tracking.runs import data_hash
+        from pipeline.results import data_hash
 
         return data_hash(self.readings)
 

@@ -40,7 +40,7 @@ import random
 import re
 import tempfile
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import fields
 from pathlib import Path
 
 from pipeline.results import TrackingRecord
@@ -403,50 +403,7 @@ def _drop(store, name: str) -> None:
         store.delete_registered_model(name)
 
 
-def data_hash(frame) -> str:
-    """Content hash of a data frame, logged with runs (``data_sha256``).
-
-    The sha256 of the column names, their dtypes and pandas' 64-bit hash of every row's values
-    (``pandas.util.hash_pandas_object``, index left out): equal content gives the same hash,
-    a changed value, column name or dtype another. Hashing the values in place is an order of
-    magnitude faster than writing the frame out as text.
-    """
-    import pandas as pd
-
-    digest = hashlib.sha256()
-    for name, dtype in frame.dtypes.items():
-        digest.update(f"{name!s}\x1f{dtype!s}\x1e".encode())
-    rows = pd.util.hash_pandas_object(frame, index=False).to_numpy(dtype="<u8")
-    digest.update(rows.tobytes())
-    return digest.hexdigest()
-
-
 # --------------------------------------------------------------------------- the one adapter
-
-@dataclass
-class RunRecord(TrackingRecord):
-    """A ``TrackingRecord`` with what model runs add.
-
-    Attributes
-    ----------
-    model : dict or None
-        A trained model to log and register as ``backlash-predictor``
-        (``pipeline.tracking.model_registry.model_record``).
-    children : list of TrackingRecord
-        Runs nested under this one (one per compared model, one per tuning trial).
-    promote : bool
-        Give the champion alias to the best registered model of this record and its children
-        (``standing``: highest backtest skill against persistence, else lowest
-        ``test_rmse_um``) when it beats the champion on the same data (``data_sha256``).
-    status : str
-        How the run ends: ``FINISHED``, or ``FAILED`` for a trial that failed.
-    """
-
-    model: dict | None = None
-    children: list = field(default_factory=list)
-    promote: bool = False
-    status: str = "FINISHED"
-
 
 def record_data(record: TrackingRecord) -> dict:
     """``record`` as plain JSON data (paths as text), for another process to log."""

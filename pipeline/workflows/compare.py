@@ -131,8 +131,8 @@ class CompareResult(Result):
         (registered); the best becomes champion if it beats the champion on the same data."""
         import tempfile
 
+        from pipeline.results import RunRecord
         from pipeline.tracking import model_registry
-        from pipeline.tracking.runs import RunRecord
 
         if "comparison" not in self.files:
             self.write(tempfile.mkdtemp(prefix="backlash-compare-"))

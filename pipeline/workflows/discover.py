@@ -115,7 +115,7 @@ class DiscoveryResult(Result):
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``discover``: baseline, effects named, the gap, the report."""
-        from pipeline.tracking.runs import data_hash
+        from pipeline.results import data_hash
 
         d = self.discovery
         return TrackingRecord(

@@ -128,7 +128,7 @@ class DriftResult(Result):
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``drift``: parameters, per-series figures, the report files."""
-        from pipeline.tracking.runs import data_hash
+        from pipeline.results import data_hash
 
         p = self.parameters
         model = p.get("model")

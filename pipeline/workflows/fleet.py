@@ -357,7 +357,7 @@ class FleetResult(Result):
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``fleet``: parameters, per-axis figures, the site's files."""
-        from pipeline.tracking.runs import data_hash
+        from pipeline.results import data_hash
 
         p = self.parameters
         params = {"data": self.source, "data_sha256": data_hash(self.readings),

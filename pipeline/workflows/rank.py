@@ -125,7 +125,7 @@ class RankResult(Result):
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``rank``: parameters, every score as a metric, the files."""
-        from pipeline.tracking.runs import data_hash
+        from pipeline.results import data_hash
 
         e, p = self.explanation, self.parameters
         model = p.get("model")

@@ -133,8 +133,8 @@ class TrainResult(Result):
         ``figures_record`` logs them once drawn."""
         import tempfile
 
+        from pipeline.results import RunRecord
         from pipeline.tracking import model_registry
-        from pipeline.tracking.runs import RunRecord
 
         if "model" not in self.files:
             self.write(Path(tempfile.mkdtemp(prefix="backlash-train-")) / self.model)

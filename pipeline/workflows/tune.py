@@ -104,7 +104,7 @@ class TuneResult(Result):
         logged it while it ran."""
         if self.logged:
             return None
-        from pipeline.tracking.runs import RunRecord
+        from pipeline.results import RunRecord
 
         return RunRecord(experiment="tune", run_name=f"tune {self.params['study']}",
                          params={**self.params, **{f"best_{k}": v
@@ -114,7 +114,7 @@ class TuneResult(Result):
 
 def trial_record(study, trial) -> TrackingRecord:
     """What MLflow keeps of one finished Optuna trial."""
-    from pipeline.tracking.runs import RunRecord
+    from pipeline.results import RunRecord
 
     attrs = trial.user_attrs
     return RunRecord(
