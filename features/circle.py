@@ -20,7 +20,6 @@ controlled machine tools.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -141,9 +140,7 @@ def read_circles(data, parameter: str = "data") -> pd.DataFrame:
         A missing column, a value that is not what the contract expects, a run too short or
         with too large a gap; naming the file, row and column.
     """
-    from features.readings.formats import read_table
-    from features.readings.io import check_readable
-    from features.readings.validation import ROW
+    from features.readings.io import read_table_rows
 
     if isinstance(data, pd.DataFrame):
         # positions inside, the caller's index labels in messages (a frame sliced from another)
@@ -151,11 +148,7 @@ def read_circles(data, parameter: str = "data") -> pd.DataFrame:
         if frame.empty:
             raise InputError("no readings: the frame is empty", parameter=parameter)
     else:
-        file = Path(data)
-        check_readable(file)
-        frame, row_base = read_table(file)
-        rows = frame.pop(ROW).reset_index(drop=True) if ROW in frame else row_base
-        frame = frame.reset_index(drop=True)
+        frame, file, rows = read_table_rows(data)
     return _checked(frame, file, rows)
 
 

@@ -10,7 +10,6 @@ at least two loads at every centre (the deflection is what changes with the load
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -78,9 +77,8 @@ def read_loaded_circles(data, parameter: str = "data") -> pd.DataFrame:
         or centre that changes within a run; naming the file, row and column.
     """
     from features import circle as fc
-    from features.readings.formats import read_table
-    from features.readings.io import check_readable
-    from features.readings.validation import ROW, row_of, to_float
+    from features.readings.io import read_table_rows
+    from features.readings.validation import row_of, to_float
 
     if isinstance(data, pd.DataFrame):
         file, frame = None, data.reset_index(drop=True)
@@ -88,12 +86,9 @@ def read_loaded_circles(data, parameter: str = "data") -> pd.DataFrame:
         if frame.empty:
             raise InputError("no readings: the frame is empty", parameter=parameter)
     else:
-        file = Path(data)
-        check_readable(file)
-        frame, row_base = read_table(file)
-        rows = (frame.pop(ROW).reset_index(drop=True) if ROW in frame
-                else pd.Series(np.arange(len(frame)) + row_base))
-        frame = frame.reset_index(drop=True)
+        frame, file, rows = read_table_rows(data)
+        if not isinstance(rows, pd.Series):  # consecutive rows from the first
+            rows = pd.Series(np.arange(len(frame)) + rows)
     where = {"file": file} if file is not None else {"parameter": parameter}
     known = {c.lower(): c for c in ADDED}
     frame = frame.rename(columns={c: known[str(c).lower()] for c in frame.columns
@@ -194,19 +189,15 @@ def read_points(data, parameter: str = "at") -> pd.DataFrame:
     InputError
         A missing column, an empty or non-numeric value, an empty table.
     """
-    from features.readings.formats import read_table
-    from features.readings.io import check_readable
-    from features.readings.validation import ROW, to_float
+    from features.readings.io import read_table_rows
+    from features.readings.validation import to_float
 
     if isinstance(data, pd.DataFrame):
         file, frame, rows = None, data.reset_index(drop=True), pd.Series(data.index)
     else:
-        file = Path(data)
-        check_readable(file)
-        frame, row_base = read_table(file)
-        rows = (frame.pop(ROW).reset_index(drop=True) if ROW in frame
-                else pd.Series(np.arange(len(frame)) + row_base))
-        frame = frame.reset_index(drop=True)
+        frame, file, rows = read_table_rows(data)
+        if not isinstance(rows, pd.Series):  # consecutive rows from the first
+            rows = pd.Series(np.arange(len(frame)) + rows)
     where = {"file": file} if file is not None else {"parameter": parameter}
     if frame.empty:
         raise InputError("no points: the table is empty; expected x_mm, y_mm, z_mm, fx_n, "

@@ -10,8 +10,6 @@ job reports.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
@@ -80,20 +78,14 @@ def read_probes(data, parameter: str = "data") -> pd.DataFrame:
         known, a direction other than +1/-1, angles that look like radians, a centre millimetres
         away from where the machine puts it), naming the file, row and column.
     """
-    from features.readings.formats import read_table
-    from features.readings.io import check_readable
-    from features.readings.validation import ROW
+    from features.readings.io import read_table_rows
 
     if isinstance(data, pd.DataFrame):
         frame, file, rows = data.reset_index(drop=True), None, pd.Series(data.index) + 2
         if frame.empty:
             raise InputError("no probed centres: the frame is empty", parameter=parameter)
     else:
-        file = Path(data)
-        check_readable(file)
-        frame, row_base = read_table(file)
-        rows = frame.pop(ROW).reset_index(drop=True) if ROW in frame else row_base
-        frame = frame.reset_index(drop=True)
+        frame, file, rows = read_table_rows(data)
     return _checked(frame, file, rows)
 
 

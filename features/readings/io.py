@@ -59,6 +59,20 @@ def check_readable(path: Path) -> None:
         raise InputError("cannot read file: not a regular file", file=path)
 
 
+def read_table_rows(path) -> tuple[pd.DataFrame, Path, pd.Series | int]:
+    """A CSV or Parquet table of another contract (circles, probing, loaded circles), checked
+    readable: (frame with a fresh index, the file, its rows: the file row of each frame row,
+    or the file row of the first when they follow one another) for errors naming the row."""
+    from features.readings.formats import read_table
+    from features.readings.validation import ROW
+
+    file = Path(path)
+    check_readable(file)
+    frame, row_base = read_table(file)
+    rows = frame.pop(ROW).reset_index(drop=True) if ROW in frame else row_base
+    return frame.reset_index(drop=True), file, rows
+
+
 def write_readings(frame: pd.DataFrame, path) -> Path:
     """Write a readings frame as CSV or Parquet (by suffix), atomically."""
     path = Path(path)
