@@ -86,3 +86,17 @@ def progress_bar(what: str = ""):
 def remove_created(folders: list[Path]) -> None:
     for folder in folders:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def show(result, args, table) -> int:
+    """Print a result as a command with a table of its own does: its JSON with ``--json``,
+    else ``table(json)``; what it recorded and wrote on stderr."""
+    from features.readings.fileio import dumps
+
+    document = result.to_json()
+    print(dumps(document) if args.json else table(document))
+    if result.recorded is not None:
+        print(result.recorded.text, file=sys.stderr)
+    if args.out:
+        print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
+    return 0

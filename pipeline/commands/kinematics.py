@@ -9,7 +9,6 @@ residual of the fit.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from pipeline.commands.parameters import add_parameters
 
@@ -22,19 +21,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
+    from pipeline.commands.common import show
     from pipeline.commands.data import run_job
 
-    result = run_job("kinematics", args)
-    if args.json:
-        print(dumps(result.to_json()))
-    else:
-        print(table(result.to_json()))
-    if result.recorded is not None:
-        print(result.recorded.text, file=sys.stderr)
-    if args.out:
-        print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
-    return 0
+    return show(run_job("kinematics", args), args, table)
 
 
 def _num(value, width: int = 10) -> str:

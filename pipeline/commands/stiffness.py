@@ -7,7 +7,6 @@ with its standard uncertainty, and the form of the stiffness map over the worksp
 from __future__ import annotations
 
 import argparse
-import sys
 
 from pipeline.commands.parameters import add_parameters
 
@@ -20,19 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
+    from pipeline.commands.common import show
     from pipeline.commands.data import run_job
 
-    result = run_job("stiffness", args)
-    if args.json:
-        print(dumps(result.to_json()))
-    else:
-        print(table(result.to_json()))
-    if result.recorded is not None:
-        print(result.recorded.text, file=sys.stderr)
-    if args.out:
-        print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
-    return 0
+    return show(run_job("stiffness", args), args, table)
 
 
 def _num(value, fmt: str = ".2f", width: int = 9) -> str:
