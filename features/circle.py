@@ -4,7 +4,7 @@ figures, the circular deviation G and the circular hysteresis H.
 A circular test moves two axes of a plane round a circle of nominal radius R at a feed F,
 once clockwise and once counter-clockwise; a telescopic ballbar between the spindle and a pivot
 on the table records the radial deviation (measured minus nominal) at each angle. The table is
-``SCHEMA.md`` section 11: one row per reading, the angle measured from the plane's first axis
+the data contract's section 11: one row per reading, the angle measured from the plane's first axis
 (XY: from +X towards +Y). CCW is the direction of increasing angle.
 
 Only that table (CSV or Parquet) is read. A ballbar vendor's own export (Renishaw's ``.b5r``
@@ -119,7 +119,7 @@ def travel_deg(direction: str, theta_deg: np.ndarray) -> np.ndarray:
 
 
 def read_circles(data, parameter: str = "data") -> pd.DataFrame:
-    """Read and check a circular-test table (SCHEMA.md section 11).
+    """Read and check a circular-test table (data contract section 11).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Loaded circular tests (LDBB, SCHEMA.md section 12): the circle table of section 11 plus the
+"""Loaded circular tests (LDBB, data contract section 12): the circle table of section 11 plus the
 load and the centre of every run; its reader and the grouping into centres.
 
 The circle columns are checked by ``features.circle.read_circles`` (the same messages, rows
@@ -55,7 +55,7 @@ class Centre:
 
 
 def read_loaded_circles(data, parameter: str = "data") -> pd.DataFrame:
-    """Read and check an LDBB table (SCHEMA.md section 12).
+    """Read and check an LDBB table (data contract section 12).
 
     Parameters
     ----------
@@ -96,7 +96,8 @@ def read_loaded_circles(data, parameter: str = "data") -> pd.DataFrame:
     for col in ADDED:
         if col not in frame:
             raise InputError(f"missing required column {col!r} of a loaded circular test "
-                             f"(SCHEMA.md section 12: the circle table plus {', '.join(ADDED)})",
+                             f"(data contract section 12: the circle table plus "
+                             f"{', '.join(ADDED)})",
                              row=1, column=col, **where)
     added = {col: to_float(frame[col], file, col, rows) for col in ADDED}
     run = [frame["test_id"].astype(str), frame["direction"].astype(str)]
@@ -169,7 +170,7 @@ POINT_COLUMNS = ("x_mm", "y_mm", "z_mm", "fx_n", "fy_n")
 
 
 def read_points(data, parameter: str = "at") -> pd.DataFrame:
-    """Points with quasi-static forces (SCHEMA.md section 12's ``--at``): ``x_mm, y_mm, z_mm,
+    """Points with quasi-static forces (data contract section 12's ``--at``): ``x_mm, y_mm, z_mm,
     fx_n, fy_n[, fz_n]`` and any other columns (kept), one row per point.
 
     Parameters

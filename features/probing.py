@@ -1,4 +1,4 @@
-"""The probing contract (SCHEMA.md section 13): calibration spheres probed on a five-axis
+"""The probing contract (data contract section 13): calibration spheres probed on a five-axis
 machine's rotary table, one row per measured sphere centre.
 
 The names of the 12 geometric errors of the two rotary axes are seed 003's Table 1 with units
@@ -55,7 +55,7 @@ def angle_column(axis: str) -> str:
 
 
 def read_probes(data, parameter: str = "data") -> pd.DataFrame:
-    """Read and check a probing table (SCHEMA.md section 13).
+    """Read and check a probing table (data contract section 13).
 
     Parameters
     ----------

@@ -98,7 +98,7 @@ def ldbb_runs(seed: int = 0, centres=None, loads_n=LOADS_N, directions=("CCW", "
 def ldbb_table(seed: int = 0, centres=None, loads_n=LOADS_N, directions=("CCW", "CW"),
                radius_mm: float = 100.0, readings: int = 360, noise_um: float = 0.3,
                machine_id: str = "VMC-7") -> pd.DataFrame:
-    """The loaded circles at every centre, load and direction (SCHEMA.md section 12)."""
+    """The loaded circles at every centre, load and direction (data contract section 12)."""
     frames = []
     for k, (centre, runs) in enumerate(ldbb_runs(seed, centres, loads_n, directions,
                                                  radius_mm, readings, noise_um)):

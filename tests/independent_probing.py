@@ -1,4 +1,4 @@
-"""An independent generator of probing tables (SCHEMA.md section 13): its own homogeneous
+"""An independent generator of probing tables (data contract section 13): its own homogeneous
 transforms, written from seed 003's eq. 6 without the product's twin or model.
 
 Each error transform is a translation times three successive rotations about X, Y and Z by

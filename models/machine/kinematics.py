@@ -1,7 +1,7 @@
 """The 12 geometric errors of a dual-turntable five-axis machine's rotary axes and their play,
 identified from probed calibration spheres; the error field they make over the workspace.
 
-Model (seed 003 eq. 6, SCHEMA.md section 13). A point q fixed on the table (table frame, mm)
+Model (seed 003 eq. 6, data contract section 13). A point q fixed on the table (table frame, mm)
 appears in machine coordinates at
 
     p = E_T R_T(t) E_C R_z(c) q,

@@ -110,7 +110,7 @@ def loaded_circle_test(machine: twin.Machine, stiffness: Stiffness, *, center_mm
     Returns
     -------
     DataFrame
-        SCHEMA.md section 12's columns (``LDBB_COLUMNS``): the circle table of section 11,
+        data contract section 12's columns (``LDBB_COLUMNS``): the circle table of section 11,
         ``load_n`` and the centre.
     """
     center = np.asarray(center_mm, float)
@@ -150,7 +150,7 @@ def ldbb_campaign(machine: twin.Machine, stiffness: Stiffness, centres_mm, *,
     Returns
     -------
     DataFrame, dict
-        The table (SCHEMA.md section 12) and the truth: ``centres`` (per centre its
+        The table (data contract section 12) and the truth: ``centres`` (per centre its
         ``centre_mm``, ``compliance_um_per_n`` (3 x 3 at the centre) and
         ``stiffness_n_per_um`` by axis, 1 / c_ii), ``ram_top_mm``, ``noise_um``.
     """

@@ -364,8 +364,8 @@ def line_test(machine: Machine, start_mm, end_mm, *, targets: int = 11, cycles: 
 
 def as_readings(test: pd.DataFrame, *, machine_id: str, axis: str, test_id: str,
                 start_mm: float = 0.0) -> pd.DataFrame:
-    """A ``line_test`` frame as the readings table (SCHEMA section 1, linear cycle): targets at
-    ``start_mm`` + the distance along the line [mm], directions '+' and '-', the deviation
+    """A ``line_test`` frame as the readings table (data contract section 1, linear cycle):
+    targets at ``start_mm`` + the distance along the line [mm], directions '+' and '-', the deviation
     along the line [um]; the rest of the product (``iso``, ``targets``) reads it as a laser's."""
     return pd.DataFrame({
         "machine_id": machine_id, "axis": axis, "test_id": test_id, "method": "linear",
@@ -419,7 +419,7 @@ def circle_test(machine: Machine, *, plane: str = "XY", radius_mm: float = 100.0
     Returns
     -------
     DataFrame
-        SCHEMA section 11's columns: ``test_id``, ``machine_id``, ``plane``, ``direction``,
+        data contract section 11's columns: ``test_id``, ``machine_id``, ``plane``, ``direction``,
         ``angle_deg`` (0 to 360, the nominal angle of the reading), ``radius_mm``,
         ``feed_mm_min``, ``deviation_um`` (measured minus nominal radius).
     """

@@ -2,7 +2,7 @@
 errors, the play of each rotary axis and a touch probe that measures sphere centres.
 
 The chain is composed of full homogeneous transforms (no linearisation, unlike the
-identification in ``models.machine.kinematics``), seed 003 eq. 6 in SCHEMA.md section 13's
+identification in ``models.machine.kinematics``), seed 003 eq. 6 in data contract section 13's
 frames:
 
     p = E_T R_T(t') E_C R_z(c') q,    E = Trans(delta) Rot(eps),
@@ -11,7 +11,7 @@ Rot(eps) the exact rotation by the vector eps (Rodrigues), T the tilting axis (A
 Y). Each axis reaches its commanded angle minus d b / 2, b its play [arcsec], d = +1 when the
 angle was approached increasing: the play is taken up against the motion. The probe reads each
 centre with independent Gaussian noise per coordinate. The twin writes the probing table of
-SCHEMA.md section 13 and its truth (``truth``), so the job can be checked against what was put
+data contract section 13 and its truth (``truth``), so the job can be checked against what was put
 in. It stands beside the feed-drive twin (``models.physics.machine``), which it does not change.
 
 >>> from models.physics import rotary_probing as rp
@@ -127,7 +127,7 @@ def probe(machine: RotaryMachine, *, spheres: dict | None = None, tilt_deg=TILT_
     Returns
     -------
     DataFrame
-        The probing table of SCHEMA.md section 13.
+        The probing table of data contract section 13.
     """
     spheres = SPHERES_MM if spheres is None else spheres
     tilt, _ = axes_of(machine.kinematics)

@@ -17,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "kinematics")
     parser.add_argument("--json", action="store_true",
                         help="print every machine's errors, plays, inseparable groups and "
-                             "residual as JSON (SCHEMA.md section 13)")
+                             "residual as JSON (data contract section 13)")
 
 
 def run(args: argparse.Namespace) -> int:

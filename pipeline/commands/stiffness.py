@@ -15,7 +15,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_parameters(parser, "stiffness")
     parser.add_argument("--json", action="store_true",
                         help="print every centre's stiffness and compliance, the map and "
-                             "(with --at) the deflections as JSON (SCHEMA.md section 12)")
+                             "(with --at) the deflections as JSON (data contract section 12)")
 
 
 def run(args: argparse.Namespace) -> int:

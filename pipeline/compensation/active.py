@@ -9,7 +9,7 @@ measures the axis's own deviation plus that offset:
 The axis without any compensation is therefore ``x_axis = x_measured - s o``, with o
 interpolated at the new targets as the controller interpolates it. A file written for
 ``x_axis`` is the active file plus the measured residual, in the controller's own format and
-sign convention, so every writer serves recalibration unchanged (SCHEMA.md, section 6).
+sign convention, so every writer serves recalibration unchanged (data contract section 6).
 
 The files given are recognised by their content (``Controller.recognise``) and refused when
 they are of another controller, name another axis (``Controller.axis_patterns``), state

@@ -1,4 +1,4 @@
-"""WATCH.toml (SCHEMA.md section 14): the source and the machine axes it feeds."""
+"""WATCH.toml (data contract section 14): the source and the machine axes it feeds."""
 
 from __future__ import annotations
 
