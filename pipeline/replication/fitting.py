@@ -1,4 +1,4 @@
-"""Replication of the backlash paper's results ([BacklashNN], section 4 and 5) on one data set.
+"""The numbers of the backlash paper's replication ([BacklashNN], section 4 and 5) on one data set.
 
 For the paper's eight inputs, and again without the two deviation inputs (the backlash
 target is computed from the same linear test, so they carry the target itself):
@@ -9,20 +9,15 @@ target is computed from the same linear test, so they carry the target itself):
 - Fig. 14 / Table 5: ANOVA -ln(p) per input across backlash classes, in the paper's order;
 - the weighted k-NN validation accuracy;
 
-side by side with the paper's numbers, with the verdicts given the other inputs
-(``models.influence``) beside the association scores.
+side by side with the paper's numbers (``comparison_rows``), with the verdicts given the other
+inputs (``models.influence``) beside the association scores. The figures and the written
+report are ``pipeline.replication.plotting``.
 """
 
 from __future__ import annotations
 
-import html
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
-
-from features.readings.fileio import clean_nan, write_json, write_text
-from pipeline.reports.report_page import new_figure, save_figure, write_page
 
 PAPER = {"best_epoch": 27, "epochs": 33, "knn_accuracy": 0.988}
 PAPER_TABLE5 = {
@@ -31,8 +26,6 @@ PAPER_TABLE5 = {
     "pressure_hpa": 0.417, "humidity_pct": 0.108,
 }
 DEVIATIONS = ("deviation_down_um", "deviation_up_um")
-FILES = {"html": "replication.html", "md": "replication.md", "json": "replication.json",
-         "fig10": "replication_fig10.png", "fig13": "replication_fig13.png"}
 
 
 def network_run(X: pd.DataFrame, y: pd.Series, random_state: int) -> dict:
@@ -160,70 +153,3 @@ def _anova_note(name: str, result: dict) -> str:
     if verdict == "proxy":
         return f"proxy for {result['proxy_for'].get(name)}"
     return "no influence given the others"
-
-
-def markdown(rows: list[dict]) -> str:
-    lines = ["| quantity | paper | twin, 8 inputs | twin, without deviations | note |",
-             "|---|---|---|---|---|"]
-    lines += [f"| {r['quantity']} | {r['paper']} | {r['with']} | {r['without']} | {r['note']} |"
-              for r in rows]
-    return "\n".join(lines) + "\n"
-
-
-def plot_fig10(results: dict, path) -> Path:
-    fig, axes = new_figure(10, 4, nrows=1, ncols=2, sharey=True)
-    for ax, (case, result) in zip(axes, results.items(), strict=True):
-        net = result["network"]
-        for key, label in (("train_mse", "training"), ("val_mse", "validation"),
-                           ("test_mse", "test")):
-            ax.semilogy(net["history"][key], label=label)
-        ax.axvline(net["best_epoch"], color="grey", ls="--",
-                   label=f"best epoch {net['best_epoch']} of {net['epochs']}")
-        ax.set_title(f"Fig. 10, {case}", fontsize=10)
-        ax.set_xlabel("epoch")
-        ax.legend(fontsize=8)
-    axes[0].set_ylabel("mean squared error (scaled target)")
-    return save_figure(fig, path)
-
-
-def plot_fig13(results: dict, path) -> Path:
-    fig, axes = new_figure(10, 9, nrows=2, ncols=2)
-    net = results["with deviations"]["network"]
-    for ax, (phase, rows) in zip(axes.ravel(), net["parts"].items(), strict=True):
-        t, o = net["target"][rows], net["output"][rows]
-        ax.plot(t, o, "o", ms=3, alpha=0.7)
-        lo, hi = float(min(t.min(), o.min())), float(max(t.max(), o.max()))
-        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
-        ax.set_title(f"{phase}: R = {net['regression_r'][phase]:.3f}", fontsize=10)
-        ax.set_xlabel("target [um]")
-        ax.set_ylabel("output [um]")
-    return save_figure(fig, path)
-
-
-def write_replication(results: dict, out_dir, source: str = "") -> dict[str, Path]:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {k: out / v for k, v in FILES.items()}
-    rows = comparison_rows(results)
-    write_text(paths["md"], markdown(rows))
-    plot_fig10(results, paths["fig10"])
-    plot_fig13(results, paths["fig13"])
-    summary = {case: {k: v for k, v in r.items() if k != "network"}
-               | {"network": {k: v for k, v in r["network"].items()
-                              if k not in ("target", "output", "parts")}}
-               for case, r in results.items()}
-    write_json(paths["json"], clean_nan({"paper": {**PAPER, "table5": PAPER_TABLE5},
-                                         "twin": summary, "table": rows}))
-    body_rows = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(r[k]))}</td>"
-                         for k in ("quantity", "paper", "with", "without", "note")) + "</tr>"
-        for r in rows)
-    write_page(paths["html"], "Replication of the backlash paper", f"""
-<p>Data: <code>{html.escape(source)}</code>. The paper's inputs include the linear-test
-deviations from which the backlash target is computed: they carry the target itself, so the
-scores are shown with and without them.</p>
-<table><tr><th>quantity</th><th>paper</th><th>twin, 8 inputs</th>
-<th>twin, without deviations</th><th>note</th></tr>{body_rows}</table>
-<img src="{FILES['fig10']}" alt="training curves"><img src="{FILES['fig13']}" alt="regression">
-""")
-    return paths
