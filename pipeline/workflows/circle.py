@@ -22,7 +22,6 @@ from pathlib import Path
 
 from pipeline.results import Result
 from pipeline.steps.parameters import Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
@@ -335,8 +334,6 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     """
     from features import circle as fc
 
-    check_params(PARAMETERS, {"data": data, "tolerance_um": tolerance_um, "store": store},
-                 "circle")
     if store is not None:  # before any work: a store that cannot take the records
         from pipeline.store.records import open_for_records
 

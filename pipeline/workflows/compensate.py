@@ -30,7 +30,7 @@ from pipeline.steps.parameters import (
     comma_list,
     readings,
 )
-from pipeline.workflows import check_params, readings_of
+from pipeline.workflows import readings_of
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
 
 
@@ -313,13 +313,6 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     CompensationResult
         Nothing is written until ``result.write(out)``.
     """
-    check_params(PARAMETERS, {"data": data, "controller": controller, "format": format,
-                              "conditions": conditions, "at_hours": at_hours,
-                              "at_date": at_date, "machine": machine, "axis": axis,
-                              "spacing": spacing,
-                              "reference_mm": reference_mm, "fanuc_unit_um": fanuc_unit_um,
-                              "active": active, "sign": sign, "verify": verify,
-                              "uncertainty": uncertainty, "progress": progress}, "compensate")
     from features.readings.fileio import MemoryFolder
     from pipeline.compensation.common import Options
     from pipeline.compensation.profile import parse_conditions

@@ -15,7 +15,7 @@ from pathlib import Path
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
 from pipeline.steps.parameters import FORMAT, SEED, Param, readings
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows import readings_of, source_of
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 
@@ -149,7 +149,6 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     -------
     DiscoveryResult
     """
-    check_params(PARAMETERS, {"format": format, "baseline": baseline, "seed": seed}, "discover")
     from models import discovery as search
 
     names = search.check_baseline(baseline)  # before the data are read

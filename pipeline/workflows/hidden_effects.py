@@ -18,7 +18,6 @@ from features.readings.errors import InputError, Progress, report
 from models.physics import SHIPPED
 from pipeline.results import Result, TrackingRecord
 from pipeline.steps.parameters import PROGRESS, Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import HasMethods, Interval
 
 SCENARIOS = SHIPPED / "hidden_effect_scenarios.toml"  # the product's, whatever the working folder
@@ -105,7 +104,6 @@ def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
     -------
     HiddenEffectsResult
     """
-    check_params(PARAMETERS, {"scenarios": scenarios, "seeds": seeds}, "hidden_effects")
     from models.discovery import benchmark as bench
 
     given_as_file = isinstance(scenarios, (str, os.PathLike))

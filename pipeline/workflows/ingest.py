@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from features.readings.errors import InputError, note
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, readings
-from pipeline.workflows import check_params, readings_of
+from pipeline.workflows import readings_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -145,10 +145,6 @@ def ingest(files, store, *, format: str = "auto", allow_future: bool = False,
     IngestInterrupted
         Interrupted (Ctrl-C) before the commit: nothing was added.
     """
-    check_params(PARAMETERS, {"files": files, "store": store, "format": format,
-                              "allow_future": allow_future,
-                              "allow_unknown_columns": allow_unknown_columns,
-                              "replace": replace, "reason": reason}, "ingest")
     reason = _reason(replace, reason)
     from pipeline.store import open_store, redact
 

@@ -21,7 +21,6 @@ from pathlib import Path
 from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
 
 # Controllers whose rotary-axis backlash is a machine parameter of its own (written alone, so
@@ -237,9 +236,6 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0, one_sphere: bool =
     ----------
     S. Wu et al. (seed 003): eq. 6, Table 1, eq. 12-13, Tables 4-5; ISO 10791-6.
     """
-    check_params(PARAMETERS, {"data": data, "at": at, "workspace_mm": workspace_mm,
-                              "one_sphere": one_sphere, "controller": controller},
-                 "kinematics")
     from features.probing import read_probes
     from features.readings.errors import note
 

@@ -30,7 +30,6 @@ from features.readings.errors import InputError, note
 from pipeline.engines import ENGINES, SCHEDULER_TIMEOUT_S
 from pipeline.results import Result, axis_alerts
 from pipeline.steps.parameters import PROGRESS, Param, python_only, scale_offset
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
 
 _RAW = "raw controller logs (--log-format camonitor or halsampler)"
@@ -217,12 +216,6 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         a day that cannot be physical (``models.lost_motion.check_physical``; nothing is
         written or recorded).
     """
-    check_params(PARAMETERS, {"traces": traces, "engine": engine, "address": address,
-                                 "threshold_um": threshold_um, "take_up_mm": take_up_mm,
-                                 "settle_s": settle_s, "store": store, "format": format,
-                                 "channels": channels, "reference_scale": reference_scale,
-                                 "machine": machine, "axis": axis, "period_s": period_s},
-                 "monitor")
     log = _log_options(format, channels, reference_scale, machine, axis, period_s)
     if store is not None:  # before any work: a store that cannot take the records
         from pipeline.store.records import open_for_records

@@ -17,7 +17,7 @@ from features.readings.errors import InputError, note
 from models.registry import TrainedModel
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only, readings
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows import readings_of, source_of
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -155,8 +155,6 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     from models.registry import load_model
     from models.serving import answerable, predictions
 
-    check_params(PARAMETERS, {"model": model, "data": data, "plan": plan, "format": format},
-                 "predict")
     if (data is None) == (plan is None):
         raise InputError("give the readings (data) or a plan, not both", parameter="data")
     if store is not None:  # before any work: a store that cannot take the records

@@ -16,7 +16,7 @@ from pathlib import Path
 from features.readings.errors import Progress
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows import readings_of, source_of
 from pipeline.workflows.constraints import Interval
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
@@ -106,8 +106,6 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
     -------
     ReplicationResult
     """
-    check_params(PARAMETERS, {"format": format, "truth": truth, "boot": boot, "seed": seed},
-                 "replicate")
     from features.table import PAPER_FEATURES, feature_table
     from pipeline import replication
 

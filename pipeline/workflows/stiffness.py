@@ -20,7 +20,6 @@ from pathlib import Path
 
 from pipeline.results import Result
 from pipeline.steps.parameters import Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval, StrOptions
 
 FORMS = ("auto", "constant", "linear", "cubic", "quadratic")
@@ -175,8 +174,6 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
     ----------
     Archenti et al., Procedia CIRP 1 (2012) 575-580; Szipka, KTH 2015 (seed 002).
     """
-    check_params(PARAMETERS, {"data": data, "at": at, "ram_top_mm": ram_top_mm, "form": form},
-                 "stiffness")
     from features import loaded_circles as flc
     from features.readings.errors import note
     from models.machine import stiffness as st

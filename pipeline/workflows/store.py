@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 
 from pipeline.results import Result
 from pipeline.steps.parameters import STORE, Param
-from pipeline.workflows import check_params
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -88,7 +87,6 @@ def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResu
     InputError
         A location that is no store or cannot be opened.
     """
-    check_params(PARAMETERS, {"store": store, "repair": repair}, "check_store")
     from pipeline.store import open_store, redact
 
     checked = open_store(store, write=repair, parameter="store").check(repair=repair)

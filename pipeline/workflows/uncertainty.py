@@ -21,7 +21,6 @@ from pathlib import Path
 from features import uncertainty as unc
 from pipeline.results import Result
 from pipeline.steps.parameters import Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import StrOptions
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
@@ -131,7 +130,6 @@ def uncertainty(budget, *, arithmetic: str | None = None) -> UncertaintyResult:
     InputError
         A missing or negative contributor, a unit in the wrong place, an unknown key.
     """
-    check_params(PARAMETERS, {"budget": budget, "arithmetic": arithmetic}, "uncertainty")
     source = str(budget) if isinstance(budget, (str, os.PathLike)) else "<budget>"
     read = unc.read_budget(budget)
     chosen = arithmetic or read.arithmetic

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import STORE, Param
-from pipeline.workflows import check_params
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -106,8 +105,6 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
         An empty reason, no matching test (no matching voided test with ``undo``), a store
         that cannot be opened or written: nothing is changed.
     """
-    check_params(PARAMETERS, {"store": store, "machine": machine, "axis": axis, "visit": visit,
-                              "test_id": test_id, "reason": reason, "undo": undo}, "void")
     if not reason.strip():
         raise InputError("is empty; say why the tests are voided", parameter="reason")
     from pipeline.store import open_store, redact

@@ -22,7 +22,6 @@ from pathlib import Path
 
 from pipeline.results import Result
 from pipeline.steps.parameters import SEED, Param
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
 # The seed paper's Table 1 [um]: the extreme deviation before and after compensation
@@ -192,8 +191,6 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0, pa
         ``path`` breaks its contract; ``stiffness`` without ``path``, or a file that is
         neither a loaded-circle table nor a saved stiffness result.
     """
-    check_params(PARAMETERS, {"seed": seed, "targets": targets, "radius_mm": radius_mm,
-                              "path": path, "stiffness": stiffness}, "volumetric")
     if stiffness is not None and path is None:
         from features.readings.errors import InputError
 

@@ -19,7 +19,6 @@ from numbers import Real
 from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import Param, python_only
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
 _POSITIVE = Interval(Real, 0, None, closed="neither")
@@ -101,9 +100,6 @@ def watch(config, *, store, until: str | None = None, seconds: float | None = No
         ``timeout_s``, a channel in another unit, a source whose clock runs backwards, a
         store that cannot be written.
     """
-    check_params(PARAMETERS, {"config": config, "store": store, "until": until,
-                              "seconds": seconds, "take_up_mm": take_up_mm,
-                              "settle_s": settle_s, "status": status}, "watch")
     if until is not None and seconds is not None:
         raise InputError("give --until or --for, not both", parameter="until")
     if until is not None:
