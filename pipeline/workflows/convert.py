@@ -20,7 +20,6 @@ from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, RAW_LOG, Param, python_only, readings
 from pipeline.workflows import check_params, readings_of
 
-# convert's table; read, validate and write check their parameters (path, source) in it too
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
 EXAMPLE = (
@@ -28,6 +27,8 @@ EXAMPLE = (
     {"data": "{two}", "out": "{side}/r.csv"},
 )
 
+# convert's table (the runner checks a call of the job against it); read, validate and
+# write, plain functions no runner calls, check their own parameters (path, source) in it
 PARAMETERS = {
     "data": readings(flag="FILE"),
     "format": FORMAT,
@@ -190,15 +191,12 @@ def convert(data, out=None, format: str = "auto", channels=None, reference_scale
     ConvertResult
     """
     raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
-    check_params(PARAMETERS, {"data": data, "format": format, **raw}, "convert")
-    if out is not None:
-        check_params(PARAMETERS, {"out": out}, "convert")
-        # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line
-        # error, not raise RuntimeError here.
-        if isinstance(data, (str, os.PathLike)) and os.path.realpath(out) == os.path.realpath(
-                data):
-            raise InputError("is the input file; expected a new file name (the original is "
-                             "kept)", file=out, parameter="out")
+    # realpath, not Path.resolve: a symbolic-link loop must reach the reader's one-line error,
+    # not raise RuntimeError here.
+    if (out is not None and isinstance(data, (str, os.PathLike))
+            and os.path.realpath(out) == os.path.realpath(data)):
+        raise InputError("is the input file; expected a new file name (the original is "
+                         "kept)", file=out, parameter="out")
     readings = readings_of(data, format, options=raw)
     tests = readings.groupby(list(schema.TEST_KEYS)).ngroups
     result = ConvertResult(readings=readings, tests=tests)

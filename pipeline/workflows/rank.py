@@ -25,7 +25,7 @@ from pipeline.steps.parameters import (
     Param,
     readings,
 )
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows import readings_of, source_of
 from pipeline.workflows.constraints import Interval, StrOptions
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
@@ -191,10 +191,6 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     -------
     RankResult
     """
-    values = {"format": format, "model": model, "bins": bins, "features": features,
-              "target": target, "k": k, "rank_by": rank_by, "boot": boot,
-              "dropcolumn": dropcolumn, "seed": seed}
-    check_params(PARAMETERS, values, "rank")
     from features.table import feature_table
     from models.influence import explain
     from pipeline.steps.model_data import check_feature_names
@@ -216,7 +212,10 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
                           n_boot=boot, dropcolumn=dropcolumn, random_state=seed, source=source)
     explanation.notes.extend(notes)
     report(progress, 3, 3, "done")
-    return RankResult(explanation, table.target_kind, source, readings, values,
+    parameters = {"format": format, "model": model, "bins": bins, "features": features,
+                  "target": target, "k": k, "rank_by": rank_by, "boot": boot,
+                  "dropcolumn": dropcolumn, "seed": seed}
+    return RankResult(explanation, table.target_kind, source, readings, parameters,
                       notes=list(explanation.notes))
 
 

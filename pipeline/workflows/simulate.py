@@ -17,7 +17,6 @@ from features.readings.errors import InputError
 from models.physics import PRESETS
 from pipeline.results import Result
 from pipeline.steps.parameters import SEED, Param, python_only
-from pipeline.workflows import check_params
 from pipeline.workflows.constraints import Interval
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
@@ -122,7 +121,7 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
         (machine_id, axis) -> controller model applied to the commanded path
         (``models.physics.controller``); the random draws do not depend on it.
     traces : bool
-        Simulate controller traces instead of a campaign (``simulate_traces``): three axes
+        Simulate controller traces instead of a campaign (``models.physics.traces``): three axes
         of one machine, motor encoder and load scale, wear growing, one axis adjusted.
     days : int
         With ``traces``: logged days (1-3650).
@@ -140,15 +139,11 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
     from models.physics.campaign import load_config
     from models.physics.campaign import simulate as run_twin
 
-    given = {"config": config, "preset": preset, "seed": seed, "session_seed": session_seed,
-             "compensation": compensation, "traces": traces, "days": days, "rate_hz": rate_hz}
-    check_params(PARAMETERS, given, "simulate")
-    for name, value in (("seed", seed), ("session_seed", session_seed)):
-        if isinstance(value, bool):  # an Integral to Python, never meant as a seed
-            raise InputError(f"must be a whole number, got {value!r}", parameter=name)
-    _one_kind(given)
+    _one_kind({"config": config, "preset": preset, "session_seed": session_seed,
+               "compensation": compensation, "traces": traces, "days": days,
+               "rate_hz": rate_hz})
     if traces:
-        return simulate_traces(seed=seed, days=days, rate_hz=rate_hz)
+        return _traces(seed, days, rate_hz)
     campaign = load_config(config, preset=preset)
     sim = run_twin(campaign, seed, compensation=compensation, session_seed=session_seed)
     return SimulationResult(_as_text(sim.readings), _as_text(sim.truth), sim.visits,
@@ -246,29 +241,11 @@ def write_together(out, writers: dict) -> dict[str, Path]:
     return {name: out / name for name in writers}
 
 
-def simulate_traces(seed: int = 0, days: int = 30, rate_hz: float = 200.0,
-                    seconds: float = 60.0) -> TraceSimulationResult:
-    """Controller traces of the twin: three axes of one machine logged ``seconds`` a day at
+def _traces(seed: int, days: int, rate_hz: float) -> TraceSimulationResult:
+    """``simulate(traces=True)``'s traces: three axes of one machine logged a minute a day at
     ``rate_hz`` for ``days`` days, with motor encoder and load scale, wear growing and one
-    axis adjusted (``models.physics.traces.TraceCampaign``).
+    axis adjusted (``models.physics.traces.TraceCampaign``)."""
+    from models.physics.traces import TraceCampaign, simulate_traces
 
-    Parameters
-    ----------
-    seed : int
-        Random seed.
-    days : int
-        Logged days (1-3650).
-    rate_hz : float
-        Sampling rate [Hz] (100-1000).
-    seconds : float
-        Length of each day's log [s] (10-3600).
-    """
-    from models.physics.traces import TraceCampaign
-    from models.physics.traces import simulate_traces as run_twin
-
-    check_params({**{k: PARAMETERS[k] for k in ("seed", "days", "rate_hz")},
-                  "seconds": [Interval(Real, 10, 3600, closed="both")]},
-                 {"seed": seed, "days": days, "rate_hz": rate_hz, "seconds": seconds},
-                 "simulate_traces")
-    trace, truth = run_twin(TraceCampaign(days=days, rate_hz=rate_hz, seconds=seconds), seed)
+    trace, truth = simulate_traces(TraceCampaign(days=days, rate_hz=rate_hz), seed)
     return TraceSimulationResult(trace, truth, seed=seed)

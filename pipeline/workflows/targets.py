@@ -15,7 +15,7 @@ from pathlib import Path
 from features import uncertainty as unc
 from pipeline.results import Result
 from pipeline.steps.parameters import BUDGET, FORMAT, TARGET, Param, readings
-from pipeline.workflows import check_params, readings_of, source_of
+from pipeline.workflows import readings_of, source_of
 
 # Columns of the printed table (those the points have).
 TABLE_COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target",
@@ -131,11 +131,11 @@ def targets(data, *, format: str = "auto", target: str = "auto",
     """
     from features.targets import backlash_targets
 
-    values = {"data": data, "format": format, "target": target, "uncertainty": uncertainty}
-    check_params(PARAMETERS, values, "targets")
     budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     readings = readings_of(data, format)
     points = backlash_targets(readings, target, budget)
     return TargetsResult(points, points.attrs["target_kind"], points.attrs["target_reason"],
                          source_of(data, readings),
-                         None if budget is None else budget.coverage_factor, values)
+                         None if budget is None else budget.coverage_factor,
+                         {"data": data, "format": format, "target": target,
+                          "uncertainty": uncertainty})
