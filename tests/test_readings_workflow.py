@@ -160,13 +160,13 @@ def test_iso_result_writes_its_files_and_chart(psi_file, tmp_path):
 
 
 def test_iso_parameters_are_checked():
-    from pipeline.workflows.iso import iso
+    from pipeline.runner import run
 
     with pytest.raises(InputError, match="drop_outliers") as err:
-        iso(small_table(), drop_outliers="yes")
+        run("iso", small_table(), drop_outliers="yes")
     assert err.value.parameter == "drop_outliers"
     with pytest.raises(InputError) as err:
-        iso("x.csv", format="excel")
+        run("iso", "x.csv", format="excel")
     assert err.value.parameter == "format"
 
 

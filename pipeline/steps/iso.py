@@ -1,33 +1,20 @@
-"""ISO 230-2 figures of every test in one or more readings files: per target and per axis,
-with the readings far from their siblings flagged (and, on request, left out). The ``iso``
-and ``report`` jobs share it (``pipeline.workflows.iso`` is the job's record).
-
->>> import backlash as bl
->>> result = bl.iso("ess_mcu1025_ISO230.dat")             # doctest: +SKIP
->>> result.figures[["test_id", "A", "E", "M", "R", "B"]]  # doctest: +SKIP
->>> result.plot("ess.png")                                # doctest: +SKIP
-
-With an ISO/TR 230-9 budget (``features.uncertainty``) each test also gets the expanded
-uncertainties of A, E, M, R and B at its own measuring length and number of runs:
-
->>> result = bl.iso("ess_mcu1025_ISO230.dat", uncertainty="paper_uncertainty.toml")  # doctest: +SKIP
->>> result.figures[["B", "U_B_um"]]                                                 # doctest: +SKIP
+"""The ISO 230-2 analysis the ``iso`` and ``report`` jobs share: the figures of every test in
+one or more readings files, per target and per axis, with the readings far from their
+siblings flagged (and, on request, left out). The ``iso`` job (``pipeline.workflows.iso``)
+returns them with its files and chart; the ``report`` job prints them, one page per test.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from features import standards
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, READINGS, Param, readings
-from pipeline.workflows import check_params, readings_of
-from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows import readings_of
 
 if TYPE_CHECKING:  # a budget is read when one is given: the module stays light for --help
     from features.uncertainty import UncertaintyBudget
@@ -36,27 +23,15 @@ if TYPE_CHECKING:  # a budget is read when one is given: the module stays light 
 JSON_KEYS = ("machine_id", "axis", "visit", "test_id", "unit", "A", "A_up", "A_down", "E",
              "E_up", "E_down", "M", "R", "R_up", "R_down", "B", "B_mean")
 PER_TARGET_KEYS = ("target", "mean_up", "mean_down", "s_up", "s_down", "B_i", "R_i")
-# Columns of the figures table the CLI prints.
+# Columns of the figures table the CLI prints (with the expanded uncertainties [um] of
+# ``features.uncertainty.TEST_UNCERTAINTY_KEYS`` when a budget is given).
 TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
-# Expanded uncertainties [um] added to the figures, the JSON objects and the table when a
-# budget is given, by the figure of ``features.uncertainty.expanded_parameters_um`` they take.
-
-
-# the iso job's table (pipeline.workflows.iso); report shares its data and standard
-PARAMETERS = {
-    "data": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
-    "format": FORMAT,
-    "drop_outliers": Param(("boolean",), "leave flagged outlier readings out of the figures"),
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add U_A_um ... U_B_um (expanded "
-                         "uncertainties at each test's measuring length)", metavar="BUDGET.toml"),
-    "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
-    **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
-}
 
 
 @dataclass
-class IsoResult(Result):
-    """ISO 230-2 figures of every test (um, arcsec for rotary axes).
+class IsoFigures(Result):
+    """ISO 230-2 figures of every test (um, arcsec for rotary axes): what the ``iso`` job
+    returns (``pipeline.workflows.iso.IsoResult``, with its files) and the ``report`` job prints.
 
     Attributes
     ----------
@@ -126,40 +101,60 @@ class IsoResult(Result):
         return self.figures[list(TABLE_COLUMNS) + self._extra()].to_string(
             index=False, float_format=lambda v: f"{v:.3f}")
 
-    def plot(self, path) -> Path:
-        """Write the ISO chart (one panel per test, at most ``iso_chart.MAX_PANELS``) as PNG.
+    @classmethod
+    def of(cls, data, format: str = "auto", drop_outliers: bool = False,
+           budget: UncertaintyBudget | None = None,
+           standard: standards.Standard = standards.ISO230_2):
+        """The figures of every test in ``data`` (ISO 230-2:2014 clause 2;
+        ``features.iso230``), each outlier a note (and a ``BacklashWarning``).
+
+        Parameters
+        ----------
+        data : str, path-like, DataFrame or list of them
+            One or more readings files (``read_tests``), or frames ``read`` returned.
+        format : str
+            Input layout of a file, ``"auto"`` to recognise it.
+        drop_outliers : bool
+            Leave the readings flagged as outliers out of the figures (default: flag, keep).
+        budget : features.uncertainty.UncertaintyBudget, optional
+            A checked ISO/TR 230-9 budget (``features.uncertainty.checked_budget``): adds the
+            expanded uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every test,
+            at its own measuring length and runs per direction
+            (``features.uncertainty.with_uncertainty``). Linear axes only.
+        standard : features.standards.Standard
+            The standard the figures follow (a supported one: ``features.standards.standard``).
 
         Raises
         ------
         InputError
-            ``path`` is not a .png name, or there are too many tests for one chart.
+            Unreadable readings, a budget for a rotary axis.
         """
-        from pipeline.reports.iso_chart import MAX_PANELS, plot_tests
+        from features import iso230
+        from features import uncertainty as unc
 
-        path = Path(path)
-        if path.suffix.lower() != ".png":
-            raise InputError("expected a .png file name", file=path, parameter="path")
-        if len(self.figures) > MAX_PANELS:
-            raise InputError(f"the chart draws at most {MAX_PANELS} tests, the readings have "
-                             f"{len(self.figures)}; split them first", parameter="path")
-        plot_tests(self.targets, self.figures, path)
-        self.files["chart"] = path
-        return path
-
-    def write(self, out) -> dict[str, Path]:
-        """Write ``iso_figures.csv``, ``iso_targets.csv`` and (for at most ``MAX_PANELS``
-        tests) the chart ``iso_chart.png`` into the folder ``out``."""
-        from features.readings.fileio import atomic_path
-        from pipeline.reports.iso_chart import MAX_PANELS
-
-        out = Path(out)
-        for role, frame in (("figures", self.figures), ("targets", self.targets)):
-            with atomic_path(out / f"iso_{role}.csv") as tmp:
-                frame.to_csv(tmp, index=False)
-            self.files[role] = out / f"iso_{role}.csv"
-        if len(self.figures) <= MAX_PANELS:
-            self.plot(out / "iso_chart.png")
-        return self.files
+        readings, sources = read_tests(data, format)
+        flagged = iso230.outliers(readings)
+        outliers = readings.loc[flagged]
+        used = readings.loc[~flagged] if drop_outliers else readings
+        targets = iso230.per_target(used)
+        figures = iso230.axis_figures(used, targets)
+        if budget is not None:
+            figures = unc.with_uncertainty(figures, targets, budget)
+        result = cls(targets=targets, figures=figures, outliers=outliers,
+                     dropped=drop_outliers, budget=budget, standard=standard,
+                     readings=readings, sources=sources)
+        action = "dropped" if drop_outliers else "kept; dropping outliers leaves it out"
+        for r in outliers.itertuples():
+            text = (f"outlier ({action}): test {r.test_id} target {r.target:g} direction "
+                    f"{r.direction} cycle {r.cycle}: deviation {r.deviation_um:.3f}")
+            result.notes.append(text)
+            note(text)
+        if budget is not None and budget.arithmetic == "paper":
+            text = ("uncertainty: the budget's [paper] lengths describe its own test; U is "
+                    "evaluated in the ISO arithmetic at each test's measuring length")
+            result.notes.append(text)
+            note(text)
+        return result
 
 
 def read_tests(data, format: str = "auto"):
@@ -206,67 +201,3 @@ def read_tests(data, format: str = "auto"):
         return frames[0], sources
     return pd.concat(frames, ignore_index=True), sources
 
-
-def iso(data, format: str = "auto", drop_outliers: bool = False,
-        uncertainty=None, standard: str = standards.DEFAULT) -> IsoResult:
-    """ISO 230-2 figures of every test (ISO 230-2:2014 clause 2; ``features.iso230``).
-
-    Parameters
-    ----------
-    data : str, path-like, DataFrame or list of them
-        One or more readings files (``read_tests``), or frames ``read`` returned.
-    format : str
-        Input layout of a file, ``"auto"`` to recognise it.
-    drop_outliers : bool
-        Leave the readings flagged as outliers out of the figures (default: flag, keep).
-    uncertainty : str, path-like, dict or UncertaintyBudget, optional
-        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): adds the expanded
-        uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every test, at its own
-        measuring length and runs per direction (``features.uncertainty.with_uncertainty``).
-        Linear axes only.
-    standard : str
-        The standard whose figures to compute, a name of ``features.standards.STANDARDS``;
-        only the supported ones are accepted (``"iso230-2"``).
-
-    Returns
-    -------
-    IsoResult
-        Figures per target and per test; each outlier is a note.
-
-    Raises
-    ------
-    InputError
-        Unreadable readings or budget, a non-physical budget, a budget for a rotary axis, a
-        standard that is not supported (the error gives the reason).
-    """
-    from features import iso230
-
-    check_params(PARAMETERS, {"data": data, "format": format, "drop_outliers": drop_outliers,
-                              "uncertainty": uncertainty, "standard": standard}, "iso")
-    record = standards.standard(standard)
-    from features import uncertainty as unc
-
-    budget = None if uncertainty is None else unc.checked_budget(uncertainty)
-    readings, sources = read_tests(data, format)
-    flagged = iso230.outliers(readings)
-    outliers = readings.loc[flagged]
-    used = readings.loc[~flagged] if drop_outliers else readings
-    targets = iso230.per_target(used)
-    figures = iso230.axis_figures(used, targets)
-    if budget is not None:
-        figures = unc.with_uncertainty(figures, targets, budget)
-    result = IsoResult(targets=targets, figures=figures, outliers=outliers,
-                       dropped=drop_outliers, budget=budget, standard=record,
-                       readings=readings, sources=sources)
-    action = "dropped" if drop_outliers else "kept; dropping outliers leaves it out"
-    for r in outliers.itertuples():
-        text = (f"outlier ({action}): test {r.test_id} target {r.target:g} direction "
-                f"{r.direction} cycle {r.cycle}: deviation {r.deviation_um:.3f}")
-        result.notes.append(text)
-        note(text)
-    if budget is not None and budget.arithmetic == "paper":
-        text = ("uncertainty: the budget's [paper] lengths describe its own test; U is "
-                "evaluated in the ISO arithmetic at each test's measuring length")
-        result.notes.append(text)
-        note(text)
-    return result

@@ -22,9 +22,9 @@ from features import standards
 from features import uncertainty as unc
 from pipeline.reports.report_meta import ReportMeta, read_meta
 from pipeline.results import Result
-from pipeline.steps import iso as iso_workflow
-from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, Param
-from pipeline.workflows import check_params
+from pipeline.steps.iso import IsoFigures
+from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, READINGS, Param, readings
+from pipeline.workflows.constraints import StrOptions
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -33,8 +33,10 @@ EXAMPLE = (
     {"data": "{two}", "axis": "Y", "out": "{side}/rep"},
 )
 
-PARAMETERS = {  # iso's readings and standard; the report's own output and meta file
-    "data": iso_workflow.PARAMETERS["data"],
+# iso's readings, outlier rule, budget and standard (the same parameters as the iso job's,
+# pipeline.workflows.iso); the report's own output and meta file
+PARAMETERS = {
+    "data": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "folder for iso_report.html and iso_report.pdf",
                  metavar="DIR", required=True, output="folder"),
@@ -46,7 +48,7 @@ PARAMETERS = {  # iso's readings and standard; the report's own output and meta 
                   "organisation, instrument, instrument_serial, instrument_calibrated_on, "
                   "sensors, remarks; printed on every page above the signature block",
                   metavar="META.toml"),
-    "standard": iso_workflow.PARAMETERS["standard"],
+    "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
     **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
 }
 
@@ -57,8 +59,9 @@ class ReportResult(Result):
 
     Attributes
     ----------
-    iso : pipeline.workflows.iso.IsoResult
-        Figures, readings, outliers, standard and budget of every test (one page each).
+    iso : pipeline.steps.iso.IsoFigures
+        Figures, readings, outliers, standard and budget of every test (one page each), as
+        the ``iso`` job computes them.
     meta : pipeline.reports.report_meta.ReportMeta or None
         Operator, instrument and its calibration, sensors and remarks, printed on every page.
     """
@@ -111,17 +114,14 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
         As ``iso``: unreadable readings or budget, a budget of another axis than a test's, a
         standard that is not supported; an unreadable meta file (naming its key).
     """
-    params = {"data": data, "format": format, "drop_outliers": drop_outliers,
-              "uncertainty": uncertainty, "standard": standard}
-    check_params(PARAMETERS, {**params, "meta": meta}, "report")
     signed = None if meta is None else read_meta(meta)
+    budget = None
     if uncertainty is not None:
         budget = unc.checked_budget(uncertainty)
         if not budget.name:  # the page names the budget: by its file when it has no name
             given = isinstance(uncertainty, (str, os.PathLike))
             budget = replace(budget, name=Path(uncertainty).name if given else "")
-        params["uncertainty"] = budget
-    result = iso_workflow.iso(**params)
+    result = IsoFigures.of(data, format, drop_outliers, budget, standards.standard(standard))
     notes = list(result.notes)
     if signed is not None:  # a calibration after the test refused, an expired one noted
         notes += signed.against_tests(result.readings)
