@@ -4,7 +4,9 @@ job needs no line in the manual besides a job's own page.
 
 - ``<!-- table: NAME -->`` on a page is replaced by the table ``TABLES[NAME]`` makes;
 - ``<!-- parameters -->`` on a job's page (``docs/<job>.md``) by that job's parameter table
-  (``pipeline.steps.parameters.parameters_table``);
+  (``pipeline.steps.parameters.parameters_table``: each parameter's ``Param.help``, else its
+  description in the workflow function's numpydoc ``Parameters`` section, and its default
+  from the signature);
 - the nav's "Jobs" section gets every job's page, in the records' order, before what
   ``mkdocs.yml`` lists there (the experiment runner); a job whose page the nav holds
   elsewhere (``store``: the fleet store) keeps that place.

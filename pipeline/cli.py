@@ -1,8 +1,9 @@
 """The ``backlash`` command. Each subcommand lives in ``pipeline.commands.<name>`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``; its summary is its job's record. Only the
-command named is built (``backlash --help`` imports no command module), and command modules
-import only light modules at top level; heavy libraries (torch, mlflow, sklearn) are imported
-inside ``run``.
+command named is built (``backlash --help`` imports no command module nor job module). A
+command's options come from its job's parameter table, whose constraints are scikit-learn's
+(building one command imports scikit-learn); other heavy libraries (torch, mlflow, optuna,
+matplotlib) are imported inside ``run``.
 
 Error contract: a user error (``InputError``, or a ``ValueError`` naming a parameter, raised
 anywhere below a subcommand, and every bad option) is printed as one line

@@ -1,6 +1,6 @@
 """A job's options, generated from its parameter table (``pipeline.steps.parameters``):
 the option's name, type, choices, default and help come from the table and the workflow's
-signature, so a parameter means the same on the command line as in Python."""
+signature and docstring, so a parameter means the same on the command line as in Python."""
 
 from __future__ import annotations
 
@@ -17,11 +17,12 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
     import inspect
 
     from features.readings.selection import FILTERS
-    from pipeline.steps.parameters import SELECTION_GROUP
+    from pipeline.steps.parameters import SELECTION_GROUP, helps
     from pipeline.workflows import workflow
 
     record = workflow(job)
     signature = inspect.signature(record.function).parameters
+    described = helps(record.function, record.parameters)  # the table's, else the docstring's
     groups: dict = {}
     for name, param in record.parameters.items():
         if not param.on_cli or name in skip:
@@ -29,7 +30,7 @@ def add_parameters(parser: argparse.ArgumentParser, job: str, skip: tuple[str, .
         where = parser if param.group is None else _group(parser, groups, param.group)
         default = signature[name].default if name in signature else None
         default = None if default is inspect.Parameter.empty else default
-        where.add_argument(*_names(name, param), **_keywords(name, param, default))
+        where.add_argument(*_names(name, param), **_keywords(name, param, default, described[name]))
         if param.reads_readings and SELECTION_GROUP not in groups:
             group = _group(parser, groups, SELECTION_GROUP)
             for f in FILTERS:
@@ -47,14 +48,14 @@ def _names(name: str, param) -> tuple[str, ...]:
     return (name,) if param.positional else (param.option(name),)
 
 
-def _keywords(name: str, param, default) -> dict:
+def _keywords(name: str, param, default, described: str) -> dict:
     """argparse's keywords for ``param``: a flag for a boolean, else a checked type."""
     from pipeline.workflows.constraints import takes_bool
 
     # a required option has no default on the command line (the Python call's is not shown);
     # a help is plain text, not a format ("15 %")
-    shown = "" if param.required else _default_text(param.help, default)
-    help = param.help.replace("%", "%%") + shown
+    shown = "" if param.required else _default_text(described, default)
+    help = described.replace("%", "%%") + shown
     if takes_bool(param.accepts) and not any(isinstance(c, type) and c is not bool
                                              for c in param.accepts):
         action = "store_true" if not default else argparse.BooleanOptionalAction
@@ -84,11 +85,11 @@ def _default_text(help: str, default) -> str:
 
 
 def _options(accepts) -> tuple | None:
-    from pipeline.workflows.constraints import StrOptions
+    from sklearn.utils._param_validation import StrOptions
 
     for c in accepts:
-        if isinstance(c, StrOptions):
-            return tuple(c.options) if not isinstance(c.options, set) else tuple(sorted(c.options))
+        if isinstance(c, StrOptions):  # ours keep a tuple's order; a set's is sorted
+            return tuple(c.options if isinstance(c.options, tuple) else sorted(c.options))
     return None
 
 

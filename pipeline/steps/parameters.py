@@ -9,8 +9,9 @@ table does two things, so that a parameter means the same wherever it is given:
   the option's name, type, choices, default (the workflow's own, from its signature) and
   help; ``run_job`` hands every option back to the runner under its Python name.
 
-The tables are plain data (this module and ``pipeline.workflows.constraints`` import no
-numeric library), so ``backlash CMD --help`` stays light. A type that lives in a heavy module
+A parameter is described once, in the workflow function's numpydoc ``Parameters`` section:
+the option's help and the docs' table take it from there (``helps``) unless its ``Param``
+gives a help of its own. Its default is the signature's. A type that lives in a heavy module
 is named by its dotted path (``"pandas.DataFrame"``) and imported only when a value is checked.
 """
 
@@ -36,8 +37,8 @@ class Param:
         The values it takes: constraints in scikit-learn's language (types, None,
         ``"boolean"``, ``Interval``, ``StrOptions``...; a heavy type by its dotted name).
     help : str or None
-        The option's help; None: a Python-only parameter (a frame, a callback), not on the
-        command line.
+        The option's help; None: the parameter's description in the workflow function's
+        numpydoc ``Parameters`` section (``helps``).
     flag : str or None
         The option, when not ``--name-with-dashes``; a name without a leading dash (``"FILE"``)
         makes it the command's positional argument, shown by that name.
@@ -64,6 +65,9 @@ class Param:
     reads_readings : bool
         The job's readings (``readings()``): the command line adds the test selection
         (``--machine``, ``--axis``, ``--since``, ``--until``) the job does not declare itself.
+    cli : bool
+        False: a Python-only parameter (a frame, a model object, a callback), not on the
+        command line (``python_only``).
     """
 
     accepts: tuple
@@ -78,10 +82,11 @@ class Param:
     group: str | None = None
     repeated: bool = False
     reads_readings: bool = False
+    cli: bool = True
 
     @property
     def on_cli(self) -> bool:
-        return self.help is not None
+        return self.cli
 
     @property
     def positional(self) -> bool:
@@ -94,7 +99,19 @@ class Param:
 
 def python_only(*accepts) -> Param:
     """A parameter only a Python call gives (a frame, a model object, a callback)."""
-    return Param(tuple(accepts))
+    return Param(tuple(accepts), cli=False)
+
+
+def helps(function, table) -> dict[str, str]:
+    """Python name -> help of every command-line parameter of ``table`` (a job's
+    ``PARAMETERS``): its ``Param.help``, else its description in ``function``'s numpydoc
+    ``Parameters`` section as plain text (``pipeline.steps.docstrings``; "" when neither
+    describes it; ``tests/test_parameters_docs.py`` checks that every job's do)."""
+    from pipeline.steps.docstrings import parameter_descriptions, plain
+
+    described = parameter_descriptions(function)
+    return {name: plain(described.get(name, "")) if param.help is None else param.help
+            for name, param in table.items() if param.on_cli}
 
 
 def comma_list(text: str) -> list[str]:
@@ -215,6 +232,7 @@ def parameters_table(job: str) -> str:
 
     record = workflow(job)
     signature = inspect.signature(record.function).parameters
+    described = helps(record.function, record.parameters)
     rows = ["| Python | command line | default | meaning |", "|---|---|---|---|"]
     for name, param in record.parameters.items():
         if not param.on_cli:
@@ -224,7 +242,7 @@ def parameters_table(job: str) -> str:
         option = param.option(name)
         option = f"`{option}`" + (f" {param.metavar}" if param.metavar else "")
         # "[0, W] [mm]" would read as a Markdown reference link: the brackets are escaped
-        meaning = param.help.replace("|", "/").replace("[", r"\[").replace("]", r"\]")
+        meaning = described[name].replace("|", "/").replace("[", r"\[").replace("]", r"\]")
         rows.append(f"| `{name}` | {option} | {shown} | {meaning} |")
     return "\n".join(rows)
 

@@ -2,10 +2,10 @@
 
 The CLI (``pipeline.commands``), experiment files (``pipeline.experiment``) and Python users
 (``pipeline.api``) all call these functions. A workflow checks what it is given with
-``check_params`` (scikit-learn's constraint language, the same as the estimators'
-``_parameter_constraints``; ``pipeline.workflows.constraints`` speaks it without importing
-scikit-learn), never prints (notes are ``BacklashWarning`` or result fields,
-progress goes to the ``progress`` callback) and names Python parameters in its errors.
+``check_params`` (scikit-learn's constraint language and its checking, the same as the
+estimators' ``_parameter_constraints``: ``pipeline.workflows.constraints``), never prints
+(notes are ``BacklashWarning`` or result fields, progress goes to the ``progress`` callback)
+and names Python parameters in its errors.
 """
 
 from __future__ import annotations
@@ -16,44 +16,43 @@ from features.readings.errors import InputError
 
 
 def check_params(constraints: dict, values: dict, caller: str) -> None:
-    """Check keyword values against scikit-learn parameter constraints.
+    """Check keyword values against scikit-learn parameter constraints, with scikit-learn's
+    ``validate_parameter_constraints``.
 
     Parameters
     ----------
     constraints : dict
         Parameter name -> list of constraints (``Interval``, ``StrOptions``, types,
-        ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``; those
-        of ``pipeline.workflows.constraints`` are checked without importing scikit-learn.
+        ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``, or its
+        ``Param`` (``pipeline.steps.parameters``: its ``accepts``); a type may be named by its
+        dotted path (``"pandas.DataFrame"``).
     values : dict
         Parameter name -> value given.
     caller : str
-        The workflow's name, shown in the message.
+        The workflow's name.
 
     Raises
     ------
     InputError
-        Naming the first parameter that breaks its constraint, or that has none (no name is
-        skipped); ``.parameter`` is its name.
+        Naming the first parameter that breaks its constraints ("must be A, B or C; got X",
+        each constraint as scikit-learn words it), or that has none (no name is skipped);
+        ``.parameter`` is its name. True or False where a parameter takes no boolean is refused
+        (Python's ``True`` is also the int 1).
     """
-    from pipeline.workflows import constraints as light
+    from pipeline.workflows.constraints import resolved, takes_bool
 
     for name, value in values.items():
         if name not in constraints:  # never skipped: a parameter without a constraint
             raise InputError(f"is not a parameter of {caller}; expected one of "
                              f"{', '.join(constraints)}", parameter=name)
-        given = list(getattr(constraints[name], "accepts", constraints[name]))  # a Param's
-        if isinstance(value, bool) and not light.takes_bool(given):
-            message = light.must_be(given, value, name, caller)
-        elif light.understood(given):
-            message = light.violation(given, value, name, caller)
-        else:
-            message = _sklearn_violation(given, value, name, caller)
-        if message is not None:
-            raise InputError(_constraint_text(message, name), parameter=name)
+        given = resolved(getattr(constraints[name], "accepts", constraints[name]))  # a Param's
+        if (isinstance(value, bool) and not takes_bool(given)
+                or not _meets(given, value, name, caller)):
+            raise InputError(f"must be {_listed(given)}; got {value!r}", parameter=name)
 
 
-def _sklearn_violation(given: list, value, name: str, caller: str) -> str | None:
-    """scikit-learn's message for ``value`` breaking ``given``, or None when it meets them."""
+def _meets(given: list, value, name: str, caller: str) -> bool:
+    """Whether ``value`` meets one of the constraints ``given``, as scikit-learn decides."""
     from sklearn.utils._param_validation import (
         InvalidParameterError,
         validate_parameter_constraints,
@@ -61,19 +60,18 @@ def _sklearn_violation(given: list, value, name: str, caller: str) -> str | None
 
     try:
         validate_parameter_constraints({name: given}, {name: value}, caller)
-    except InvalidParameterError as err:
-        return str(err)
-    return None
+    except InvalidParameterError:
+        return False
+    return True
 
 
-def _constraint_text(message: str, name: str) -> str:
-    """scikit-learn says "The 'x' parameter of f must be A. Got B instead."; the error already
-    names the parameter, so keep "must be A; got B"."""
-    _, _, rest = message.partition(" must be ")
-    if not rest:
-        return message
-    expected, _, got = rest.rpartition(". Got ")
-    return f"must be {expected}; got {got.removesuffix(' instead.')}" if got else f"must be {rest}"
+def _listed(given: list) -> str:
+    """The constraints ``given`` in scikit-learn's words ("A, B or C"): each constraint
+    object's own ``str()``, as scikit-learn lists them in its message (hidden ones left out)."""
+    from sklearn.utils._param_validation import make_constraint
+
+    shown = [str(c) for c in map(make_constraint, given) if not c.hidden]
+    return shown[0] if len(shown) == 1 else f"{', '.join(shown[:-1])} or {shown[-1]}"
 
 
 class Constraints(Mapping):
