@@ -81,7 +81,7 @@ class Step:
     index: int
     title: str
     job: str
-    params: dict
+    parameters: dict
     out: Path | None = None
     inputs: list[Path] = field(default_factory=list)
     outputs: list[Path] = field(default_factory=list)
@@ -197,12 +197,12 @@ def load_step(index: int, raw: StepFile, values: dict, path: Path) -> Step:
             value = _place(value, "input", step, values, path, label)
         elif name == "out":
             value = _place(value, "output", step, values, path, label)
-        step.params[name] = value
+        step.parameters[name] = value
     if "storage" in accepted:
         _check_storage(step, Path(values["out"]), path, where)
-    if "out" in step.params and "out" not in accepted:
-        step.out = Path(step.params.pop("out"))
-    _check_values(record, {k: v for k, v in step.params.items() if k in accepted}, path, where)
+    if "out" in step.parameters and "out" not in accepted:
+        step.out = Path(step.parameters.pop("out"))
+    _check_values(record, {k: v for k, v in step.parameters.items() if k in accepted}, path, where)
     return step
 
 
@@ -301,7 +301,7 @@ def _toml(value) -> str:
 def _check_storage(step: Step, out: Path, path: Path, where: str) -> None:
     """A storage URL (``tune``) is an output: SQLite files inside the output folder, given
     explicitly (the workflow's default file lies in the working directory)."""
-    url = step.params.get("storage")
+    url = step.parameters.get("storage")
     if url is None:
         raise InputError(f"{where}: give parameter 'storage', e.g. \"{SQLITE}{{out}}/optuna.db\""
                          ": the default storage lies outside the experiment's output folder",
@@ -312,7 +312,7 @@ def _check_storage(step: Step, out: Path, path: Path, where: str) -> None:
             raise InputError(f"{where}: parameter 'storage': {url!r} lies outside the "
                              f"experiment's output folder {out}", file=path)
         step.outputs.append(db)
-        step.params["storage"] = f"{SQLITE}{db}"
+        step.parameters["storage"] = f"{SQLITE}{db}"
 
 
 def inside(path: Path, folder: Path) -> bool:
@@ -381,7 +381,7 @@ def _run_step(step: Step, experiment: Experiment) -> StepResult:
             raise InputError(f"no such file or folder {str(missing[0])!r} (no earlier step "
                              "wrote it)")
         out = {} if step.out is None else {"out": step.out}
-        result = run(step.job, **step.params, **out)  # logged nested in the experiment's run
+        result = run(step.job, **step.parameters, **out)  # logged nested in the experiment's run
         files = dict(result.files)
     except (InputError, ValueError) as err:
         mlflow.log_metric(f"step_{step.index}_exit_code", 2)

@@ -142,7 +142,7 @@ REPR_CHARS = 300  # the longest repr of a result, in characters
 
 def data_name(result) -> str | None:
     """The file name of the data a result was made from (``source``, ``sources``, the
-    readings' ``source``, ``params['data']``), ``N files`` for several, or None."""
+    readings' ``source``, ``parameters['data']``), ``N files`` for several, or None."""
     found = getattr(result, "source", None)
     if not found:
         sources = getattr(result, "sources", None) or {}
@@ -152,8 +152,8 @@ def data_name(result) -> str | None:
         readings = getattr(result, "readings", None)
         found = getattr(readings, "attrs", {}).get("source")
     if not found:
-        params = getattr(result, "params", None)
-        found = params.get("data") if isinstance(params, dict) else None
+        parameters = getattr(result, "parameters", None)
+        found = parameters.get("data") if isinstance(parameters, dict) else None
     return Path(str(found)).name if found else None
 
 

@@ -81,7 +81,7 @@ out = "drift"
 """)
     (step,) = experiment.load(spec).steps
     # only what the table gives: the workflow's own defaults apply, no parser is replayed
-    assert step.params == {"data": str(psi_file.resolve()), "threshold_um": 4}
+    assert step.parameters == {"data": str(psi_file.resolve()), "threshold_um": 4}
     assert step.out == (tmp_path / "out" / "drift").resolve()  # relative to the out folder
     assert step.inputs == [psi_file.resolve()] and step.outputs == [step.out]
 
@@ -329,6 +329,6 @@ out = "forecast.csv"
 """)
     (step,) = experiment.load(spec).steps
     out = (tmp_path / "out").resolve()
-    assert step.params == {"model": str(out / "models" / "m"), "plan": str(psi_file.resolve())}
+    assert step.parameters == {"model": str(out / "models" / "m"), "plan": str(psi_file.resolve())}
     assert step.inputs == [out / "models" / "m", psi_file.resolve()]
     assert step.out == out / "forecast.csv"

@@ -264,7 +264,7 @@ def write_report(result, out, meta=None) -> dict[str, Path]:
 
     Parameters
     ----------
-    result : pipeline.steps.iso.IsoResult
+    result : pipeline.steps.iso.IsoFigures
         The figures, readings and outliers of the tests.
     out : str or path-like
         The folder (created if needed); both files are written atomically.
