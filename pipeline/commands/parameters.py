@@ -85,36 +85,36 @@ def _default_text(help: str, default) -> str:
 
 
 def _options(accepts) -> tuple | None:
-    from sklearn.utils._param_validation import StrOptions
+    """The choices of the first ``StrOptions`` declared, in its order (a set's sorted)."""
+    from pipeline.workflows.constraints import StrOptions
 
-    for c in accepts:
-        if isinstance(c, StrOptions):  # ours keep a tuple's order; a set's is sorted
-            return tuple(c.options if isinstance(c.options, tuple) else sorted(c.options))
-    return None
+    return next((c.options for c in accepts if isinstance(c, StrOptions)), None)
 
 
 def _parser(name: str, param):
-    """The option's text to its value: a number checked against the parameter's interval
-    (``seed`` by name), else the text itself, never empty."""
+    """The option's text to its value: a number of the declared interval's type, checked by
+    scikit-learn's ``Interval`` (built when an option is parsed, never for ``--help``); else
+    a count, a seed (by name) or a float for a parameter taking that type, or the text itself,
+    never empty."""
     from numbers import Integral, Real
 
     from pipeline.workflows.constraints import Interval
 
-    interval = next((c for c in param.accepts if isinstance(c, Interval)), None)
-    if interval is None:
+    declared = next((c for c in param.accepts if isinstance(c, Interval)), None)
+    if declared is None:
         if int in param.accepts:
             return seed if name.endswith("seed") else count
         if float in param.accepts or Real in param.accepts:
             return finite_float
         return non_empty
-    integral = interval.type is Integral
+    integral = declared.type is Integral
 
     def number(text: str):
         value = whole(text) if integral else finite_float(text)
+        interval = declared.sklearn()
         if not interval.is_satisfied_by(value):
             raise argparse.ArgumentTypeError(f"{text!r}: expected {interval}")
         return value
 
     number.__name__ = "int" if integral else "float"  # argparse names the type in its errors
     return number
-

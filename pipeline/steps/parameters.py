@@ -35,7 +35,9 @@ class Param:
     ----------
     accepts : tuple
         The values it takes: constraints in scikit-learn's language (types, None,
-        ``"boolean"``, ``Interval``, ``StrOptions``...; a heavy type by its dotted name).
+        ``"boolean"``, ``Interval``, ``StrOptions``...: ``pipeline.workflows.constraints``'s
+        declarations, scikit-learn's objects once a value is checked; a heavy type by its
+        dotted name).
     help : str or None
         The option's help; None: the parameter's description in the workflow function's
         numpydoc ``Parameters`` section (``helps``).
@@ -49,7 +51,7 @@ class Param:
         reaches the workflow as itself, several as a list.
     parse : callable or None
         The option's text to the value (``argparse``'s ``type``); default: from ``accepts``
-        (a number checked against its ``Interval``, else the text, never empty).
+        (a number checked by scikit-learn against its ``Interval``, else the text, never empty).
     choices : tuple or None
         The values the option offers, in order; default: a ``StrOptions``'s.
     required : bool

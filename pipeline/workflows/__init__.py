@@ -15,17 +15,19 @@ from collections.abc import Mapping
 from features.readings.errors import InputError
 
 
-def check_params(constraints: dict, values: dict, caller: str) -> None:
+def check_params(constraints: Mapping, values: dict, caller: str) -> None:
     """Check keyword values against scikit-learn parameter constraints, with scikit-learn's
     ``validate_parameter_constraints``.
 
     Parameters
     ----------
-    constraints : dict
+    constraints : Mapping
         Parameter name -> list of constraints (``Interval``, ``StrOptions``, types,
         ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``, or its
-        ``Param`` (``pipeline.steps.parameters``: its ``accepts``); a type may be named by its
-        dotted path (``"pandas.DataFrame"``).
+        ``Param`` (``pipeline.steps.parameters``: its ``accepts``); a constraint may be a
+        declaration of ``pipeline.workflows.constraints`` (converted to scikit-learn's object
+        when its parameter is first checked, once per table) and a type may be named by its
+        dotted path (``"pandas.DataFrame"``, imported then).
     values : dict
         Parameter name -> value given.
     caller : str
@@ -39,30 +41,52 @@ def check_params(constraints: dict, values: dict, caller: str) -> None:
         ``.parameter`` is its name. True or False where a parameter takes no boolean is refused
         (Python's ``True`` is also the int 1).
     """
-    from pipeline.workflows.constraints import resolved, takes_bool
-
-    for name, value in values.items():
-        if name not in constraints:  # never skipped: a parameter without a constraint
-            raise InputError(f"is not a parameter of {caller}; expected one of "
-                             f"{', '.join(constraints)}", parameter=name)
-        given = resolved(getattr(constraints[name], "accepts", constraints[name]))  # a Param's
-        if (isinstance(value, bool) and not takes_bool(given)
-                or not _meets(given, value, name, caller)):
-            raise InputError(f"must be {_listed(given)}; got {value!r}", parameter=name)
-
-
-def _meets(given: list, value, name: str, caller: str) -> bool:
-    """Whether ``value`` meets one of the constraints ``given``, as scikit-learn decides."""
     from sklearn.utils._param_validation import (
         InvalidParameterError,
         validate_parameter_constraints,
     )
 
-    try:
-        validate_parameter_constraints({name: given}, {name: value}, caller)
-    except InvalidParameterError:
-        return False
-    return True
+    for name, value in values.items():
+        if name not in constraints:  # never skipped: a parameter without a constraint
+            raise InputError(f"is not a parameter of {caller}; expected one of "
+                             f"{', '.join(constraints)}", parameter=name)
+        given, booleans, listed = _converted(constraints, name)
+        # scikit-learn lets True pass an Interval(Integral, ...) or an int type: bool is a
+        # subclass of int (an Integral), so a flag written where a number belongs
+        # (seed = true) would run as 1
+        refused = isinstance(value, bool) and not booleans
+        if not refused:
+            try:
+                validate_parameter_constraints({name: given}, {name: value}, caller)
+            except InvalidParameterError:
+                refused = True
+        if refused:
+            raise InputError(f"must be {listed}; got {value!r}", parameter=name)
+
+
+# id(table) -> (table, {name: (declared, scikit-learn's constraints, takes a bool, words)}):
+# a table's declarations are converted once (the tables are the job modules' constants; a
+# few more, made on the fly, are kept too, the oldest let go)
+_CONVERTED: dict[int, tuple[Mapping, dict]] = {}
+_KEPT = 64
+
+
+def _converted(table: Mapping, name: str) -> tuple[list, bool, str]:
+    """Parameter ``name``'s constraints in ``table`` as scikit-learn's objects, whether it
+    takes a boolean, and the constraints in scikit-learn's words (``_listed``)."""
+    from pipeline.workflows.constraints import resolved, takes_bool
+
+    kept = _CONVERTED.get(id(table))
+    if kept is None or kept[0] is not table:
+        if len(_CONVERTED) >= _KEPT:
+            _CONVERTED.pop(next(iter(_CONVERTED), None), None)
+        kept = _CONVERTED[id(table)] = (table, {})
+    declared = getattr(table[name], "accepts", table[name])  # a Param's, or the list itself
+    entry = kept[1].get(name)
+    if entry is None or entry[0] is not declared:  # a name's constraints replaced: again
+        given = resolved(declared)
+        entry = kept[1][name] = (declared, given, takes_bool(given), _listed(given))
+    return entry[1:]
 
 
 def _listed(given: list) -> str:
@@ -72,30 +96,6 @@ def _listed(given: list) -> str:
 
     shown = [str(c) for c in map(make_constraint, given) if not c.hidden]
     return shown[0] if len(shown) == 1 else f"{', '.join(shown[:-1])} or {shown[-1]}"
-
-
-class Constraints(Mapping):
-    """A workflow's ``PARAMETERS``: parameter name -> constraints, built by ``build()`` on
-    first use. Importing scikit-learn's constraint classes costs about a second, and every
-    command imports its workflow just to show ``--help``."""
-
-    def __init__(self, build):
-        self._build = build
-        self._table = None
-
-    def _built(self) -> dict:
-        if self._table is None:
-            self._table = self._build()
-        return self._table
-
-    def __getitem__(self, name):
-        return self._built()[name]
-
-    def __iter__(self):
-        return iter(self._built())
-
-    def __len__(self):
-        return len(self._built())
 
 
 def readings_data() -> list:
