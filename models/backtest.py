@@ -12,6 +12,10 @@ and an origin whose next visit is itself a known adjustment (hours or event) is 
 (nothing before it says where the new clock starts). Predictors with ``predict_interval`` also
 report how often their 95 % interval covers the measured value (``cover95_measured_pct``) and,
 on twin data, the true backlash (``cover95_true_pct``).
+
+A trained predictor's forecasting skill (``forecast_skill``: 1 - RMSE / RMSE of persistence over
+a backtest on its own training table) is what ranks registered models for the champion; the
+model jobs compute it with the fit, so it is the same whether or not the run is tracked.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ from models import evaluation, registry
 from models.wear.wear_map import found_adjustments, latest_epoch
 
 PERSISTENCE = "persistence"
+MIN_SKILL_VISITS = 3  # the skill's backtest trains on visits <= k (at least 2), forecasts k + 1
+MAX_SKILL_ORIGINS = 4  # the skill's backtest forecasts the last visits only: <= 4 extra fits
 SAME_POINT = ("machine_id", "axis", "feed_mm_min", "dwell_s", "repeat", "target")
 
 
@@ -151,3 +157,53 @@ def summary(results: pd.DataFrame) -> pd.DataFrame:
     base = out.set_index("model").loc[PERSISTENCE, "rmse_um"]
     out["skill_vs_persistence"] = 1 - out["rmse_um"] / base
     return out.sort_values("rmse_um", kind="stable").reset_index(drop=True)
+
+
+def forecast_skill(fit, min_visits: int = MIN_SKILL_VISITS,
+                   max_origins: int = MAX_SKILL_ORIGINS) -> dict:
+    """Forecasting skill of a predictor that forecasts (``models.registry`` record
+    ``forecasts``) from a rolling-origin backtest on its training table.
+
+    Parameters
+    ----------
+    fit : models.training.Fit
+        The fitted predictor; its table (for a wear map: the visits since each axis's last
+        adjustment) is the backtest's data.
+    min_visits : int
+        Fewer visits give no skill (the backtest trains on >= 2 visits, forecasts the next).
+    max_origins : int
+        The backtest forecasts the last ``max_origins`` visits only, each from every visit
+        before it: its cost is at most that many extra fits of the predictor.
+
+    Returns
+    -------
+    dict
+        ``skill`` = 1 - RMSE / RMSE of persistence over the origins' points (rounded to 4
+        decimals), ``rmse_um``, ``persistence_rmse_um`` and ``origins``; or ``skill`` None and
+        ``reason`` (the predictor does not forecast, too few visits, no origin).
+    """
+    import math
+
+    if not registry.predictor(fit.name).forecasts:
+        return {"skill": None, "reason": f"{fit.name} does not forecast a plan"}
+    visits = len(set(evaluation.visit_order(fit.table.meta).tolist()))
+    if visits < min_visits:
+        return {"skill": None, "reason": f"{visits} visit(s) in the training data; the "
+                                         f"backtest needs at least {min_visits}"}
+    try:
+        # the trained model's own choices (a wear map's control points): no CV per origin
+        chosen = getattr(fit.estimator, "chosen_params", dict)()
+        results = backtest(fit.table, [fit.name], min_train_visits=max(2, visits - max_origins),
+                           params={fit.name: chosen})
+        scored = summary(results).set_index("model")
+    except InputError as err:
+        return {"skill": None, "reason": err.message}
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:  # a fold failed to fit
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        return {"skill": None, "reason": f"the backtest failed: {first[:200]}"}
+    skill = float(scored.loc[fit.name, "skill_vs_persistence"])
+    if not math.isfinite(skill):
+        return {"skill": None, "reason": "persistence forecasts the training data exactly"}
+    return {"skill": round(skill, 4), "rmse_um": float(scored.loc[fit.name, "rmse_um"]),
+            "persistence_rmse_um": float(scored.loc[PERSISTENCE, "rmse_um"]),
+            "origins": int(scored.loc[fit.name, "origins"])}

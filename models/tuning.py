@@ -10,6 +10,10 @@ seed depends only on the given seed, the worker index and the study's size at th
 A search stops cleanly: SIGTERM stops it the way Ctrl-C does (the running trial is marked
 FAIL), worker processes die with their parent, and a signal that arrives while Optuna stores a
 finished trial takes effect once that is done (``run_workers``, ``terminate_as_interrupt``).
+
+A search (``open_search``, then ``run_search``) reports each finished trial as plain data
+(``trial_summary``) to the ``on_trial`` callables it is given, in whichever worker process ran
+the trial; what they do with it (log it somewhere) is their caller's business.
 """
 
 from __future__ import annotations
@@ -19,8 +23,12 @@ import sys
 import threading
 import time
 import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+
+from features.readings.errors import InputError, Progress, report
 
 HEARTBEAT_S = 10
 SCHEMA_ATTEMPTS = 5  # tries to open a storage that other workers are creating at the same time
@@ -178,6 +186,163 @@ def fail_stale_trials(study) -> list[int]:
     return sorted(number for trial_id, number in running.items() if trial_id not in still)
 
 
+def check_storage(url: str) -> str:
+    """``url`` if it names a database Optuna can share between processes, else one line."""
+    scheme = url.split("://", 1)[0].split("+", 1)[0].lower() if "://" in url else ""
+    if scheme not in STORAGE_SCHEMES:
+        raise InputError(f"unsupported storage URL {url!r}; expected sqlite:///FILE or "
+                         "postgresql://USER@HOST/DB", parameter="storage")
+    if scheme == "sqlite":
+        path = url.split("sqlite:///", 1)[1].split("?", 1)[0] if "sqlite:///" in url else ""
+        if not path or path == ":memory:" or path.startswith("file::memory:"):
+            raise InputError(f"storage URL {url!r} keeps the study in one process's memory, "
+                             "which workers and later runs cannot share; expected "
+                             "sqlite:///FILE", parameter="storage")
+        file = Path(path).absolute()
+        if file.is_dir() or not file.parent.is_dir():
+            raise InputError(f"storage URL {url!r}: {file.parent} must be an existing folder "
+                             "and the file not a folder", parameter="storage")
+    return url
+
+
+def open_study(name: str, storage: str, seed: int, heartbeat_s: int):
+    """The named study; every call on it must use one heartbeat (the grace period is judged by
+    the process that looks, so a shorter one would fail trials whose workers are alive)."""
+    try:
+        study = create_study(name, storage, seed, heartbeat_s)
+    except Exception as err:  # noqa: BLE001 - any driver error is a bad URL or server for the user
+        first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise InputError(f"cannot open Optuna storage: {type(err).__name__}: {first}",
+                         parameter="storage") from None
+    recorded = study.user_attrs.get("heartbeat_s")
+    if recorded is None:
+        study.set_user_attr("heartbeat_s", heartbeat_s)
+    elif recorded != heartbeat_s:
+        raise InputError(f"study {name!r} runs with a heartbeat of {recorded} s; give the same "
+                         f"(got {heartbeat_s})", parameter="heartbeat_s")
+    return study
+
+
+@dataclass
+class Opened:
+    """A study opened for a search (``open_search``).
+
+    Attributes
+    ----------
+    study : optuna.Study
+    storage : str
+        Its storage URL.
+    heartbeat_s : int
+    stale : list of int
+        Trials found stale (their worker was killed) and marked FAIL as it opened.
+    stale_tags : set of str
+        The labels of the searches those trials belonged to: searches that were killed.
+    before : int
+        Trials in the study before this search.
+    first_data : str or None
+        The data digest the study began on (None: it begins now, on this search's data).
+    """
+
+    study: object
+    storage: str
+    heartbeat_s: int
+    stale: list[int] = field(default_factory=list)
+    stale_tags: set[str] = field(default_factory=set)
+    before: int = 0
+    first_data: str | None = None
+
+
+def open_search(name: str, storage: str, seed: int, heartbeat_s: int,
+                data_sha256: str) -> Opened:
+    """Open study ``name`` in ``storage`` (``check_storage``, ``open_study``) for a search on
+    the data of digest ``data_sha256``: its stale trials marked FAIL, the data it began on
+    recorded when it is new."""
+    study = open_study(name, check_storage(storage), seed, heartbeat_s)
+    stale = fail_stale_trials(study)
+    tags = {t.user_attrs.get("tag") for t in study.trials if t.number in stale} - {None}
+    first = study.user_attrs.get("data_sha256")
+    if first is None:  # the data the study began on: a later call on other data is told
+        study.set_user_attr("data_sha256", data_sha256)
+    return Opened(study, storage, heartbeat_s, stale, tags, len(study.trials), first)
+
+
+def trial_summary(study, trial) -> dict:
+    """One finished trial as plain data: ``study`` (its name), ``number``, ``params``,
+    ``value`` (mean CV RMSE [um], None when it failed), ``std`` (of the folds' RMSE),
+    ``state`` (``COMPLETE``, ``FAIL``...) and ``worker_pid``."""
+    attrs = trial.user_attrs
+    return {"study": study.study_name, "number": trial.number, "params": dict(trial.params),
+            "value": trial.value, "std": attrs.get("cv_rmse_std_um"),
+            "state": trial.state.name, "worker_pid": attrs.get("worker_pid", "")}
+
+
+@dataclass
+class Outcome:
+    """The study after a search (``run_search``).
+
+    Attributes
+    ----------
+    best_params : dict
+        Parameters of the study's best complete trial.
+    best_value : float
+        Its mean CV RMSE [um].
+    best_trial : int
+    counts : dict
+        Trials of the study by state (``counts``).
+    finished : list of dict
+        This search's finished trials (``trial_summary``), by number.
+    completed : int
+        This search's complete trials.
+    """
+
+    best_params: dict
+    best_value: float
+    best_trial: int
+    counts: dict
+    finished: list[dict]
+    completed: int
+
+
+def run_search(opened: Opened, X, y, *, trials: int, workers: int = 1, folds: int = 5,
+               seed: int = 0, tag: str, on_trial: tuple = (),
+               progress: Progress | None = None) -> Outcome:
+    """Run ``trials`` trials of the opened study in this process or shared among ``workers``
+    processes (``search``), its trials labelled ``tag``.
+
+    ``on_trial`` callables get each finished trial's ``trial_summary`` in the process that ran
+    it (with several workers they travel to the workers' processes: they must pickle);
+    ``progress(done, total, what)`` hears of each trial (one worker only).
+
+    Raises
+    ------
+    RuntimeError
+        When no trial of the study completed.
+    """
+    import optuna
+
+    if workers == 1:
+        done = []
+
+        def reported(summary: dict) -> None:
+            done.append(summary["number"])
+            report(progress, len(done), trials, f"trial {summary['number']}")
+
+        on_trial = (*on_trial, reported)
+    search({"name": opened.study.study_name, "storage": opened.storage, "X": X, "y": y,
+            "folds": folds, "seed": seed, "tag": tag, "start": opened.before,
+            "heartbeat_s": opened.heartbeat_s, "on_trial": tuple(on_trial)}, trials, workers)
+    study = opened.study
+    count = counts(study)
+    if count.get("complete", 0) == 0:
+        raise RuntimeError("no trial of the study completed")
+    mine = [t for t in study.trials if t.user_attrs.get("tag") == tag]
+    best = study.best_trial
+    return Outcome(
+        best_params=best.params, best_value=best.value, best_trial=best.number, counts=count,
+        finished=[trial_summary(study, t) for t in mine if t.state.is_finished()],
+        completed=sum(t.state == optuna.trial.TrialState.COMPLETE for t in mine))
+
+
 def counts(study) -> dict[str, int]:
     """Trials of the study by state (``complete``, ``fail``, ``running``, ``pruned``, ...)."""
     out: dict[str, int] = {}
@@ -189,13 +354,14 @@ def counts(study) -> dict[str, int]:
 
 def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag: str,
          worker: int = 0, start: int = 0, threads: int | None = None,
-         callbacks: tuple = (), heartbeat_s: int = HEARTBEAT_S, stop=None) -> None:
+         on_trial: tuple = (), heartbeat_s: int = HEARTBEAT_S, stop=None) -> None:
     """One worker: run ``trials`` trials of the shared study.
 
     The sampler seed comes from ``seed``, the worker's index and ``start`` (trials in the study
     when the invocation began), never from the process, so one ``seed`` gives one study.
-    ``callbacks`` run after each finished trial (Optuna's ``callback(study, trial)``); ``stop``
-    is passed to the objective.
+    ``on_trial`` callables get each finished trial's ``trial_summary``; ``stop`` is passed to
+    the objective, and checked once they are done (a SIGTERM that arrived while the trial was
+    stored or reported stops the search there).
     """
     import optuna
     import sklearn.model_selection  # noqa: F401 - imported before a SIGTERM may interrupt cv_rmse
@@ -208,8 +374,14 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
     quiet_optuna(optuna)
     study = create_study(name, storage, sampler_seed(seed, worker, start), heartbeat_s, tag)
     stopped(stop)
-    study.optimize(objective(X, y, folds, seed, stop), n_trials=trials,
-                   callbacks=list(callbacks))
+
+    def finished(study, trial) -> None:
+        summary = trial_summary(study, trial)
+        for call in on_trial:
+            call(summary)
+        stopped(stop)
+
+    study.optimize(objective(X, y, folds, seed, stop), n_trials=trials, callbacks=[finished])
 
 
 def search(work_args: dict, trials: int, workers: int = 1) -> None:

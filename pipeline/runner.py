@@ -16,7 +16,10 @@ done here, the same way for every entry point (kedro's runner and hooks):
    ``tracking_record()`` to MLflow (parameters, metrics, artifacts, a model to register and
    the champion alias) through ``pipeline.tracking.background``: from the ``backlash`` program the
    MLflow child starts while the job computes; inside an active MLflow run (an experiment
-   file's) the record is logged as a nested run;
+   file's) the record is logged as a nested run. A job that logs while it computes
+   (``Workflow.logs_while_running``: a search whose trials are kept as each finishes) gets
+   the live run its record names as its ``live`` parameter instead, which the runner ends
+   with the job after logging the result's record into it;
 4. **output**: ``out`` is written by ``result.write(out)`` (a workflow that takes ``out``
    itself writes it);
 5. **store recording** (``store``): a job whose record names its recorder
@@ -30,9 +33,12 @@ Tracking default: ``TRACK = True``, for every entry point (the CLI's ``--no-trac
 did wherever it runs, so a model trained from Python is registered as one trained by the CLI.
 Only tracked jobs (``Workflow.tracked``) touch MLflow; the others never import it.
 
+A parameter whose default depends on where the job runs (a study storage in the tracking
+folder) is resolved here when the call leaves it None (``Workflow.runtime_defaults``).
+
 Everything that differs from one job to another is declared on its record
 (``pipeline.workflows.Workflow``: ``tracked``, ``source``, ``records``, ``model_logging``,
-``reader_options``); this module names no job.
+``logs_while_running``, ``runtime_defaults``, ``reader_options``); this module names no job.
 
 What the tracking gave (``run_id``; ``version`` and ``champion`` of a registered model) is
 ``result.tracking``; a store's record line is ``result.recorded``.
@@ -40,6 +46,7 @@ What the tracking gave (``run_id``; ``version`` and ``champion`` of a registered
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import sys
 
@@ -48,6 +55,7 @@ from features.readings.selection import NAMES as SELECTION
 
 TRACK = True  # the one default of every entry point
 READINGS = ("data", "files")  # the parameter of a workflow that takes the readings
+LIVE = "live"  # the parameter of a workflow that logs while it runs (its live run)
 
 
 def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=None,
@@ -87,15 +95,20 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
     extra = {"out": out, "store": store, "progress": progress}
     params.update({k: v for k, v in extra.items() if k in declared and v is not None})
     nested = _active_run()
-    if "track" in declared:  # a workflow that logs while it runs: not inside a run
-        params["track"] = track and not nested
     bound = _bound(record, declared, args, params)
     _checked(record, bound)
+    bound = _defaults(record, bound)
     bound = _selected(record, declared, bound)
     opened = _opened(record, declared, store)
-    with _tracking(record, track and not params.get("track"), nested) as tracking:
+    live = _live(record, track and not nested)
+    if live is not None:
+        bound[LIVE] = live
+    with _tracking(record, track and live is None, nested) as tracking, \
+            live or contextlib.nullcontext():
         result = record.function(**bound)
         tracking.write_and_log(result, None if "out" in declared else out)
+        if live is not None:
+            tracking.logged = live.finish(result)
     result.tracking = tracking.logged
     if opened is not None:
         from pipeline.workflows import imported
@@ -132,6 +145,28 @@ def _checked(record, bound: dict) -> None:
     check_params(table, {k: v for k, v in bound.items()
                          if k != "progress" and not (k in SELECTION and k not in table)},
                  record.name)
+
+
+def _defaults(record, bound: dict) -> dict:
+    """The parameters the call left None whose default depends on where the job runs
+    (``Workflow.runtime_defaults``), resolved."""
+    from pipeline.workflows import imported
+
+    for name, dotted in record.runtime_defaults:
+        if bound.get(name) is None:
+            bound[name] = imported(dotted)()
+    return bound
+
+
+def _live(record, track: bool):
+    """The live run of a job that logs while it computes (``Workflow.logs_while_running``),
+    when it is tracked outside an experiment's run; else None (its result is logged after it,
+    as any tracked job's)."""
+    if not (track and record.tracked and record.logs_while_running):
+        return None
+    from pipeline.workflows import imported
+
+    return imported(record.logs_while_running)(record.name)
 
 
 def _selected(record, declared, params: dict) -> dict:
@@ -262,7 +297,7 @@ class _Tracked(_Untracked):
 
     def _drawn_beside(self, result, out) -> None:
         """A result that saves and draws (a trained model's): a second child draws the figures while
-        this process scores what the record needs and the MLflow child logs the model."""
+        the MLflow child logs the model (the record reads what the job computed)."""
         from pipeline.tracking.background import BackgroundTask
 
         tracking = self._tracking

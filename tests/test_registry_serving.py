@@ -125,7 +125,7 @@ def test_signature_lists_the_plan_columns_the_wear_map_uses(wear_map):
 def test_a_network_signature_keeps_the_deviations(fleet, tmp_path):
     result = quiet(bl.train, fleet[0], model="ridge", track=False)
     result.write(tmp_path / "ridge")
-    spec = model_registry.model_record(result.fit, result.files["model"])["signature"]
+    spec = result.tracking_record().model["signature"]
     names = [c["name"] for c in spec["inputs"]]
     # the machine axis optional (given, it is checked against what the model covers)
     assert names == ["machine_id", "axis", *result.trained.feature_names_]

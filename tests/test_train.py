@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import mlflow
 import pandas as pd
@@ -147,3 +148,43 @@ def test_default_predictor_fits_saves_and_predicts_without_skops_torch_or_mlflow
                           text=True, check=True)
     assert done.stdout.strip() == "", done.stdout
     assert len(pd.read_csv(pred)) > 0 and pd.read_csv(pred)["backlash_um"].notna().all()
+
+
+TWIN = Path(__file__).parents[1] / "experiments" / "data" / "twin" / "readings.csv"
+
+
+def test_the_champions_skill_is_the_jobs_tracked_or_not(monkeypatch):
+    """``train`` and ``compare`` compute the forecasting skill that ranks models for the
+    champion themselves (``result.skill``, ``result.skills``): the same with ``track=False``
+    as with ``track=True``, and what the registered version carries; logging a result computes
+    no backtest."""
+    import warnings
+
+    import backlash as bl
+    from features.readings.errors import BacklashWarning
+    from models import backtest
+    from pipeline.tracking import runs as tracking
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BacklashWarning)
+        untracked = bl.train(TWIN, model="wear-map", track=False)
+        tracked = bl.train(TWIN, model="wear-map")
+        compared = {track: bl.compare(TWIN, models=["wear-map", "constant"], track=track)
+                    for track in (False, True)}
+    assert untracked.skill == tracked.skill and untracked.skill["skill"] is not None
+    assert compared[False].skills == compared[True].skills
+    assert compared[True].skills["wear-map"] == tracked.skill
+    assert compared[True].skills["constant"]["skill"] is None  # it does not forecast
+    client = mlflow.MlflowClient()
+    version = client.get_model_version("backlash-predictor", tracked.tracking["version"])
+    assert version.tags["backtest_skill"] == f"{tracked.skill['skill']:.4f}"
+
+    def no_backtest(*args, **kwargs):
+        raise AssertionError("logging a result ran a backtest")
+
+    monkeypatch.setattr(backtest, "backtest", no_backtest)
+    logged = tracking.log_result(untracked)
+    assert tracking.client().get_model_version("backlash-predictor", logged["version"]).tags[
+        "backtest_skill"] == f"{untracked.skill['skill']:.4f}"
+    record = compared[False].tracking_record()
+    assert {c.run_name: c.model["backtest"] for c in record.children} == compared[False].skills

@@ -333,3 +333,37 @@ def test_each_data_has_its_own_study_and_a_resumed_one_says_so(readings_csv, tmp
     assert again.trials == {"complete": 2}
     assert any("resumed with its 1 earlier trials" in n and "other data" not in n
                for n in again.notes)
+
+
+def test_python_tune_logs_while_it_runs_into_the_tracking_folders_study(readings_csv, tmp_path,
+                                                                         monkeypatch):
+    """``bl.tune`` without a storage uses ``optuna.db`` in the tracking folder (the runner
+    resolves the default the job's record declares); tracked, its run holds the search's and
+    the best trial's parameters, with every trial nested under it, and ends FINISHED."""
+    import backlash as bl
+
+    folder = tmp_path / "tracking"
+    folder.mkdir()
+    monkeypatch.setenv("BACKLASH_TRACKING_DIR", str(folder))
+    result = bl.tune(readings_csv, trials=2, folds=2)
+    assert (folder / "optuna.db").is_file()
+    assert result.params["storage"] == f"sqlite:///{folder / 'optuna.db'}"
+    run = mlflow.get_run(result.tracking["run_id"])
+    assert run.info.status == "FINISHED" and run.info.run_name == f"tune {result.params['study']}"
+    assert run.data.params["tag"] == result.params["tag"]
+    assert {f"best_{k}" for k in result.best_params} <= set(run.data.params)
+    assert run.data.metrics["best_cv_rmse_um"] == pytest.approx(result.best_cv_rmse_um)
+    trials = [r for r in nested_trial_runs()
+              if r.data.tags.get("mlflow.parentRunId") == run.info.run_id]
+    assert sorted(r.info.run_name for r in trials) == ["trial 0", "trial 1"]
+
+
+def test_the_workflow_function_takes_the_storage_it_is_given(readings_csv):
+    """The default storage is the runner's to resolve: the job's own function, called
+    directly, opens no store it was not given."""
+    from features.readings.errors import InputError
+    from pipeline.workflows import workflow
+
+    with pytest.raises(InputError) as raised:
+        workflow("tune").function(readings_csv, trials=1, folds=2)
+    assert raised.value.parameter == "storage"

@@ -34,6 +34,7 @@ mlflow is imported inside the functions so that the CLI starts fast.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import random
@@ -43,6 +44,7 @@ import time
 from dataclasses import fields
 from pathlib import Path
 
+from models.description import FIGURES
 from pipeline.results import TrackingRecord
 from pipeline.tracking import TRACKING_DIR  # the tracking folder's variable (--tracking-dir)
 
@@ -503,23 +505,98 @@ def log_child(experiment_id: str, parent_run_id: str, record) -> str:
     return created.info.run_id
 
 
+def end_killed(experiment: str, tags) -> list[str]:
+    """End as KILLED the runs of ``experiment`` still RUNNING (their process was killed) whose
+    ``tag`` parameter is one of ``tags``, nested runs aside; returns their run ids."""
+    tags = set(tags) - {None}
+    if not tags:
+        return []
+    store = client()
+    found = store.get_experiment_by_name(experiment)
+    if found is None:
+        return []
+    closed = []
+    for run_ in store.search_runs([found.experiment_id], "attributes.status = 'RUNNING'"):
+        if run_.data.params.get("tag") in tags and "mlflow.parentRunId" not in run_.data.tags:
+            store.set_terminated(run_.info.run_id, "KILLED")
+            closed.append(run_.info.run_id)
+    return closed
+
+
+class LiveRun:
+    """The run of a job that logs while it computes (``Workflow.logs_while_running``; the
+    runner enters it around the job and hands it to the job as ``live``).
+
+    The job ``start``s it once its record is known; each step it hands to ``child`` (from any
+    process) is a nested run at once, so a job killed later keeps what it finished (and its
+    run stays RUNNING, to be ended as KILLED by the next job that ``start``s with its
+    ``tag``); the runner ``finish``es it with the result. Leaving the context ends the run:
+    FINISHED, or FAILED on an error.
+    """
+
+    def __init__(self, job: str):
+        self.job = job
+        self._stack = contextlib.ExitStack()
+        self._active = None
+        self._started: dict = {}
+
+    def __enter__(self):
+        check_uri()  # a bad tracking store is refused before any work
+        return self
+
+    def __exit__(self, *exc_info):
+        return self._stack.__exit__(*exc_info)
+
+    def start(self, record: TrackingRecord, killed=()) -> list[str]:
+        """Start the run: ``record``'s experiment, run name, tags and params (logged at once).
+        Before, the runs of earlier jobs that were killed (``end_killed`` of ``killed``) are
+        ended as KILLED; returns the notes saying so."""
+        closed = end_killed(record.experiment, killed)
+        self._active = self._stack.enter_context(
+            run(record.experiment, record.run_name, tags=record.tags or None))
+        mlflow_module().log_params(params(record.params))
+        self._started = dict(record.params)
+        return ([f"MLflow run(s) {', '.join(closed)} of killed searches ended as KILLED"]
+                if closed else [])
+
+    @property
+    def child(self):
+        """``child(record)``: ``record`` logged as a run nested under this one and ended at
+        once (``log_child``), from this process or another (it pickles)."""
+        info = self._active.info
+        return functools.partial(log_child, info.experiment_id, info.run_id)
+
+    def finish(self, result) -> dict:
+        """Log ``result``'s ``tracking_record()`` into the run: the params ``start`` did not
+        log, the metrics and artifacts (the children went to ``child`` as they came); returns
+        ``run_id``. Nothing when the job never started the run."""
+        if self._active is None:
+            return {}
+        record = result if isinstance(result, TrackingRecord) else result.tracking_record()
+        if record is not None:
+            data = record_data(record)
+            data["params"] = {k: v for k, v in data["params"].items() if k not in self._started}
+            log_into({**data, "children": []})
+        return {"run_id": self._active.info.run_id}
+
+
 # --------------------------------------------------------------------------- model registry
 
 REGISTERED_NAME = "backlash-predictor"
 CHAMPION = "champion"
 CHAMPION_LOCK = f"{REGISTERED_NAME}.champion-lock"
-MODEL_FIGURES = "figures"  # the folder of a model directory holding its figures
+MODEL_FIGURES = FIGURES  # the folder of a model directory holding its figures
 BACKTEST_METRICS = ("skill", "rmse_um", "persistence_rmse_um")  # logged as backtest_*
 REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "scikit-learn",
                 "skops", "pandas", "numpy", "scipy"]
 
 
 def log_model(model: dict) -> str:
-    """Log a trained model (``pipeline.tracking.model_registry.model_record``) into the active run:
-    its estimator parameters, per-epoch history, backtest scores (``backtest_skill``,
-    ``backtest_rmse_um``, ``backtest_persistence_rmse_um``), the model directory and the model
-    from code, registered as ``backlash-predictor`` with the record's version tags; returns the
-    registered version."""
+    """Log a trained model (a record's ``model``: its result's ``models.description.describe``
+    with its ``model_dir``) into the active run: its estimator parameters, per-epoch history,
+    backtest scores (``backtest_skill``, ``backtest_rmse_um``, ``backtest_persistence_rmse_um``),
+    the model directory and the model from code, registered as ``backlash-predictor`` with the
+    record's version tags; returns the registered version."""
     import shutil
 
     mlflow = mlflow_module()

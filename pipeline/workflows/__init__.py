@@ -229,6 +229,21 @@ class Workflow:
     model_logging : str or None
         The dotted name of the function the MLflow child runs before the result is ready, to
         prepare logging a model (the imports it needs, while the job computes).
+    logs_while_running : str or None
+        The dotted name of ``hook(job) -> live run`` for a job that logs while it computes (a
+        search whose steps are kept as each finishes, so a killed job keeps them): when the
+        runner tracks outside an experiment's run, it enters the hook's object around the job
+        (the run ends FINISHED, or FAILED on an error) and passes it as the job's ``live``
+        parameter; the job calls ``live.start(record, killed=tags)`` once its run's record is
+        known (the runs of killed jobs whose ``tag`` parameter is in ``tags`` ended as KILLED
+        first; returns notes) and hands ``live.child`` (``child(record)``, picklable, from any
+        process) each step's record; the runner then logs the result's ``tracking_record``
+        into it (``live.finish(result)``; the children were logged already). Otherwise the job
+        gets no ``live`` and its result is logged after it, as any tracked job's.
+    runtime_defaults : tuple of (str, str)
+        Parameters whose default depends on where the job runs: (name, dotted name of a
+        function of no arguments giving it), resolved by the runner when a call leaves the
+        parameter None (the workflow function itself takes it as given).
     reader_options : tuple of str
         A raw log's reader options (``pipeline.steps.parameters.RAW_LOG``) the job's table
         declares: the runner hands those its function does not take to the reader.
@@ -244,6 +259,8 @@ class Workflow:
     records: str | None = None
     model_logging: str | None = None
     reader_options: tuple[str, ...] = ()
+    logs_while_running: str | None = None
+    runtime_defaults: tuple[tuple[str, str], ...] = ()
 
     @property
     def module(self):
@@ -320,7 +337,9 @@ WORKFLOWS = (
     Workflow('tune',
              'Tune the network (hidden sizes, activation, trainer, regularisation) by cross-'
              'validation with Optuna.',
-             inputs=('data',), tracked=True),
+             inputs=('data',), tracked=True,
+             logs_while_running='pipeline.tracking.runs.LiveRun',
+             runtime_defaults=(('storage', 'pipeline.tracking.runs.study_storage'),)),
     Workflow('rank',
              "Which inputs drive backlash given the others (driver with its effect in um, proxy, "
              "none), beside the paper's association views (weighted k-NN, ANOVA -ln(p), permutation "

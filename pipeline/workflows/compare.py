@@ -86,6 +86,13 @@ class CompareResult(Result):
         Predictor name -> ``models.training.Fit``.
     noise_floor_um : float
         Standard uncertainty of one measured backlash point [um].
+    skills : dict
+        Predictor name -> its forecasting skill against persistence
+        (``models.backtest.forecast_skill``), which ranks the registered models for the
+        champion.
+    descriptions : dict
+        Predictor name -> the model as plain data, what the registry keeps of it
+        (``models.description``).
     """
 
     table: pd.DataFrame
@@ -94,6 +101,8 @@ class CompareResult(Result):
     target_kind: str
     n_points: int
     params: dict = field(default_factory=dict)
+    skills: dict = field(default_factory=dict, repr=False)
+    descriptions: dict = field(default_factory=dict, repr=False)
 
     @property
     def best(self) -> str:
@@ -103,8 +112,8 @@ class CompareResult(Result):
         """``comparison.csv`` and, per predictor, its model directory with figures under
         ``models/NAME``."""
         from features.readings.fileio import atomic_path
+        from models.description import FIGURES
         from pipeline.reports.model_report import write_figures
-        from pipeline.tracking import model_registry
 
         out = Path(out)
         files = {}
@@ -113,7 +122,7 @@ class CompareResult(Result):
                 fit.trained_model({"data_sha256": self.params.get("data_sha256")}),
                 out / "models" / name)
             files[name] = model_dir
-            files[f"{name} figures"] = write_figures(fit, model_dir / model_registry.FIGURES)
+            files[f"{name} figures"] = write_figures(fit, model_dir / FIGURES)
         out.mkdir(parents=True, exist_ok=True)
         with atomic_path(out / "comparison.csv") as tmp:
             self.table.to_csv(tmp, index=False)
@@ -128,11 +137,12 @@ class CompareResult(Result):
 
     def tracking_record(self):
         """A parent run (the table, every model's test RMSE) with one nested run per model
-        (registered); the best becomes champion if it beats the champion on the same data."""
+        (registered, from its ``descriptions``); the best (by ``skills``, then test RMSE)
+        becomes champion if it beats the champion on the same data."""
         import tempfile
 
+        from models.description import FIGURES
         from pipeline.results import RunRecord
-        from pipeline.tracking import model_registry
 
         if "comparison" not in self.files:
             self.write(tempfile.mkdtemp(prefix="backlash-compare-"))
@@ -141,8 +151,8 @@ class CompareResult(Result):
         children = [RunRecord(
             experiment="compare", run_name=name, params={"model": name, **child_params},
             metrics=fit.metrics, artifacts=list(self.files[f"{name} figures"]),
-            artifact_path=model_registry.FIGURES,
-            model=model_registry.model_record(fit, self.files[name]))
+            artifact_path=FIGURES,
+            model={**self.descriptions[name], "model_dir": str(self.files[name])})
             for name, fit in self.fits.items()]
         return RunRecord(
             experiment="compare", run_name=f"compare {Path(self.params['data']).name}",
@@ -166,22 +176,23 @@ def compare(data, *, models: list[str] | None = None, format: str = "auto",
     """
     import pandas as pd
 
+    from models.backtest import forecast_skill
+    from models.description import describe
     from models.training import fit_model
     from pipeline.steps.model_data import model_data
 
-    values = {"data": data, "models": models, "format": format, "target": target,
-              "features": features, "split": split, "truth": truth, "seed": seed}
-    check_params(PARAMETERS, values, "compare")
     if split == "backtest":
-        values.pop("split")
-        return backtest(**values, progress=progress)
+        return _backtest(data, models=models, format=format, target=target, features=features,
+                         truth=truth, seed=seed, progress=progress)
     names = model_names(models)
     loaded = model_data(data, format, target, features, truth)
-    table, rows, fits = loaded.table, [], {}
+    table, rows, fits, skills, descriptions = loaded.table, [], {}, {}, {}
     for i, name in enumerate(names):
         report(progress, i, len(names), name)
         fits[name] = fit_model(table, name, split, seed, loaded.truth, loaded.noise_floor_um,
                                loaded.source)
+        skills[name] = forecast_skill(fits[name])
+        descriptions[name] = describe(fits[name], loaded.digest, skills[name])
         rows.append({"model": name, **fits[name].metrics})
     report(progress, len(names), len(names), "models")
     result = pd.DataFrame(rows).sort_values("test_rmse_um", kind="stable")
@@ -190,7 +201,8 @@ def compare(data, *, models: list[str] | None = None, format: str = "auto",
               "noise_floor_um": loaded.noise_floor_um}
     return CompareResult(table=result.reset_index(drop=True), fits=fits,
                          noise_floor_um=loaded.noise_floor_um, target_kind=table.target_kind,
-                         n_points=len(table.y), params=params)
+                         n_points=len(table.y), params=params, skills=skills,
+                         descriptions=descriptions)
 
 
 @dataclass
@@ -272,13 +284,22 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
     -------
     BacktestResult
     """
+    # a plain function (``bl.backtest``), not a job the runner checks: its parameters are
+    # checked here against compare's table
+    check_params(PARAMETERS, {"data": data, "models": models, "format": format,
+                              "target": target, "features": features, "truth": truth,
+                              "seed": seed}, "backtest")
+    return _backtest(data, models=models, format=format, target=target, features=features,
+                     truth=truth, seed=seed, progress=progress)
+
+
+def _backtest(data, *, models, format, target, features, truth, seed,
+              progress) -> BacktestResult:
+    """``backtest`` on parameters checked already (compare's, by the runner)."""
     from models import backtest as rolling
     from models.training import visit_series
     from pipeline.steps.model_data import model_data
 
-    check_params(PARAMETERS, {"data": data, "models": models, "format": format,
-                              "target": target, "features": features, "truth": truth,
-                              "seed": seed}, "backtest")
     names = model_names(models)
     loaded = model_data(data, format, target, features, truth)
     visits, why_not = visit_series(loaded.readings, loaded.stats)

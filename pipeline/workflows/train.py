@@ -27,7 +27,6 @@ from pipeline.steps.parameters import (
     Param,
     readings,
 )
-from pipeline.workflows import check_params
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -71,7 +70,14 @@ class TrainResult(Result):
         ``truth_*`` and ``noise_floor_um`` and, with an uncertainty budget, the test error
         against U(B) (``models.evaluation.against_uncertainty``).
     params : dict
-        What the run logs as MLflow parameters (model, split, target, features, data hash...).
+        What the run logs as its parameters (model, split, target, features, data hash...).
+    skill : dict
+        Forecasting skill against persistence from a backtest on the training table
+        (``models.backtest.forecast_skill``): ``skill`` (None for a predictor that does not
+        forecast, or too few visits, with the ``reason``), ``rmse_um``,
+        ``persistence_rmse_um``, ``origins``. It ranks registered models for the champion.
+    description : dict
+        The model as plain data, what the registry keeps of it (``models.description``).
     """
 
     model: str
@@ -83,6 +89,8 @@ class TrainResult(Result):
     target_kind: str = ""
     target_reason: str = ""
     figures: list[Path] = field(default_factory=list)
+    skill: dict = field(default_factory=dict)
+    description: dict = field(default_factory=dict, repr=False)
 
     def repr_items(self) -> dict[str, str]:
         rmse = self.metrics.get("test_rmse_um")
@@ -105,10 +113,10 @@ class TrainResult(Result):
     def draw(self) -> list[Path]:
         """The second half of ``write``: the figures of the fit in the saved model directory's
         ``figures`` folder."""
+        from models.description import FIGURES
         from pipeline.reports.model_report import write_figures
-        from pipeline.tracking import model_registry
 
-        return self.drawn(write_figures(self.fit, self.files["model"] / model_registry.FIGURES,
+        return self.drawn(write_figures(self.fit, self.files["model"] / FIGURES,
                                         U_um=self.metrics.get("U_B_um")))
 
     def drawn(self, figures: list) -> list[Path]:
@@ -127,31 +135,31 @@ class TrainResult(Result):
                 **({"model_dir": str(self.files["model"])} if "model" in self.files else {})}
 
     def tracking_record(self):
-        """Params, metrics, the figures and the model (registered; champion if best on the
-        same data). A result not written yet is written to a temporary folder first; one
-        saved but not drawn yet (``save`` without ``draw``) has no figures in its record:
-        ``figures_record`` logs them once drawn."""
+        """Params, metrics, the figures and the model (``description`` with its directory:
+        registered; champion if its ``skill`` is best on the same data). A result not written
+        yet is written to a temporary folder first; one saved but not drawn yet (``save``
+        without ``draw``) has no figures in its record: ``figures_record`` logs them once
+        drawn."""
         import tempfile
 
+        from models.description import FIGURES
         from pipeline.results import RunRecord
-        from pipeline.tracking import model_registry
 
         if "model" not in self.files:
             self.write(Path(tempfile.mkdtemp(prefix="backlash-train-")) / self.model)
         return RunRecord(
             experiment="train", run_name=f"train {self.model}", params=self.params,
-            metrics=self.metrics, artifacts=list(self.figures),
-            artifact_path=model_registry.FIGURES,
-            model=model_registry.model_record(self.fit, self.files["model"]), promote=True)
+            metrics=self.metrics, artifacts=list(self.figures), artifact_path=FIGURES,
+            model={**self.description, "model_dir": str(self.files["model"])}, promote=True)
 
     def figures_record(self):
         """The figures alone, for the run ``tracking_record`` started before they were drawn:
         the model is logged while they are drawn."""
+        from models.description import FIGURES
         from pipeline.results import TrackingRecord
-        from pipeline.tracking import model_registry
 
         return TrackingRecord(experiment="train", run_name=f"train {self.model}",
-                              artifacts=list(self.figures), artifact_path=model_registry.FIGURES)
+                              artifacts=list(self.figures), artifact_path=FIGURES)
 
 
 def train(data, *, model: str | None = None, format: str = "auto", target: str = "auto",
@@ -187,7 +195,8 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     Returns
     -------
     TrainResult
-        Notes say which visits a wear map's clock uses (it restarts at an adjustment).
+        Notes say which visits a wear map's clock uses (it restarts at an adjustment); its
+        ``skill`` is the forecasting skill that ranks it for the champion.
 
     Raises
     ------
@@ -196,12 +205,11 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
         axis's data.
     """
     from features.uncertainty import checked_budget
+    from models.backtest import forecast_skill
+    from models.description import describe
     from models.training import fit_model, since_adjustment
     from pipeline.steps.model_data import model_data
 
-    check_params(PARAMETERS, {"data": data, "model": model, "format": format, "target": target,
-                              "features": features, "split": split, "truth": truth,
-                              "seed": seed, "uncertainty": uncertainty}, "train")
     name = model or registry.RECOMMENDED
     registry.check_name(name)
     budget = None if uncertainty is None else checked_budget(uncertainty)
@@ -243,9 +251,11 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
               "features": ",".join(table.X.columns), "n_train": len(fit.train_index),
               "n_test": len(fit.test_index), "data": loaded.source, "data_sha256": digest,
               "seed": seed}
+    skill = forecast_skill(fit)
     return TrainResult(model=name, fit=fit, trained=fit.trained_model(meta),
                        metrics=metrics, params=params, n_points=len(loaded.table.y),
-                       target_kind=table.target_kind, target_reason=table.reason)
+                       target_kind=table.target_kind, target_reason=table.reason,
+                       skill=skill, description=describe(fit, digest, skill))
 
 
 def measurement_U_B_um(stats, budget) -> float:
