@@ -71,7 +71,7 @@ def test_fleet_version_carries_axes_predictor_target_data_and_skill(wear_map):
     logged, version = logged_version(wear_map)
     tags = version.tags
     assert tags["predictor"] == "wear-map" and tags["target_kind"] == wear_map.target_kind
-    assert tags["data_sha256"] == wear_map.params["data_sha256"]
+    assert tags["data_sha256"] == wear_map.parameters["data_sha256"]
     assert tags["machines"] == "M01,M02" and tags["n_axes"] == "4"
     assert tags["axes"] == "M01/X,M01/Y,M02/X,M02/Y"
     # five visits: three origins of a rolling-origin backtest on the training data

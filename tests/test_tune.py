@@ -347,10 +347,10 @@ def test_python_tune_logs_while_it_runs_into_the_tracking_folders_study(readings
     monkeypatch.setenv("BACKLASH_TRACKING_DIR", str(folder))
     result = bl.tune(readings_csv, trials=2, folds=2)
     assert (folder / "optuna.db").is_file()
-    assert result.params["storage"] == f"sqlite:///{folder / 'optuna.db'}"
+    assert result.parameters["storage"] == f"sqlite:///{folder / 'optuna.db'}"
     run = mlflow.get_run(result.tracking["run_id"])
-    assert run.info.status == "FINISHED" and run.info.run_name == f"tune {result.params['study']}"
-    assert run.data.params["tag"] == result.params["tag"]
+    assert run.info.status == "FINISHED" and run.info.run_name == f"tune {result.parameters['study']}"
+    assert run.data.params["tag"] == result.parameters["tag"]
     assert {f"best_{k}" for k in result.best_params} <= set(run.data.params)
     assert run.data.metrics["best_cv_rmse_um"] == pytest.approx(result.best_cv_rmse_um)
     trials = [r for r in nested_trial_runs()

@@ -100,7 +100,7 @@ class CompareResult(Result):
     noise_floor_um: float
     target_kind: str
     n_points: int
-    params: dict = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
     skills: dict = field(default_factory=dict, repr=False)
     descriptions: dict = field(default_factory=dict, repr=False)
 
@@ -119,7 +119,7 @@ class CompareResult(Result):
         files = {}
         for name, fit in self.fits.items():
             model_dir = registry.save_model(
-                fit.trained_model({"data_sha256": self.params.get("data_sha256")}),
+                fit.trained_model({"data_sha256": self.parameters.get("data_sha256")}),
                 out / "models" / name)
             files[name] = model_dir
             files[f"{name} figures"] = write_figures(fit, model_dir / FIGURES)
@@ -146,7 +146,7 @@ class CompareResult(Result):
 
         if "comparison" not in self.files:
             self.write(tempfile.mkdtemp(prefix="backlash-compare-"))
-        child_params = {k: self.params[k] for k in ("split", "data_sha256", "target_kind",
+        child_params = {k: self.parameters[k] for k in ("split", "data_sha256", "target_kind",
                                                     "seed")}
         children = [RunRecord(
             experiment="compare", run_name=name, params={"model": name, **child_params},
@@ -155,8 +155,8 @@ class CompareResult(Result):
             model={**self.descriptions[name], "model_dir": str(self.files[name])})
             for name, fit in self.fits.items()]
         return RunRecord(
-            experiment="compare", run_name=f"compare {Path(self.params['data']).name}",
-            params=self.params, artifacts=[self.files["comparison"]],
+            experiment="compare", run_name=f"compare {Path(self.parameters['data']).name}",
+            params=self.parameters, artifacts=[self.files["comparison"]],
             metrics={f"{r['model']}_test_rmse_um": r["test_rmse_um"]
                      for r in self.table.to_dict("records")},
             children=children, promote=True)
@@ -201,7 +201,7 @@ def compare(data, *, models: list[str] | None = None, format: str = "auto",
               "noise_floor_um": loaded.noise_floor_um}
     return CompareResult(table=result.reset_index(drop=True), fits=fits,
                          noise_floor_um=loaded.noise_floor_um, target_kind=table.target_kind,
-                         n_points=len(table.y), params=params, skills=skills,
+                         n_points=len(table.y), parameters=params, skills=skills,
                          descriptions=descriptions)
 
 
@@ -226,7 +226,7 @@ class BacktestResult(Result):
     noise_floor_um: float
     target_kind: str
     n_points: int
-    params: dict = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
 
     def write(self, out) -> dict[str, Path]:
         """``backtest.csv``, ``backtest_summary.csv`` and, with a wear map, ``wear_map.csv``
@@ -267,8 +267,8 @@ class BacktestResult(Result):
         metrics = {f"{row['model']}_{k}": v for row in self.summary.to_dict("records")
                    for k, v in row.items() if k != "model" and pd.notna(v)}
         return TrackingRecord(experiment="compare",
-                              run_name=f"backtest {Path(self.params['data']).name}",
-                              params=self.params, metrics=metrics,
+                              run_name=f"backtest {Path(self.parameters['data']).name}",
+                              params=self.parameters, metrics=metrics,
                               artifacts=list(self.files.values()))
 
 
@@ -315,7 +315,7 @@ def _backtest(data, *, models, format, target, features, truth, seed,
     return BacktestResult(origins=origins, summary=rolling.summary(origins), wear_map=wear,
                           noise_floor_um=loaded.noise_floor_um,
                           target_kind=loaded.table.target_kind, n_points=len(loaded.table.y),
-                          params=params)
+                          parameters=params)
 
 
 def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:

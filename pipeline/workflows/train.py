@@ -69,7 +69,7 @@ class TrainResult(Result):
         ``test_*``, ``train_*`` (RMSE and MAE [um], R^2, MAPE [%]), on twin data
         ``truth_*`` and ``noise_floor_um`` and, with an uncertainty budget, the test error
         against U(B) (``models.evaluation.against_uncertainty``).
-    params : dict
+    parameters : dict
         What the run logs as its parameters (model, split, target, features, data hash...).
     skill : dict
         Forecasting skill against persistence from a backtest on the training table
@@ -84,7 +84,7 @@ class TrainResult(Result):
     fit: object
     trained: object
     metrics: dict
-    params: dict
+    parameters: dict
     n_points: int = 0
     target_kind: str = ""
     target_reason: str = ""
@@ -148,7 +148,7 @@ class TrainResult(Result):
         if "model" not in self.files:
             self.write(Path(tempfile.mkdtemp(prefix="backlash-train-")) / self.model)
         return RunRecord(
-            experiment="train", run_name=f"train {self.model}", params=self.params,
+            experiment="train", run_name=f"train {self.model}", params=self.parameters,
             metrics=self.metrics, artifacts=list(self.figures), artifact_path=FIGURES,
             model={**self.description, "model_dir": str(self.files["model"])}, promote=True)
 
@@ -253,7 +253,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
               "seed": seed}
     skill = forecast_skill(fit)
     return TrainResult(model=name, fit=fit, trained=fit.trained_model(meta),
-                       metrics=metrics, params=params, n_points=len(loaded.table.y),
+                       metrics=metrics, parameters=params, n_points=len(loaded.table.y),
                        target_kind=table.target_kind, target_reason=table.reason,
                        skill=skill, description=describe(fit, digest, skill))
 

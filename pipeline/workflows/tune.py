@@ -83,12 +83,12 @@ class TuneResult(Result):
     trials: dict
     completed_this_run: int
     marked_failed: list[int]
-    params: dict = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
     trial_records: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {"best_params": self.best_params, "best_cv_rmse_um": self.best_cv_rmse_um,
-                "best_trial": self.best_trial, "study": self.params.get("study"),
+                "best_trial": self.best_trial, "study": self.parameters.get("study"),
                 "trials": self.trials,
                 "completed_this_run": self.completed_this_run,
                 "marked_failed": self.marked_failed}
@@ -105,8 +105,8 @@ class TuneResult(Result):
         they finished: it adds the rest)."""
         from pipeline.results import RunRecord
 
-        return RunRecord(experiment="tune", run_name=run_name(self.params["study"]),
-                         params={**self.params, **{f"best_{k}": v
+        return RunRecord(experiment="tune", run_name=run_name(self.parameters["study"]),
+                         params={**self.parameters, **{f"best_{k}": v
                                                    for k, v in self.best_params.items()}},
                          metrics=self.metrics, children=list(self.trial_records))
 
@@ -218,7 +218,7 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     return TuneResult(
         best_params=outcome.best_params, best_cv_rmse_um=outcome.best_value,
         best_trial=outcome.best_trial, trials=outcome.counts,
-        completed_this_run=outcome.completed, marked_failed=opened.stale, params=params,
+        completed_this_run=outcome.completed, marked_failed=opened.stale, parameters=params,
         trial_records=[trial_record(t) for t in outcome.finished], notes=notes)
 
 
