@@ -36,7 +36,7 @@ class RunRecord(TrackingRecord):
     ----------
     model : dict or None
         A trained model to log and register as ``backlash-predictor``
-        (``pipeline.tracking.model_registry.model_record``).
+        (``models.description.describe``).
     children : list of TrackingRecord
         Runs nested under this one (one per compared model, one per tuning trial).
     promote : bool

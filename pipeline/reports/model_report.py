@@ -7,17 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from models.description import training_history
 from pipeline.reports.report_page import new_figure, save_figure
-
-
-def training_history(estimator) -> dict | None:
-    """Per-epoch history of a network, also inside a hybrid (its residual network)."""
-    for candidate in (estimator, getattr(estimator, "residual_", None)):
-        history = getattr(candidate, "history_", None)
-        if history:
-            return {"history": history, "best_epoch": getattr(candidate, "best_epoch_", None),
-                    "stop_reason": getattr(candidate, "stop_reason_", "")}
-    return None
 
 
 def plot_training(info: dict, path: Path) -> Path:
