@@ -32,15 +32,12 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": Param((str, os.PathLike, "pandas.DataFrame"), "circular-test table, CSV or Parquet "
-                  "(docs/circle.md)", flag="FILE"),
+    "data": Param((str, os.PathLike, "pandas.DataFrame"), flag="FILE"),
     "out": Param((str, os.PathLike, None), "output folder: a polar plot per circle, "
                  "circles.csv, circles.html", metavar="DIR", output="folder"),
-    "tolerance_um": Param((None, Interval(Real, 0, None, closed="neither")), "width of the "
-                          "tolerance band drawn in the plots [um]", flag="--tolerance",
-                          metavar="UM"),
-    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
-                   "record each axis's backlash in (docs/fleet.md)", metavar="STORE"),
+    "tolerance_um": Param((None, Interval(Real, 0, None, closed="neither")),
+                          flag="--tolerance", metavar="UM"),
+    "store": Param((str, os.PathLike, None), metavar="STORE"),
 }
 
 # JSON keys of the diagnosis: (key, model term of the first axis, of the second) or (key, term).
@@ -303,15 +300,15 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     Parameters
     ----------
     data : str, path-like or DataFrame
-        A circular-test table (SCHEMA.md section 11), CSV or Parquet, or a frame of it.
+        A circular-test table, CSV or Parquet (SCHEMA.md section 11, docs/circle.md).
     tolerance_um : float, optional
         Width of the tolerance band drawn in the polar plots [um] (e.g. the G a machine's
         acceptance allows); not drawn when not given.
     store : str or path-like, optional
-        A fleet store (folder or ``postgresql://`` URL) to record each diagnosed circle's
-        backlash in: one ``ballbar`` record per axis of its plane, dated by the earliest
-        ``started_at`` of its runs (``pipeline.store.records.ballbar_records``); the same
-        circles again add nothing.
+        A fleet store (folder or ``postgresql://`` URL; docs/fleet.md) to record each
+        diagnosed circle's backlash in: one ``ballbar`` record per axis of its plane, dated by
+        the earliest ``started_at`` of its runs (``pipeline.store.records.ballbar_records``);
+        the same circles again add nothing.
 
     Returns
     -------

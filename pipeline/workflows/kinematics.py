@@ -38,20 +38,11 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": Param((*_PATHS, "pandas.DataFrame"), "probing table, CSV or Parquet (SCHEMA "
-                  "section 13, docs/kinematics.md)", flag="PROBES"),
-    "at": Param((*_PATHS, "pandas.DataFrame", None), "workpiece points and angles (x_mm, y_mm, "
-                "z_mm, a_deg or b_deg, c_deg) to predict the error field at: field.csv in "
-                "--out", metavar="POINTS.csv"),
-    "workspace_mm": Param((Interval(Real, 0, 5000, closed="neither"),), "half width of the "
-                          "workpiece cube of the report's tables and field plots: x, y in "
-                          "[-W, W], z in [0, W] [mm]", metavar="MM"),
-    "one_sphere": Param(("boolean",), "accept a machine probed on one sphere: its errors are "
-                        "identified, but nothing checks that the table moves as one rigid body "
-                        "(refused without it)"),
-    "controller": Param((None, StrOptions(set(ROTARY_BACKLASH))), "write each rotary axis's "
-                        "play as that controller's backlash parameter (in --out)",
-                        choices=ROTARY_BACKLASH),
+    "data": Param((*_PATHS, "pandas.DataFrame"), flag="PROBES"),
+    "at": Param((*_PATHS, "pandas.DataFrame", None), metavar="POINTS.csv"),
+    "workspace_mm": Param((Interval(Real, 0, 5000, closed="neither"),), metavar="MM"),
+    "one_sphere": Param(("boolean",)),
+    "controller": Param((None, StrOptions(set(ROTARY_BACKLASH))), choices=ROTARY_BACKLASH),
     "out": Param((*_PATHS, None), "folder for kinematics.json, errors.csv, field.csv (with "
                  "--at), kinematics.html and its plots", metavar="DIR", output="folder"),
     "store": Param((*_PATHS, None), "fleet store (folder or postgresql:// URL) to record each "
@@ -202,21 +193,23 @@ def kinematics(data, *, at=None, workspace_mm: float = 200.0, one_sphere: bool =
     Parameters
     ----------
     data : str, path-like or DataFrame
-        A probing table (SCHEMA.md section 13), CSV or Parquet, or a frame of it.
+        A probing table, CSV or Parquet (SCHEMA.md section 13, docs/kinematics.md).
     at : str, path-like or DataFrame, optional
         Workpiece points (``x_mm``, ``y_mm``, ``z_mm`` in the table frame) and angles
-        (``a_deg`` or ``b_deg``, ``c_deg``) [mm, deg]: the error field is predicted there for
-        every machine (``field``; ``field.csv`` in ``out``).
+        (``a_deg`` or ``b_deg``, ``c_deg``) [mm, deg], CSV or Parquet: the error field is
+        predicted there for every machine (the result's ``field``, ``field.csv`` in the
+        output folder).
     workspace_mm : float
-        Half width W of the workpiece cube (x, y in [-W, W], z in [0, W]) over which seed
-        003's Tables 4-5 (smallest and largest comprehensive error) are taken [mm].
+        Half width W of the workpiece cube (x, y in [-W, W], z in [0, W]) [mm] over which the
+        report's tables (seed 003's Tables 4-5: smallest and largest comprehensive error) and
+        field plots are taken.
     one_sphere : bool
         Accept a machine probed on a single sphere (off the C axis) with a note: its 12
         errors are determined, but nothing checks that the table moves as one rigid body (a
-        second sphere at another radius and height does). Refused without it.
+        second sphere at another radius and height does); otherwise such a machine is refused.
     controller : {"siemens", "heidenhain"}, optional
-        Write each rotary axis's play as the controller's backlash machine parameter
-        (SINUMERIK MD32450, Heidenhain MP710) [deg].
+        Write each rotary axis's play [deg] as that controller's backlash machine parameter
+        (SINUMERIK MD32450, Heidenhain MP710), in the output folder.
 
     Returns
     -------

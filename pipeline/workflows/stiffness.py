@@ -32,18 +32,11 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": Param((str, os.PathLike, "pandas.DataFrame"), "loaded circular-test table (LDBB), "
-                  "CSV or Parquet (docs/stiffness.md)", flag="FILE"),
-    "at": Param((str, os.PathLike, "pandas.DataFrame", None), "points x_mm,y_mm,z_mm,fx_n,fy_n"
-                "[,fz_n] (CSV or Parquet) to predict the deflection at (deflection.csv)",
-                metavar="POINTS.csv"),
-    "ram_top_mm": Param((None, Interval(Real, None, None, closed="neither")), "z of the ram's "
-                        "zero extension [mm]: makes the cubic ram map (compliance growing with "
-                        "the cube of the extension) a candidate", flag="--ram-top",
+    "data": Param((str, os.PathLike, "pandas.DataFrame"), flag="FILE"),
+    "at": Param((str, os.PathLike, "pandas.DataFrame", None), metavar="POINTS.csv"),
+    "ram_top_mm": Param((None, Interval(Real, None, None, closed="neither")), flag="--ram-top",
                         metavar="MM"),
-    "form": Param((StrOptions(set(FORMS)),), "form of the stiffness map: auto (cross-"
-                  "validated) or one of constant, linear, cubic, quadratic", flag="--map",
-                  choices=FORMS),
+    "form": Param((StrOptions(set(FORMS)),), flag="--map", choices=FORMS),
     "out": Param((str, os.PathLike, None), "output folder: stiffness.json, centres.csv and, "
                  "with --at, deflection.csv", metavar="DIR", output="folder"),
     "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
@@ -143,19 +136,20 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
     Parameters
     ----------
     data : str, path-like or DataFrame
-        A loaded circular-test table (SCHEMA.md section 12): the circle table of section 11
-        plus ``load_n`` and ``centre_x_mm, centre_y_mm, centre_z_mm``; at least two loads per
-        centre.
+        A loaded circular-test table (LDBB), CSV or Parquet (SCHEMA.md section 12,
+        docs/stiffness.md): the circle table of section 11 plus ``load_n`` and
+        ``centre_x_mm, centre_y_mm, centre_z_mm``; at least two loads per centre.
     at : str, path-like or DataFrame, optional
         Points ``x_mm, y_mm, z_mm, fx_n, fy_n[, fz_n]`` (and ``machine_id`` when the file holds
-        several machines) to predict the deflection at [mm, N].
+        several machines), CSV or Parquet, to predict the deflection at [mm, N]
+        (``deflection.csv`` in the output folder).
     ram_top_mm : float, optional
         z of the ram's zero extension [mm] (the top of its travel): the cubic map, compliance
-        growing with the cube of the ram's extension ``ram_top_mm - z``, is a candidate.
+        growing with the cube of the ram's extension below this z, is a candidate.
     form : str
-        'auto': the map's form by leave-one-centre-out cross-validation; or one of
-        'constant', 'linear', 'cubic', 'quadratic' (falls back, with a note, when the centres
-        cannot carry it).
+        Form of the stiffness map: ``auto`` (chosen by leave-one-centre-out cross-validation)
+        or one of ``constant``, ``linear``, ``cubic``, ``quadratic`` (falls back, with a note,
+        when the centres cannot carry it).
 
     Returns
     -------

@@ -52,19 +52,11 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "seed": Param(SEED, "random seed of the measurement noise"),
-    "targets": Param((Interval(Integral, 5, 101, closed="both"),), "targets along each axis and "
-                     "diagonal, 5 to 101 (default 11, as the paper)"),
-    "radius_mm": Param((Interval(Real, 0, 500, closed="right"),), "radius of the circular "
-                       "tests in circles.csv [mm]", metavar="MM"),
-    "path": Param((str, os.PathLike, "pandas.DataFrame", None), "tool path with forces: "
-                  "x_mm,y_mm,z_mm,fx_n,fy_n[,fz_n] (CSV or Parquet); reports the geometric, "
-                  "backlash and load-induced error at each point (path.csv)",
-                  metavar="PATH.csv"),
-    "stiffness": Param((str, os.PathLike, None), "stiffness for the path's load: loaded "
-                       "circles (LDBB, CSV or Parquet) or a stiffness.json written by backlash "
-                       "stiffness --out (default: the twin's own loaded circles)",
-                       metavar="FILE"),
+    "seed": Param(SEED),
+    "targets": Param((Interval(Integral, 5, 101, closed="both"),)),
+    "radius_mm": Param((Interval(Real, 0, 500, closed="right"),), metavar="MM"),
+    "path": Param((str, os.PathLike, "pandas.DataFrame", None), metavar="PATH.csv"),
+    "stiffness": Param((str, os.PathLike, None), metavar="FILE"),
     "out": Param((str, os.PathLike, None), "folder for volumetric.json, diagonals.csv (every "
                  "reading), circles.csv (ISO 230-4, SCHEMA section 11) and, with --path, "
                  "path.csv", output="folder"),
@@ -158,20 +150,22 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0, pa
     seed : int
         Random seed of the measurement noise: the same seed gives the same numbers.
     targets : int
-        Targets along each axis and each diagonal (the paper: 11).
+        Targets along each axis and each diagonal, 5 to 101 (the paper used 11).
     radius_mm : float
-        Radius of the circular tests written beside [mm].
+        Radius of the circular tests written beside (``circles.csv``) [mm].
     path : str, path-like or DataFrame, optional
         A tool path with its quasi-static forces, ``x_mm, y_mm, z_mm, fx_n, fy_n[, fz_n]`` [mm,
-        N], in the order the tool runs it: the error at each point in three parts, each from
-        the model the twin's tests gave: geometric (the Abbe-aware identification), backlash
-        (the play the circles' diagnosis found, by the direction each axis last moved) and
-        load (the stiffness map of loaded circles) [Szipka2015]_.
+        N], CSV or Parquet, in the order the tool runs it: the error at each point
+        (``path.csv``) in three parts, each from the model the twin's tests gave: geometric
+        (the Abbe-aware identification), backlash (the play the circles' diagnosis found, by
+        the direction each axis last moved) and load (the stiffness map of loaded circles)
+        [Szipka2015]_.
     stiffness : str or path-like, optional
-        Where the load part's stiffness comes from: a loaded-circle table (SCHEMA.md section
-        12; its map's cubic ram term extends below the top of the twin's Z travel) or a
-        ``stiffness.json`` written by ``backlash stiffness --out``; default: the twin's own
-        loaded circles (27 centres, 100, 300 and 500 N). Only with ``path``.
+        Where the load part's stiffness comes from: a loaded-circle table (LDBB, CSV or
+        Parquet, SCHEMA.md section 12; its map's cubic ram term extends below the top of the
+        twin's Z travel) or a ``stiffness.json`` written by ``backlash stiffness --out``;
+        default: the twin's own loaded circles (27 centres, 100, 300 and 500 N). Used only
+        with a tool path.
 
     Returns
     -------
