@@ -27,7 +27,8 @@ the first visit:
   ``1 - alpha``) crosses it: early end = upper band, late end = lower band (null when the lower
   band never reaches the threshold within ``horizon_months``). The crossing is null when the
   last visit is already at or above the threshold (an ``above_threshold`` alert fires instead)
-  or when the Theil-Sen slope is not positive.
+  or when the Theil-Sen slope is not positive, or so small that the line reaches the threshold
+  more than ``MAX_CROSSING_MONTHS`` (100 years) after the last visit.
 
 Alert policy (each alert a dict with ``kind`` and ``message``): ``above_threshold``,
 ``crossing_soon`` (early end of the crossing interval within ``warn_months`` of the last
@@ -84,8 +85,12 @@ import pandas as pd
 from scipy import stats
 
 from features.visits import DAYS_PER_MONTH, SERIES_KEYS, months_between
+from models.condition.settings import DEFAULTS
 
 MIN_VISITS_FOR_SCATTER = 7
+# A crossing date further than this past the last visit [month] is no date: a line that flat
+# does not reach the limit in the life of a machine (and pandas holds no date past 2262).
+MAX_CROSSING_MONTHS = 1200.0
 # Residuals' worth of weight the fleet's pooled scatter has in each series' own.
 SCATTER_PRIOR_RESIDUALS = 10.0
 # The fleet's pooled scatter needs this many residuals, from two series or more.
@@ -338,12 +343,17 @@ def crossing_forecast(t_month, y_um, sigma_um, threshold_um: float, *, slope: fl
     yhat(t) ± q s sqrt(1 + 1/m + (t - t̄)²/Sxx), reach it (q Student t with m-2 degrees of
     freedom and s the residual scatter; with fewer than 4 visits q is normal and s the mean
     per-visit sigma). Searched up to ``horizon_months`` after the last visit on a daily grid.
-    Returns (t_cross, t_early, t_late); None where undefined (see module docstring).
+    Returns (t_cross, t_early, t_late); None where undefined (see module docstring). A line
+    so flat that it reaches the threshold more than ``MAX_CROSSING_MONTHS`` after the last
+    visit gives no crossing date (as a line not growing; no calendar holds that date), its
+    interval as the band gives it.
     """
     t, y = np.asarray(t_month, float), np.asarray(y_um, float)
     if y[-1] >= threshold_um or not slope > 0:
         return None, None, None
     t_cross = (threshold_um - intercept) / slope
+    if not t_cross - t[-1] <= MAX_CROSSING_MONTHS:
+        t_cross = None
     grid = t[-1] + np.arange(0.0, horizon_months * DAYS_PER_MONTH + 1.0) / DAYS_PER_MONTH
     _, lo, hi = prediction_band(t, y, sigma_um, grid, alpha)
 
@@ -351,7 +361,7 @@ def crossing_forecast(t_month, y_um, sigma_um, threshold_um: float, *, slope: fl
         return float(grid[np.argmax(mask)]) if mask.any() else None
 
     t_early, t_late = first(hi >= threshold_um), first(lo >= threshold_um)
-    return float(max(t_cross, t[-1])), t_early, t_late
+    return None if t_cross is None else float(max(t_cross, t[-1])), t_early, t_late
 
 
 def prediction_band(t_month, y_um, sigma_um, at_month, alpha: float = 0.05):
@@ -543,8 +553,6 @@ class DriftSeries:
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
     # the fleet's pooled scatter and backtests' model error (``forecast_terms``); None alone
     terms: ForecastTerms | None = None
-    # the forecast as a report draws it (``forecast_curve``), set by the workflow
-    curve: dict | None = None
 
     @property
     def unit(self) -> str:
@@ -624,14 +632,8 @@ class DriftSeries:
                 "forecast_backtests": terms.backtests,
                 "forecast_note": self.forecast_note}
 
-    @property
-    def forecast_end_month(self) -> float:
-        """How far ahead [month] ``drift`` draws the forecast: the next visit, or the end of
-        the crossing interval (its date without one) when later."""
-        late = self.crossing[2] if self.crossing[2] is not None else self.crossing[0]
-        return max(self.next_visit_month, late if late is not None else -np.inf)
-
-    def forecast_curve(self, end_month: float, steps: int = 40) -> dict | None:
+    def forecast_curve(self, end_month: float,
+                       steps: int = DEFAULTS.forecast_steps) -> dict | None:
         """The forecast from the last visit to ``end_month`` [month]: ``t_month``, ``fit``,
         ``measurement_low``/``_high`` and ``lost_motion_low``/``_high`` [um]; None without
         an interval."""
@@ -645,7 +647,9 @@ class DriftSeries:
                 "lost_motion_low": f["lost_motion_low_um"],
                 "lost_motion_high": f["lost_motion_high_um"]}
 
-    def to_json(self) -> dict:
+    def to_json(self, forecast: dict | None = None) -> dict:
+        """The series as ``drift --json`` carries it; ``forecast`` the forecast of the next
+        visit when computed already (``forecast_json``)."""
         v = self.visits
         return {
             "machine_id": self.machine_id, "axis": self.axis, "unit": self.unit,
@@ -665,7 +669,7 @@ class DriftSeries:
             "threshold_crossing": self.date_at(self.crossing[0]),
             "crossing_interval": [self.date_at(self.crossing[1]), self.date_at(self.crossing[2])],
             "alerts": self.alerts,
-            **self.forecast_json(),
+            **(self.forecast_json() if forecast is None else forecast),
             **(self._uncertainty_json() if self.coverage_factor is not None else {}),
             **({"model": self.model} if self.model is not None else {}),
         }
@@ -684,9 +688,9 @@ class DriftSeries:
 
 
 def analyse_series(visits: pd.DataFrame, *, threshold_um: float | None = None,
-                   alpha: float = 0.05, min_jump_sigma: float = 3.0,
-                   penalty: float | None = None, warn_months: float = 6.0,
-                   horizon_months: float = 120.0,
+                   alpha: float = DEFAULTS.alpha, min_jump_sigma: float = DEFAULTS.min_jump_sigma,
+                   penalty: float | None = None, warn_months: float = DEFAULTS.warn_months,
+                   horizon_months: float = DEFAULTS.crossing_horizon_months,
                    coverage_factor: float | None = None,
                    fleet_scatter: float | None = None) -> DriftSeries:
     """Change points, trend since the last one, threshold forecast and alerts of one series.

@@ -23,6 +23,7 @@ def drift_page(tmp_path_factory) -> Path:
     import pandas as pd
 
     from features.visits import DAYS_PER_MONTH
+    from models.condition.maintenance import axis_forecast
     from models.drift import analyse_series
     from pipeline.reports.drift_report import write_drift_report
 
@@ -37,7 +38,7 @@ def drift_page(tmp_path_factory) -> Path:
     series = [analyse_series(visits, threshold_um=6.0)]  # crossing within months: alert
     assert [a["kind"] for a in series[0].alerts] == ["crossing_soon"]
     out = tmp_path_factory.mktemp("drift_report")
-    return write_drift_report(series, out, source="synthetic")["html"]
+    return write_drift_report([axis_forecast(s) for s in series], out, source="synthetic")["html"]
 
 
 def test_drift_report_screenshot_shows_the_figure(drift_page, tmp_path):

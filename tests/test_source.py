@@ -188,6 +188,43 @@ def test_a_source_reads_the_selection_or_every_axis_and_knows_its_store(store, t
     assert Source.of(source) is source
 
 
+def test_fleet_and_drift_read_each_record_once_through_their_source(store, whole,
+                                                                      monkeypatch):
+    """No second store reader: the store's records are read through the Source, each kind
+    once (the fleet's probing limits, forecasts, compensations, voids, trace and ballbar
+    evidence alike), and each axis's offsets to the laser are found once; the results stay
+    those of the store."""
+    from pipeline.steps import evidence
+    from pipeline.store import records
+
+    reads, offsets = [], []
+    read_records, axis_offsets = records.read_records, evidence.axis_offsets
+    monkeypatch.setattr(records, "read_records",
+                        lambda s, kind: reads.append(kind) or read_records(s, kind))
+    monkeypatch.setattr(evidence, "axis_offsets",
+                        lambda v, e: offsets.append(1) or axis_offsets(v, e))
+    assert fleet_axes(_quiet("fleet", str(store), as_of=AS_OF)) == whole["fleet"]
+    assert sorted(reads) == sorted(set(reads)) and "probing" in reads and "trace" in reads
+    assert len(offsets) == len(whole["fleet"])
+    reads.clear()
+    offsets.clear()
+    assert drift_axes(_quiet("drift", str(store), as_of=AS_OF, evidence="all")) == whole[
+        "drift"]
+    assert sorted(reads) == ["ballbar", "trace"] and len(offsets) == len(whole["fleet"])
+
+
+def test_a_source_reads_a_given_store_s_records_or_none(store, tmp_path):
+    source = Source(str(store))
+    assert source.records_store() == str(store) and source.records_store(tmp_path) is None
+    found = source.records(("compensation", "voided"))
+    assert set(found) == {"compensation", "voided"} and ("M1", "X") in found["compensation"]
+    assert source.records(("compensation",))["compensation"] is found["compensation"]
+    path = tmp_path / "some.csv"
+    bl.write(source.readings(), path)
+    assert Source(str(path)).records() == {} and Source(str(path)).live() == []
+    assert Source(str(path)).records(store=str(store))["voided"] == found["voided"]
+
+
 def test_the_dates_of_a_selection_still_choose_the_tests_of_every_axis(store):
     """``since``/``until`` select tests (the fleet is computed within them), machine and axis
     select the axes reported."""

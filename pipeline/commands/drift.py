@@ -21,23 +21,24 @@ def run(args: argparse.Namespace) -> int:
     from pipeline.commands.data import run_job
 
     result = run_job("drift", args)  # without --out or --json: the table alone, as fleet
-    print_summary(result.series, result.files.get("html"), file=sys.stderr)
+    print_summary(result.forecasts, result.files.get("html"), file=sys.stderr)
     if args.json:
         print(dumps(result.to_json()))
     return ALERT_EXIT if result.alerts else 0
 
 
-def print_summary(series, html_path, file) -> None:
-    """One line per axis (with a budget also the last visit's U), its alerts and the changes
-    within the measurement uncertainty."""
+def print_summary(forecasts, html_path, file) -> None:
+    """One line per analysed axis (``models.condition.maintenance.AxisForecast``; with a
+    budget also the last visit's U), its alerts and the changes within the measurement
+    uncertainty."""
     from models.drift import WITHIN_KINDS
 
-    budget = any(s.coverage_factor is not None for s in series)
+    budget = any(f.series.coverage_factor is not None for f in forecasts)
     print(f"{'machine':<12} {'axis':<4} {'unit':<6} {'visits':>6} {'backlash':>9} "
           + (f"{'U':>6} " if budget else "")
           + f"{'target':>6} {'slope /mo':>12} {'changes':>7}  crossing", file=file)
-    for s in series:
-        j = s.to_json()
+    for f in forecasts:
+        s, j = f.series, f.to_json()
         slope = j["slope_um_per_month"]
         kind = (j.get("target_kind") or ["-"])[-1]
         u = f"{j['backlash_U_um'][-1]:>6.2f} " if budget else ""

@@ -6,9 +6,12 @@ Each panel shows the axis's backlash at each visit (``features.visits.visit_back
 ``backlash_um``, its lost motion by the axis's measuring system) with its ±2 sigma bars (and,
 with an uncertainty budget, a band of ± its expanded uncertainty ``backlash_U_um``), the
 Theil-Sen trend since the last change point, the change points (dashed), the threshold, the crossing
-interval and the forecast interval of the next measurement (``DriftSeries.curve``, computed by
-the workflow; the page's table gives both intervals of the next visit: the measurement's and
-the axis's lost motion's).
+interval and the forecast interval of the next measurement; the page's table gives both
+intervals of the next visit: the measurement's and the axis's lost motion's.
+
+The report draws, it computes nothing: every line, band and date comes from the maintenance
+analysis of each axis (``models.condition.maintenance.AxisForecast``: trend line, band and
+crossing over the horizon it computed, the next visit's forecast), on its one time axis.
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ import numpy as np
 import pandas as pd
 
 from features.readings import fileio
-from features.visits import DAYS_PER_MONTH
 from models.drift import WITHIN_KINDS
 from pipeline.reports.fleet_charts import unit_label
 from pipeline.reports.report_page import new_figure, save_figure, write_page
@@ -28,79 +30,73 @@ from pipeline.reports.report_page import new_figure, save_figure, write_page
 FILES = {"png": "drift.png", "html": "drift.html", "json": "drift.json"}
 
 
-def write_drift_report(series, out_dir, *, source: str = "", notes=(),
+def write_drift_report(forecasts, out_dir, *, source: str = "", notes=(),
                        as_of: str | None = None) -> dict:
-    """Write PNG, HTML and JSON for analysed series (``models.drift.DriftSeries``)."""
+    """Write PNG, HTML and JSON of the analysed axes (``models.condition.maintenance``'s
+    ``AxisForecast``: the series and what the analysis computed of it)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {k: out / name for k, name in FILES.items()}
-    plot_series(series, paths["png"])
-    write_page(paths["html"], TITLE, render_body(series, source=source, notes=notes,
+    plot_series(forecasts, paths["png"])
+    write_page(paths["html"], TITLE, render_body(forecasts, source=source, notes=notes,
                                                  as_of=as_of))
     fileio.write_json(paths["json"], fileio.clean_nan(
-        {"source": source, "as_of": as_of, "series": [s.to_json() for s in series]}))
+        {"source": source, "as_of": as_of, "series": [f.to_json() for f in forecasts]}))
     return paths
 
 
-def plot_series(series, path) -> None:
-    """One panel per series: visits, trend, change points, threshold and forecast band."""
+def plot_series(forecasts, path) -> None:
+    """One panel per axis: visits, trend, change points, threshold and forecast band."""
     # Fixed margins draw the figure once (constrained layout draws it twice), and one legend
     # serves every panel: text is most of a fleet's drawing time.
-    fig, axes = new_figure(8, 3.2 * len(series), nrows=len(series), ncols=1, squeeze=False,
-                           fixed_margins=True, gridspec_kw={"hspace": 0.55})
-    for i, (ax, s) in enumerate(zip(axes[:, 0], series)):
-        _panel(ax, s)
+    fig, axes = new_figure(8, 3.2 * len(forecasts), nrows=len(forecasts), ncols=1,
+                           squeeze=False, fixed_margins=True, gridspec_kw={"hspace": 0.55})
+    for i, (ax, f) in enumerate(zip(axes[:, 0], forecasts)):
+        _panel(ax, f)
         if i == 0:
             ax.legend(fontsize=7, loc="upper left")
     save_figure(fig, path)
 
 
-def _panel(ax, s) -> None:
-    v = s.visits
-    to_date = s.origin.tz_localize(None) if s.origin.tzinfo else s.origin
+def _naive(times):
+    """UTC times as matplotlib draws them (without a time zone)."""
+    return pd.DatetimeIndex(pd.to_datetime(times, utc=True)).tz_localize(None)
 
-    def dates(t_month):
-        return to_date + pd.to_timedelta(np.asarray(t_month) * DAYS_PER_MONTH, unit="D")
 
+def _panel(ax, f) -> None:
+    s, v = f.series, f.series.visits
     if "backlash_U_um" in v:  # a budget was given: the expanded uncertainty of each visit
-        ax.fill_between(dates(v["t_month"]), v["backlash_um"] - v["backlash_U_um"],
+        ax.fill_between(_naive(v["date"]), v["backlash_um"] - v["backlash_U_um"],
                         v["backlash_um"] + v["backlash_U_um"], color="C0", alpha=0.12, lw=0,
                         label=f"± U, measurement uncertainty (k = {s.coverage_factor:g})")
     laser = v[v["source"] == "laser"] if "source" in v else v
-    ax.errorbar(dates(laser["t_month"]), laser["backlash_um"], yerr=2 * laser["sigma_um"],
+    ax.errorbar(_naive(laser["date"]), laser["backlash_um"], yerr=2 * laser["sigma_um"],
                 fmt="o", ms=4, capsize=2, color="C0",
                 label=f"backlash per visit, {_kinds(laser)} (±2σ)")
     for source, (marker, colour) in EVIDENCE_MARKERS.items():  # drift --evidence
         mine = v[v["source"] == source] if "source" in v else v.iloc[:0]
         if len(mine):
-            ax.errorbar(dates(mine["t_month"]), mine["backlash_um"], yerr=2 * mine["sigma_um"],
+            ax.errorbar(_naive(mine["date"]), mine["backlash_um"], yerr=2 * mine["sigma_um"],
                         fmt=marker, ms=4, mfc="none", capsize=2, color=colour,
                         label=f"{source}, shifted by its offset to the laser (±2σ)")
-    seg = v.iloc[s.segment_start:]
     tr = s.trend
-    t_end = float(v["t_month"].iloc[-1])
-    if s.crossing[0] is not None:
-        t_end = max(t_end, s.crossing[2] or s.crossing[0])
-    if s.curve is not None:
-        t_end = max(t_end, float(s.curve["t_month"][-1]))
-    if np.isfinite(tr.get("slope", np.nan)):
-        tt = np.linspace(seg["t_month"].iloc[0], t_end, 50)
-        ax.plot(dates(tt), tr["intercept"] + tr["slope"] * tt, color="C1",
+    if f.trend_line is not None:
+        ax.plot(_naive(f.trend_line["at"]), f.trend_line["fit_um"], color="C1",
                 label="Theil-Sen trend since the last change point")
-    if s.curve is not None:  # the next measurement's interval (models.drift)
-        ahead = s.curve["t_month"]
-        ax.fill_between(dates(ahead), s.curve["measurement_low"], s.curve["measurement_high"],
-                        color="C1", alpha=0.2, lw=0,
+    if f.band is not None:  # the next measurement's interval (models.drift)
+        ax.fill_between(_naive(f.band["at"]), f.band["measurement_low_um"],
+                        f.band["measurement_high_um"], color="C1", alpha=0.2, lw=0,
                         label=f"{100 * (1 - s.alpha):g} % forecast of the next measurement")
-    for c in s.change_points:
-        ax.axvline(dates(v["t_month"].iloc[c["index"]]), ls="--", color="0.4", lw=1)
+    for when in _naive(f.change_dates):
+        ax.axvline(when, ls="--", color="0.4", lw=1)
     unit = unit_label(s.unit)
     if s.threshold_um is not None:
         ax.axhline(s.threshold_um, color="C3", lw=1, label=f"threshold {s.threshold_um:g} {unit}")
-        if s.crossing[1] is not None:
-            hi = s.crossing[2] if s.crossing[2] is not None else t_end
-            ax.axvspan(dates(s.crossing[1]), dates(max(hi, s.crossing[1])), color="C3",
-                       alpha=0.15, label="crossing interval")
+        _, early, late = f.crossing
+        if early is not None:
+            late = max(late if late is not None else f.horizon_end, early)
+            ax.axvspan(*_naive([early, late]), color="C3", alpha=0.15,
+                       label="crossing interval")
     slope = tr.get("slope", np.nan)
     ax.set_title(f"{s.machine_id} axis {s.axis}"
                  + (f", trend {slope:+.3f} {unit}/month" if np.isfinite(slope) else "")
@@ -167,7 +163,8 @@ def _visit_row(r: dict) -> str:
 
 
 def _uncertainty_text(series) -> str:
-    """What U means, when a budget was given (else nothing)."""
+    """What U means, when a budget was given (else nothing); ``series`` the analysed
+    ``models.drift.DriftSeries``."""
     k = next((s.coverage_factor for s in series if s.coverage_factor is not None), None)
     if k is None:
         return ""
@@ -179,11 +176,12 @@ def _uncertainty_text(series) -> str:
             "measurement uncertainty.</p>")
 
 
-def render_body(series, *, source: str = "", notes=(), as_of: str | None = None) -> str:
+def render_body(forecasts, *, source: str = "", notes=(), as_of: str | None = None) -> str:
     """The report body: a summary table, the figure, and per-series visit tables."""
+    series = [f.series for f in forecasts]
     rows = []
-    for s in series:
-        j = s.to_json()
+    for f, s in zip(forecasts, series):
+        j = f.to_json()
         rows.append(
             f"<tr><td>{html.escape(s.machine_id)}</td><td>{html.escape(s.axis)}</td>"
             f"<td>{unit_label(s.unit)}</td>"

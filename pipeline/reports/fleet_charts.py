@@ -10,7 +10,9 @@ script). The markup carries no ``xmlns`` (an inline ``<svg>`` in HTML does not n
 page holds no URL at all.
 
 Every chart is a ``Plot``: data ranges mapped onto a pixel box, layers added in drawing order
-(bands, lines, points with error bars, reference lines), axes with ticks, a legend.
+(bands, lines, points with error bars, reference lines), axes with ticks, a legend. A chart
+over time counts days from an axis's first visit (``days_since``: the analysis's UTC times
+mapped onto the chart's axis); the charts draw what they are given and compute nothing else.
 """
 
 from __future__ import annotations
@@ -26,6 +28,11 @@ BLUE, ORANGE, GREEN, RED, GREY = "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#7
 PURPLE = "#9467bd"
 FONT = "font-family='system-ui, sans-serif'"
 CHAR_PX = 6.6  # mean width of a character of the 11 px labels [px], for the legend layout
+
+
+def days_since(origin, times) -> np.ndarray:
+    """The chart's x of each of ``times`` (datetimes): days [d] since ``origin``."""
+    return np.array([(t - origin).total_seconds() for t in times], float) / 86400.0
 
 
 def unit_label(unit: str) -> str:

@@ -13,7 +13,10 @@ Files written into the output folder (``write_site``), all or nothing:
 - ``fleet.json``: what ``backlash fleet --json`` prints.
 
 Pages use the product's one page shell (``pipeline.reports.report_page.page``); charts are inline SVG
-(``pipeline.reports.fleet_charts``). The pages are built in memory, written into a temporary folder
+(``pipeline.reports.fleet_charts``). The pages draw what the workflow computed: each axis's
+analysis (``AxisView.forecast``: trend line, forecast band and crossing over the horizon the
+analysis computed, ``models.condition.maintenance``) and its schedule; they compute nothing.
+The pages are built in memory, written into a temporary folder
 beside the output folder (``features.readings.fileio.temp_folder``) and renamed into place: a
 new folder appears whole, files of an existing one are replaced one by one only after every
 file was written.
@@ -110,16 +113,39 @@ def _fmt(value, fmt: str = ".3f") -> str:
 
 
 def _history(view) -> dict:
-    """The series as the charts take it: days since the first visit, values, change days."""
-    from features.visits import DAYS_PER_MONTH
-
-    v, b = view.series.visits, view.basis  # the change points of the series the trend uses
-    days = v["t_month"].to_numpy(float) * DAYS_PER_MONTH
-    shift = (b.origin - view.series.origin).total_seconds() / 86400.0
-    b_days = b.visits["t_month"].to_numpy(float) * DAYS_PER_MONTH + shift
-    return {"days": days, "backlash_um": v["backlash_um"].to_numpy(float),
+    """The series as the charts take it: days since the first visit, values, change days
+    (the change points of the analysis the trend comes from)."""
+    v, origin = view.series.visits, view.series.origin
+    return {"days": fleet_charts.days_since(origin, v["date"]),
+            "backlash_um": v["backlash_um"].to_numpy(float),
             "sigma_um": v["sigma_um"].to_numpy(float),
-            "change_days": [float(b_days[c["index"]]) for c in b.change_points]}
+            "change_days": list(fleet_charts.days_since(origin, view.forecast.change_dates))}
+
+
+def _band(view) -> dict | None:
+    """The forecast band the analysis computed as the charts take it (days since the first
+    visit, the next measurement's interval), or None."""
+    band = view.forecast.band
+    if band is None:
+        return None
+    return {"days": fleet_charts.days_since(view.series.origin, band["at"]),
+            "fit": band["fit_um"], "low": band["measurement_low_um"],
+            "high": band["measurement_high_um"]}
+
+
+def _trend(view) -> dict | None:
+    """The analysis's trend line as the chart takes it (days since the first visit), or None."""
+    line = view.forecast.trend_line
+    if line is None:
+        return None
+    return {"days": fleet_charts.days_since(view.series.origin, line["at"]),
+            "fit": line["fit_um"]}
+
+
+def _crossing_days(view) -> tuple:
+    """The crossing (date, early, late) in days since the first visit, None where unknown."""
+    return tuple(None if t is None else float(fleet_charts.days_since(view.series.origin, [t])[0])
+                 for t in view.forecast.crossing)
 
 
 def _crossing_text(j: dict) -> str:
@@ -195,7 +221,7 @@ def _index_row(rank: int, view) -> str:
     j = view.to_json()
     unit = _unit(view)
     threshold = view.series.threshold_um
-    spark = fleet_charts.sparkline(_history(view), view.forecast, threshold_um=threshold,
+    spark = fleet_charts.sparkline(_history(view), _band(view), threshold_um=threshold,
                                    alert=bool(view.alerts), recorded=recorded_point(view, j),
                                    label=f"{view.machine_id} {view.axis} backlash history")
     slope = (f"{_fmt(j['slope_um_per_month'], '+.3f')}<br><small>{_interval(j)}</small>"
@@ -354,8 +380,8 @@ def _alerts(view) -> str:
 def _history_chart(view, j: dict) -> str:
     origin = view.series.visits["date"].iloc[0].date()
     return fleet_charts.history_chart(
-        _history(view), view.forecast, view.trend_line, origin, unit=view.series.unit,
-        threshold_um=view.series.threshold_um, crossing=view.crossing_days,
+        _history(view), _band(view), _trend(view), origin, unit=view.series.unit,
+        threshold_um=view.series.threshold_um, crossing=_crossing_days(view),
         due_days=float((view.next_visit_due - origin).days), recorded=recorded_point(view, j),
         label=f"{view.machine_id} {view.axis}: backlash per visit and forecast",
         evidence=evidence_marks(view, origin)) + _evidence_text(view)

@@ -1,6 +1,8 @@
 """The evidence a fleet store holds beside an axis's laser visits: its trace days and ballbar
-runs (``pipeline.store.records``), their offsets to the laser's definition
-(``models.evidence``) and the series of all sources that ``drift`` analyses.
+runs (``pipeline.store.records``, read through ``pipeline.steps.source.Source.records``), their
+offsets to the laser's definition (``models.evidence``), computed once per machine axis
+(``axes_evidence``), and the series of all sources that ``drift`` analyses and ``fleet``
+forecasts with.
 
 A day measured twice (recorded again from another file, or re-measured) counts once: the
 latest recorded trace record per day, the latest ballbar record per day, plane, visit,
@@ -26,7 +28,7 @@ KEYS = {"trace": ("lost_motion_um", "lost_motion_u_um"),
 
 def evidence_frame(records: dict, key: tuple, as_of: dt.date | None = None) -> pd.DataFrame:
     """The trace days and ballbar runs of machine axis ``key`` in ``records`` (what
-    ``pipeline.workflows.fleet.store_records`` read), up to the end of day ``as_of``:
+    ``pipeline.steps.source.Source.records`` read), up to the end of day ``as_of``:
     ``EVIDENCE_COLUMNS`` plus ``plane`` (ballbar), sorted by source and date."""
     rows = []
     for source, (value, u) in KEYS.items():
@@ -109,20 +111,25 @@ def sources_of(evidence, parameter: str = "evidence") -> tuple[str, ...]:
     return tuple(s for s in SOURCES if s in names or s == "laser")
 
 
-def read_evidence(store) -> dict:
-    """The trace and ballbar records of a fleet store by kind and machine axis
-    (``pipeline.store.records.read_records``)."""
-    from pipeline.store import open_store
-    from pipeline.store.records import read_records
+def axes_evidence(visits: pd.DataFrame, records: dict, as_of=None) -> dict[tuple, tuple]:
+    """Per machine axis of ``visits`` (its laser visits, ``visit_backlash`` rows): its other
+    sources' points up to ``as_of`` (``evidence_frame``), their offsets to its laser visits and
+    the notes of sources without one (``axis_offsets``), computed once for every reader:
+    {(machine_id, axis): (frame, offsets, notes)}."""
+    from features.visits import SERIES_KEYS
 
-    opened = open_store(store, parameter="store")
-    return {kind: read_records(opened, kind) for kind in KEYS}
+    out = {}
+    for key, group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True):
+        key = tuple(map(str, key))
+        frame = evidence_frame(records, key, as_of)
+        out[key] = (frame, *axis_offsets(group, frame))
+    return out
 
 
 def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=None,
                   coverage_factor: float | None = None,
                   min_days: int = MIN_SHARED_DAYS,
-                  keeps=None) -> tuple[pd.DataFrame, dict, list]:
+                  keeps=None, evidence: dict | None = None) -> tuple[pd.DataFrame, dict, list]:
     """The laser visits of every machine axis with the points of the other ``sources``
     shifted onto the laser's definition (``models.evidence.combined``), the offsets per
     machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
@@ -130,21 +137,22 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
     (all of its uncertainty changes from day to day). A source sharing fewer than
     ``min_days`` days with the laser stays out of the axis's series, with a note; its offset
     is still returned. ``keeps(machine_id, axis)``: the axes whose notes are wanted (a
-    selection's; default all)."""
+    selection's; default all). ``evidence``: what ``axes_evidence`` found for ``visits``,
+    when computed already."""
     from features.visits import SERIES_KEYS
     from models.evidence import combined
 
+    evidence_of = axes_evidence(visits, records, as_of) if evidence is None else evidence
     frames, found_all, notes = [], {}, []
     for key, group in visits.groupby(list(SERIES_KEYS), sort=True, observed=True):
         key = tuple(map(str, key))
-        evidence = evidence_frame(records, key, as_of)
-        found, more = axis_offsets(group, evidence)
+        frame, found, more = evidence_of[key]
         few = {s: o["days_in_common"] for s, o in found.items()
                if o is not None and s in sources and o["days_in_common"] < min_days}
         if keeps is None or keeps(*key):
             notes += more + [few_days_note(key, s, n, min_days) for s, n in few.items()]
         found_all[key] = found
-        frames.append(combined(group, evidence, {
+        frames.append(combined(group, frame, {
             s: o for s, o in found.items() if o is not None and s not in few}, sources))
     out = pd.concat(frames, ignore_index=True)
     if coverage_factor is not None:

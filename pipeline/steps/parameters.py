@@ -267,3 +267,19 @@ def _shown(default) -> str:
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         return os.path.relpath(default, root)
     return repr(default)
+
+
+# --------------------------------------------------------------- drift and fleet
+# The one maintenance analysis drift and fleet share (models.condition.maintenance): the limits,
+# the day it is computed as of and the trend analysis, each in the axis's unit. Both jobs' tables
+# take the group whole; the meaning of each and its default are
+# models.condition.settings.MaintenanceSettings's, which both signatures take their defaults from.
+MAINTENANCE = {
+    "threshold_um": THRESHOLD_UM,
+    "threshold_arcsec": THRESHOLD_ARCSEC,
+    "limits": LIMITS,
+    "as_of": AS_OF,
+    "warn_months": WARN_MONTHS,
+    "alpha": ALPHA,
+    "min_jump_sigma": MIN_JUMP_SIGMA,
+}

@@ -126,18 +126,19 @@ def probing_frame(found: list[dict], as_of: dt.date | None = None
 
 
 def probing_views(records: dict, as_of: dt.date | None = None, *, keeps=None,
-                  laser=frozenset(), threshold_um: float | None = None,
-                  threshold_arcsec: float | None = None, limits: dict | None = None,
-                  **options) -> tuple[list[ProbingView], list[str]]:
+                  laser=frozenset(), settings=None) -> tuple[list[ProbingView], list[str]]:
     """A ``ProbingView`` per rotary axis with probing records in ``records`` (what
-    ``pipeline.workflows.fleet.store_records`` read) that ``keeps(machine_id, axis)`` keeps
+    ``pipeline.steps.source.Source.records`` read) that ``keeps(machine_id, axis)`` keeps
     (default all), alerting ones first, then by machine and axis; and the notes of records
-    left out. ``laser``: the (machine_id, axis) with laser visits in the view; the limit of
-    each axis is ``models.drift.limit_of``'s; ``options`` go to ``analyse_series`` (``alpha``,
-    ``min_jump_sigma``, ``warn_months``), and with ``as_of`` a crossing before it alerts
+    left out. ``laser``: the (machine_id, axis) with laser visits in the view; ``settings``
+    (``models.condition.settings.MaintenanceSettings``, default its defaults): the limits
+    (each axis's is ``models.drift.limit_of``'s) and the trend analysis
+    (``models.drift.analyse_series``); with ``as_of`` a crossing before it alerts
     ``limit_passed_unmeasured`` as on a laser series."""
+    from models.condition.settings import DEFAULTS
     from models.drift import analyse_series, limit_of, limit_passed_alert
 
+    settings = DEFAULTS if settings is None else settings
     views, notes = [], []
     for key, found in sorted((records.get("probing") or {}).items()):
         if keeps is not None and not keeps(*key):
@@ -146,27 +147,14 @@ def probing_views(records: dict, as_of: dt.date | None = None, *, keeps=None,
         notes += said
         if frame.empty:
             continue
-        series = analyse_series(frame, threshold_um=limit_of(
-            *key, threshold_um, threshold_arcsec, limits), **options)
+        series = analyse_series(frame, threshold_um=limit_of(*key, **settings.limits_of()),
+                                **settings.trend_options())
         passed = limit_passed_alert(series, as_of) if as_of is not None else None
         if passed is not None:
             series.alerts.append(passed)
         views.append(ProbingView(series, key in laser, kept))
     views.sort(key=lambda v: (not v.alerts, v.machine_id, v.axis))
     return views, notes
-
-
-def probed_axes(store) -> set[tuple[str, str]]:
-    """The (machine_id, axis) pairs with probing records in ``store`` (none for a file or a
-    frame): a limit of such an axis applies to its probing plays."""
-    import os
-
-    from pipeline.store import is_store, open_store
-    from pipeline.store.records import read_records
-
-    if not isinstance(store, (str, os.PathLike)) or not is_store(store):
-        return set()
-    return set(read_records(open_store(store, parameter="store"), "probing"))
 
 
 # --------------------------------------------------------------------------- the site
@@ -181,8 +169,7 @@ def probing_section(result) -> str:
     rows = []
     for view in views:
         j = view.to_json()
-        days = [(d - view.series.origin).total_seconds() / 86400 for d in
-                view.series.visits["date"]]
+        days = list(fleet_charts.days_since(view.series.origin, view.series.visits["date"]))
         spark = fleet_charts.sparkline(
             {"days": days, "backlash_um": view.series.visits["backlash_um"].to_numpy(float),
              "change_days": [days[c["index"]] for c in view.series.change_points]}, None,

@@ -8,7 +8,8 @@ then reads what it needs: the selected tests (``readings``), or every machine ax
 rate) or on the store the readings came from (its recorded compensations, voided tests, trace
 days and ballbar runs). Such a job computes on the whole data and reports the axes the
 selection keeps (``keeps``), so a selection never changes what is said about an axis it
-keeps.
+keeps. A job reads a store's records (``records``) and its watchers' state (``live``) here
+too: the store is opened once, each kind of record read once.
 
 This module is light (no pandas at import): a job's module imports it at the top.
 """
@@ -47,6 +48,7 @@ class Source:
     parameter: str = "data"
     _selected: object = field(default=None, init=False, repr=False, compare=False)
     _all: object = field(default=None, init=False, repr=False, compare=False)
+    _records: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @classmethod
     def of(cls, data, format: str = "auto", parameter: str = "data") -> Source:
@@ -107,6 +109,49 @@ class Source:
         None for a file or a frame."""
         return self.data if self.is_store else None
 
+    def records_store(self, store=None):
+        """Where the records are read: ``store`` (a job's own ``store`` parameter) when given,
+        else the store the readings came from; None when that names no store."""
+        from pipeline.store import is_store
+
+        where = self.store if store is None else store
+        return where if isinstance(where, (str, os.PathLike)) and is_store(where) else None
+
+    def records(self, kinds=None, store=None) -> dict:
+        """The records of the fleet store ``records_store(store)`` by kind and machine axis
+        (``pipeline.store.records.read_records``: {kind: {(machine_id, axis): [record, ...]}},
+        oldest first): ``kinds`` of them (default every kind, and the voided tests of each
+        machine axis under ``voided``, ``visit``, ``test_id``, ``at``, ``user_name``,
+        ``reason``); empty without a store. The store is opened once, each kind read once."""
+        from pipeline.store.tables import TABLES
+
+        where = self.records_store(store)
+        if where is None:
+            return {}
+        kinds = (*TABLES, "voided") if kinds is None else tuple(kinds)
+        if os.fspath(where) not in self._records:
+            from pipeline.store import open_store
+
+            self._records[os.fspath(where)] = (open_store(where, parameter="store"), {})
+        opened, read = self._records[os.fspath(where)]
+        for kind in kinds:
+            if kind not in read:
+                from pipeline.store.records import read_records
+
+                read[kind] = _voided(opened) if kind == "voided" else read_records(opened, kind)
+        return {kind: read[kind] for kind in kinds}
+
+    def live(self, store=None) -> list[dict]:
+        """The watched axes of the store ``records_store(store)`` (``pipeline.store.live``:
+        ``machine_id``, ``axis``, ``last_sample``, ``stale_after_s``, ``source``); none for a
+        file, a frame or a PostgreSQL store (which keeps no watcher's state)."""
+        where = self.records_store(store)
+        if where is None or "://" in str(where):
+            return []
+        from pipeline.store.live import live_axes
+
+        return live_axes(where)
+
     def name(self, readings=None) -> str:
         """The name a result gives its data: the path or store as given (a URL without its
         password), else the frame's ``attrs["source"]`` (of ``readings`` when given)."""
@@ -116,3 +161,10 @@ class Source:
             return source_of(self.data, None)
         frame = readings if readings is not None else self.data
         return frame.attrs.get("source", "readings")
+
+
+def _voided(store) -> dict:
+    """The voided tests of an opened store by machine axis (``Store.voids``)."""
+    voids = store.voids()
+    return {key: rows.drop(columns=["machine_id", "axis"]).to_dict("records")
+            for key, rows in voids.groupby(["machine_id", "axis"])}

@@ -4,6 +4,11 @@ threshold, and (with a trained model) its residual and input drift.
 >>> import backlash as bl
 >>> result = bl.drift("readings.csv", threshold_um=4.0)   # doctest: +SKIP
 >>> result.alerts                                         # doctest: +SKIP
+
+``drift`` is the maintenance analysis of every machine axis
+(``models.condition.maintenance``, the same as ``fleet``'s) and its report
+(``pipeline.reports.drift_report``, which draws what the analysis computed); this module only
+wires: the readings and a store's evidence through the ``Source``, the budget, the model.
 """
 
 from __future__ import annotations
@@ -14,23 +19,11 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from features.readings.errors import note
+from models.condition.settings import DEFAULTS, MaintenanceSettings
 from pipeline.results import Result, TrackingRecord, axis_alerts
-from pipeline.steps.parameters import (
-    ALPHA,
-    AS_OF,
-    BUDGET,
-    FORMAT,
-    LIMITS,
-    MIN_JUMP_SIGMA,
-    MODEL,
-    THRESHOLD_ARCSEC,
-    THRESHOLD_UM,
-    WARN_MONTHS,
-    Param,
-    readings,
-)
+from pipeline.steps.parameters import BUDGET, FORMAT, MAINTENANCE, MODEL, Param, readings
 from pipeline.steps.source import Source
-from pipeline.workflows import check_params, source_of
+from pipeline.workflows import source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -44,15 +37,9 @@ PARAMETERS = {
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "output folder for the report (optional with --json)",
                  output="folder"),
-    "threshold_um": THRESHOLD_UM,
-    "threshold_arcsec": THRESHOLD_ARCSEC,
-    "limits": LIMITS,
-    "as_of": AS_OF,
+    **MAINTENANCE,  # the analysis drift and fleet share
     "model": Param((*MODEL, None), "trained model directory: monitor its residuals and inputs",
                    metavar="DIR"),
-    "warn_months": WARN_MONTHS,
-    "alpha": ALPHA,
-    "min_jump_sigma": MIN_JUMP_SIGMA,
     "uncertainty": Param(BUDGET, "ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
                          "each visit's backlash; steps within it do not alert",
                          metavar="BUDGET.toml"),
@@ -86,6 +73,9 @@ class DriftResult(Result):
         With ``evidence`` beyond the laser: per (machine_id, axis) the offset of each other
         source to the laser's backlash (``models.evidence.offset``), None where it has no
         laser visit near.
+    forecasts : list of models.condition.maintenance.AxisForecast
+        The analysis of each series (its ``series``): trend line, forecast band, crossing and
+        next visit on one time axis, up to the horizon the report draws.
     """
 
     series: list
@@ -93,6 +83,7 @@ class DriftResult(Result):
     readings: object = field(repr=False)
     parameters: dict = field(default_factory=dict)
     offsets: dict = field(default_factory=dict)
+    forecasts: list = field(default_factory=list, repr=False)
 
     @property
     def alerts(self) -> list[dict]:
@@ -103,14 +94,14 @@ class DriftResult(Result):
         """``drift.png``, ``drift.html`` and ``drift.json`` (``pipeline.reports.drift_report``)."""
         from pipeline.reports.drift_report import write_drift_report
 
-        self.files = write_drift_report(self.series, out, source=self.source, notes=self.notes,
-                                        as_of=self.parameters.get("as_of"))
+        self.files = write_drift_report(self.forecasts, out, source=self.source,
+                                        notes=self.notes, as_of=self.parameters.get("as_of"))
         return self.files
 
     def to_json(self) -> dict:
         from features.readings.fileio import clean_nan
 
-        series = [s.to_json() for s in self.series]
+        series = [f.to_json() for f in self.forecasts]
         others = [k for k in (self.parameters.get("evidence") or "laser").split(",")
                   if k != "laser"]
         for j, s in zip(series if others else (), self.series):  # each source's offset
@@ -161,8 +152,8 @@ class DriftResult(Result):
 
 def drift(data, *, format: str = "auto", threshold_um: float | None = None,
           threshold_arcsec: float | None = None, limits=None, as_of=None, model=None,
-          warn_months: float = 6.0, alpha: float = 0.05,
-          min_jump_sigma: float = 3.0, uncertainty=None, evidence="laser",
+          warn_months: float = DEFAULTS.warn_months, alpha: float = DEFAULTS.alpha,
+          min_jump_sigma: float = DEFAULTS.min_jump_sigma, uncertainty=None, evidence="laser",
           store=None) -> DriftResult:
     """Follow backlash across maintenance visits.
 
@@ -225,32 +216,27 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     Raises
     ------
     InputError
-        Bad readings or parameters, an unreadable or non-physical budget, a budget for a rotary
-        axis, an unknown evidence source, evidence beyond the laser without a fleet store.
+        Bad readings, an unreadable or non-physical budget, a budget for a rotary axis, a bad
+        limits file or ``as_of``, an unknown evidence source, evidence beyond the laser
+        without a fleet store. The runner (``pipeline.runner.run``, ``bl.drift``) refuses a
+        parameter out of range first, naming it.
     """
-    values = {"format": format, "threshold_um": threshold_um,
-              "threshold_arcsec": threshold_arcsec, "limits": limits, "as_of": as_of,
-              "model": model,
-              "warn_months": warn_months, "alpha": alpha, "min_jump_sigma": min_jump_sigma,
-              "uncertainty": uncertainty, "evidence": evidence, "store": store}
-    check_params(PARAMETERS, values, "drift")
-    from pipeline.steps.evidence import sources_of
-
-    sources = sources_of(evidence)
-    values["evidence"] = ",".join(sources)
-    source = Source.of(data, format)
-    records = _evidence_records(source.store if store is None else store, sources)
-    from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
-    from pipeline.steps.limits import limit_notes, read_limits
-
-    day = as_of_date(as_of)
-    values["as_of"] = day.isoformat()
-    per_axis = None if limits is None else read_limits(limits)
-    budget = None if uncertainty is None else unc.checked_budget(uncertainty)
     from features.visits import SERIES_KEYS, visit_backlash
     from models import drift as drift_model
     from models import monitoring
+    from models.condition.maintenance import analyse_axes
+    from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
+    from pipeline.steps.evidence import sources_of
+    from pipeline.steps.limits import limit_notes, read_limits
 
+    sources = sources_of(evidence)
+    source = Source.of(data, format)
+    records = _evidence_records(source, store, sources)
+    day = as_of_date(as_of)
+    per_axis = None if limits is None else read_limits(limits)
+    budget = None if uncertainty is None else unc.checked_budget(uncertainty)
+    settings = MaintenanceSettings(threshold_um, threshold_arcsec, per_axis, alpha=alpha,
+                                   min_jump_sigma=min_jump_sigma, warn_months=warn_months)
     predictor = model
     if isinstance(model, (str, os.PathLike)):
         from models.registry import load_model
@@ -279,15 +265,10 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
               for (m, a), c in counts.items() if c < 2]
     for text in notes:
         note(text)
-    series = drift_model.analyse_visits(visits, threshold_um=threshold_um,
-                                        threshold_arcsec=threshold_arcsec, limits=per_axis,
-                                        alpha=alpha,
-                                        min_jump_sigma=min_jump_sigma,
-                                        warn_months=warn_months, coverage_factor=k)
-    series = [s for s in series if source.keeps(s.machine_id, s.axis)]
-    for s in series:
-        s.alerts += [a for a in [drift_model.limit_passed_alert(s, day)] if a is not None]
-        s.curve = s.forecast_curve(s.forecast_end_month)  # what the report draws
+    forecasts = [f for f in analyse_axes(visits, settings, as_of=day, min_visits=2,
+                                         coverage_factor=k)
+                 if source.keeps(f.machine_id, f.axis)]
+    series = [f.series for f in forecasts]
     for text in drift_model.two_visit_notes(series):
         notes.append(text)
         note(text)
@@ -304,13 +285,19 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     if store is not None:  # the result names a store without its password
         from pipeline.store import redact
 
-        values["store"] = redact(store)
-    return DriftResult(series, source_of(source.data, whole), readings, values, notes=notes,
-                       offsets=offsets)
+        store = redact(store)
+    parameters = {"format": format, "threshold_um": threshold_um,
+                  "threshold_arcsec": threshold_arcsec, "limits": limits,
+                  "as_of": day.isoformat(), "model": model, "warn_months": warn_months,
+                  "alpha": alpha, "min_jump_sigma": min_jump_sigma, "uncertainty": uncertainty,
+                  "evidence": ",".join(sources), "store": store}
+    return DriftResult(series, source_of(source.data, whole), readings, parameters,
+                       notes=notes, offsets=offsets, forecasts=forecasts)
 
 
-def _evidence_records(store, sources: tuple) -> dict | None:
-    """The trace and ballbar records ``sources`` ask for (None for the laser alone).
+def _evidence_records(source: Source, store, sources: tuple) -> dict | None:
+    """The trace and ballbar records ``sources`` ask for, read through ``source`` from
+    ``store`` (default the store the readings came from); None for the laser alone.
 
     Raises
     ------
@@ -320,10 +307,9 @@ def _evidence_records(store, sources: tuple) -> dict | None:
     if sources == ("laser",):
         return None
     from features.readings.errors import InputError
-    from pipeline.steps.evidence import read_evidence
-    from pipeline.store import is_store
+    from pipeline.steps.evidence import KEYS
 
-    if not isinstance(store, (str, os.PathLike)) or not is_store(store):
+    if source.records_store(store) is None:
         raise InputError("trace and ballbar evidence is read from a fleet store; give the "
                          "store as data or as store", parameter="evidence")
-    return read_evidence(store)
+    return source.records(KEYS, store=store)
