@@ -326,6 +326,6 @@ def test_an_experiment_step_reads_a_store_url_as_it_is(postgres_url, tmp_path):
     spec.write_text(f'name = "s"\nout = "out"\n[[steps]]\njob = "iso"\n[steps.with]\n'
                     f'data = "{url}"\n')
     loaded = experiment.load(spec)
-    assert loaded.steps[0].params["data"] == url
+    assert loaded.steps[0].parameters["data"] == url
     result = experiment.execute(loaded)
     assert PASSWORD not in json.dumps(result.to_json(), default=str)
