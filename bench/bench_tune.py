@@ -1,4 +1,4 @@
-"""Optuna: 100 trials of the network search with 5-fold cross-validation on 432 points (the
+"""Optuna: 20 trials of the network search with 5-fold cross-validation on 432 points (the
 paper plan's size), in trials per second; in-memory storage against local SQLite storage."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pandas as pd
 
 from bench import TINY, size
 
-TRIALS, FOLDS, POINTS = size(100, 1), size(5, 2), size(432, 60)
+TRIALS, FOLDS, POINTS = size(20, 1), size(5, 2), size(432, 60)
 # A drawn network can take a minute to fit even on a few points: a tiny run fits this one in
 # every trial, since it checks that the search runs, not how fast it goes.
 TINY_TRIAL = {"n_layers": 1, "width_0": 2, "activation": "tanh", "trainer": "lm",
