@@ -14,7 +14,7 @@ from pathlib import Path
 
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
-from pipeline.steps.parameters import FORMAT, SEED, Param, readings
+from pipeline.steps.parameters import FORMAT, READINGS, SEED, Param
 from pipeline.workflows import readings_of, source_of
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
@@ -28,13 +28,12 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": readings("readings file (columns of docs/data-contract.md; measured_at for time "
-                     "effects)"),
+    "data": Param(READINGS, flag="DATA", reads_readings=True),  # as readings(), described here
     "format": FORMAT,
-    "baseline": Param((str, list, tuple), "comma-separated effects of the simulation model"),
+    "baseline": Param((str, list, tuple)),
     "out": Param((str, os.PathLike, None), "output folder for the report", required=True,
                  output="folder"),
-    "seed": Param(SEED, "bootstrap seed"),
+    "seed": Param(SEED),
 }
 
 
@@ -136,12 +135,13 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     Parameters
     ----------
     data : str, path or DataFrame
-        Readings (``measured_at`` for time effects): a file or a frame as ``read`` returns it.
+        Readings (the columns of docs/data-contract.md; ``measured_at`` for time effects): a
+        file or a fleet store (a folder or a ``postgresql://`` URL, ``backlash ingest``).
     format : str, default 'auto'
         Input layout of a file.
     baseline : str or list of str, default 'backlash,lead_error_linear'
-        Effects of the simulation model (names of ``models.physics.effects.EFFECTS``;
-        comma-separated text allowed).
+        Effects of the simulation model: names of ``models.physics.effects.EFFECTS``,
+        comma-separated.
     seed : int, default 0
         Seed of the bootstrap that checks each named effect is stable.
 

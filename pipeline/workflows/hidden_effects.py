@@ -34,10 +34,8 @@ EXAMPLE = (
 PARAMETERS = {
     "out": Param((str, os.PathLike, None), "output folder for the scenario table",
                  required=True, output="folder"),
-    "scenarios": Param((str, os.PathLike, dict, HasMethods(["check"])),
-                       "scenario file (default experiments/hidden_effect_scenarios.toml)"),
-    "seeds": Param((Interval(Integral, 1, None, closed="left"), None),
-                   "seeds per design (default: the scenario file's seeds)"),
+    "scenarios": Param((str, os.PathLike, dict, HasMethods(["check"]))),
+    "seeds": Param((Interval(Integral, 1, None, closed="left"), None)),
     "progress": PROGRESS,
 }
 
@@ -92,11 +90,11 @@ def hidden_effects(scenarios=SCENARIOS, *, seeds: int | None = None,
 
     Parameters
     ----------
-    scenarios : str, path, dict or Scenarios, default experiments/hidden_effect_scenarios.toml
-        Scenario file (TOML), or its specification as a dict of the same shape or a
-        ``models.discovery.benchmark.Scenarios``.
+    scenarios : str, path, dict or models.discovery.benchmark.Scenarios
+        Scenario file (TOML); default: the shipped
+        ``experiments/hidden_effect_scenarios.toml``.
     seeds : int, optional
-        Seeds per design (1 to ``seeds``); default the scenario file's seeds.
+        Seeds per design (seeds 1 to this number); default the scenario file's seeds.
     progress : callable, optional
         ``progress(done, total, what)``, told as each scenario starts.
 

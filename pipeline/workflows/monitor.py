@@ -27,7 +27,7 @@ from numbers import Real
 from pathlib import Path
 
 from features.readings.errors import InputError, note
-from pipeline.engines import ENGINES, SCHEDULER_TIMEOUT_S
+from pipeline.engines import ENGINES
 from pipeline.results import Result, axis_alerts
 from pipeline.steps.parameters import PROGRESS, Param, python_only, scale_offset
 from pipeline.workflows.constraints import Interval, StrOptions
@@ -42,37 +42,24 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "traces": Param((str, os.PathLike, list, tuple, "pandas.DataFrame"), "trace table (CSV, "
-                    "Parquet) or Parquet dataset folder partitioned by machine_id=, axis=, "
-                    "date= (docs/data-contract.md section 10)", flag="TRACE", nargs="+"),
+    "traces": Param((str, os.PathLike, list, tuple, "pandas.DataFrame"), flag="TRACE",
+                    nargs="+"),
     "out": Param((str, os.PathLike, None), "output folder: monitor.json, daily.csv, "
                  "monitor.html", output="folder"),
-    "engine": Param((StrOptions(ENGINES),), "where the partitions run (default local: this "
-                    "process)"),
-    "address": Param((str, None), "Dask scheduler address (tcp://host:8786), refused if it "
-                     f"does not answer within {SCHEDULER_TIMEOUT_S} s; default Dask's local "
-                     "scheduler", metavar="URL"),
-    "threshold_um": Param((_POSITIVE, None), "lost-motion limit [um]: alert at it, forecast "
-                          "its crossing", metavar="X"),
-    "take_up_mm": Param((_POSITIVE,), "travel after a reversal past which the play is taken "
-                        "up", metavar="X"),
+    "engine": Param((StrOptions(ENGINES),)),
+    "address": Param((str, None), metavar="URL"),
+    "threshold_um": Param((_POSITIVE, None), metavar="X"),
+    "take_up_mm": Param((_POSITIVE,), metavar="X"),
     "settle_s": python_only(Interval(Real, 0, None, closed="left")),
-    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL) to "
-                   "record the daily lost motion in (docs/fleet.md)", metavar="STORE"),
-    "format": Param((StrOptions(("trace", "camonitor", "halsampler")),), "what TRACE is: trace "
-                    "tables (default) or a raw log per machine axis", flag="--log-format",
+    "store": Param((str, os.PathLike, None), metavar="STORE"),
+    "format": Param((StrOptions(("trace", "camonitor", "halsampler")),), flag="--log-format",
                     group=_RAW),
-    "channels": Param((str, dict, None), "commanded=PV,motor=PV,load=PV (halsampler: field "
-                      "numbers or pins)", metavar="MAP", group=_RAW),
-    "reference_scale": Param((Real, tuple, list, None), "load position = GAIN * logged load "
-                             "+ OFFSET, in the commanded channel's unit (default: as logged)",
-                             metavar="GAIN[,OFFSET]", parse=scale_offset, group=_RAW),
-    "machine": Param((str, None), "the log's machine (default: the commanded PV's IOC)",
-                     group=_RAW),
-    "axis": Param((str, None), "the log's axis (default: the commanded PV's axis letter)",
-                  group=_RAW),
-    "period_s": Param((_POSITIVE, None), "halsampler output's sample period [s]", metavar="S",
-                      group=_RAW),
+    "channels": Param((str, dict, None), metavar="MAP", group=_RAW),
+    "reference_scale": Param((Real, tuple, list, None), metavar="GAIN[,OFFSET]",
+                             parse=scale_offset, group=_RAW),
+    "machine": Param((str, None), group=_RAW),
+    "axis": Param((str, None), group=_RAW),
+    "period_s": Param((_POSITIVE, None), metavar="S", group=_RAW),
     "progress": PROGRESS,
 }
 
@@ -167,13 +154,15 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     Parameters
     ----------
     traces : str, path, list of them, or DataFrame
-        Trace tables (CSV, Parquet) and/or Parquet datasets partitioned by machine, axis and
-        date (folders), or a trace frame (docs/data-contract.md section 10). Each needs
-        ``load_mm``.
+        Trace tables (CSV, Parquet) and/or Parquet dataset folders partitioned by machine,
+        axis and date (``machine_id=``, ``axis=``, ``date=``; docs/data-contract.md section
+        10). Each needs ``load_mm``.
     engine : {'local', 'dask'}
-        Where the partitions run (``pipeline.engines``).
+        Where the partitions run: ``local`` (this process) or ``dask``
+        (``pipeline.engines``).
     address : str, optional
-        A Dask scheduler's address (``tcp://host:8786``); default Dask's local scheduler.
+        A Dask scheduler's address (``tcp://host:8786``), refused if it does not answer within
+        ``pipeline.engines.SCHEDULER_TIMEOUT_S`` (10 s); default Dask's local scheduler.
     threshold_um : float, optional
         Lost-motion limit [um]: alert at or above it, forecast its crossing.
     take_up_mm : float
@@ -184,21 +173,26 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     progress : callable, optional
         ``progress(done, total, what)`` per partition (local engine).
     store : str or path-like, optional
-        A fleet store (folder or ``postgresql://`` URL) to record the daily lost motion in:
-        one ``trace`` record per machine axis and day with a value
+        A fleet store (folder or ``postgresql://`` URL; docs/fleet.md) to record the daily lost
+        motion in: one ``trace`` record per machine axis and day with a value
         (``pipeline.store.records.trace_records``); the same days again add nothing.
     format : {'trace', 'camonitor', 'halsampler'}
-        ``trace``: trace tables and datasets. ``camonitor`` (an EPICS camonitor log) or
-        ``halsampler`` (LinuxCNC halsampler output or a halscope export): each file a raw log
-        of one machine axis, read into a trace (``features.traces.logs.read_log_trace``).
+        What the traces are: ``trace``, trace tables and datasets; ``camonitor`` (an EPICS
+        camonitor log) or ``halsampler`` (LinuxCNC halsampler output or a halscope export),
+        each file a raw log of one machine axis, read into a trace
+        (``features.traces.logs.read_log_trace``).
     channels : str or dict, optional
-        A raw log's channels: ``"commanded=PV,motor=PV,load=PV"`` or a dict (halsampler:
-        0-based field numbers or pin names). Required with a raw log, refused without one.
+        A raw log's channels, each name to its PV: ``commanded=PV,motor=PV,load=PV``
+        (halsampler: 0-based field numbers or pin names). Required with a raw log, refused
+        without one.
     reference_scale : float or (float, float), optional
         A raw log's load side: load position = gain * logged value + offset, in the
-        commanded channel's unit (a resolver in counts, a reference counting the other way).
-    machine, axis : str, optional
-        A raw log's machine and axis; default what the commanded PV's name states.
+        commanded channel's unit (a resolver in counts, a reference counting the other way);
+        default: as logged.
+    machine : str, optional
+        A raw log's machine; default the one the commanded PV's name states (its IOC).
+    axis : str, optional
+        A raw log's axis; default the one the commanded PV's name states (its axis letter).
     period_s : float, optional
         Sample period of halsampler output [s].
 

@@ -27,18 +27,17 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "preset": Param((str, None), f"shipped campaign: {', '.join(PRESETS)} (default paper: the "
-                    "campaign's defaults)"),  # checked against the presets by ``load_config``
+    # its own help: the command line lists the presets found in experiments/presets/ (checked
+    # against them by ``load_config``, not by the parser)
+    "preset": Param((str, None), f"a shipped campaign: {', '.join(PRESETS)} (default: the "
+                    "paper's plan on one axis)"),
     "config": Param((str, os.PathLike, dict, "models.physics.campaign.Campaign", None),
-                    "campaign configuration; overrides the preset's values",
                     metavar="FILE.toml"),
-    "seed": Param(SEED, "random seed"),
+    "seed": Param(SEED),
     "out": Param((str, os.PathLike, None), "output folder", required=True, output="folder"),
-    "traces": Param(("boolean",), "write controller traces instead (motor encoder and load "
-                    "scale, wear, an adjustment): OUT/traces/ and OUT/traces_truth.csv"),
-    "days": Param((Interval(Integral, 1, 3650, closed="both"),), "with --traces: logged days"),
-    "rate_hz": Param((Interval(Real, 100, 1000, closed="both"),),
-                     "with --traces: sampling rate [Hz]"),
+    "traces": Param(("boolean",)),
+    "days": Param((Interval(Integral, 1, 3650, closed="both"),)),
+    "rate_hz": Param((Interval(Real, 100, 1000, closed="both"),)),
     "session_seed": python_only(*SEED, None),
     "compensation": python_only(dict, None),
 }
@@ -107,8 +106,7 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
     Parameters
     ----------
     config : str, Path, dict or Campaign, optional
-        A campaign TOML file (or a dict of the same shape, or a ``Campaign``); its values
-        apply on top of ``preset``.
+        A campaign TOML file (docs/simulate.md); its values apply on top of the preset's.
     preset : str, optional
         A shipped campaign (``models.physics.PRESETS``: the files in
         ``experiments/presets/``); default the paper's plan on one axis.
@@ -122,7 +120,8 @@ def simulate(config=None, preset: str | None = None, seed: int = 0,
         (``models.physics.controller``); the random draws do not depend on it.
     traces : bool
         Simulate controller traces instead of a campaign (``models.physics.traces``): three axes
-        of one machine, motor encoder and load scale, wear growing, one axis adjusted.
+        of one machine, motor encoder and load scale, wear growing, one axis adjusted; written
+        to ``traces/`` and ``traces_truth.csv`` in the output folder.
     days : int
         With ``traces``: logged days (1-3650).
     rate_hz : float

@@ -31,12 +31,8 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "budget": Param((str, os.PathLike, dict, unc.UncertaintyBudget),
-                    "uncertainty budget (e.g. experiments/data/paper_uncertainty.toml)",
-                    flag="BUDGET.toml"),
-    "arithmetic": Param((StrOptions(unc.ARITHMETICS), None), "arithmetic reported first "
-                        "(default: the budget's 'arithmetic', else iso); the other is shown "
-                        "beside it"),
+    "budget": Param((str, os.PathLike, dict, unc.UncertaintyBudget), flag="BUDGET.toml"),
+    "arithmetic": Param((StrOptions(unc.ARITHMETICS), None)),
 }
 
 
@@ -113,11 +109,12 @@ def uncertainty(budget, *, arithmetic: str | None = None) -> UncertaintyResult:
     Parameters
     ----------
     budget : str, path, dict or UncertaintyBudget
-        The budget: a TOML file (``experiments/data/paper_uncertainty.toml``), its content as
-        a dict, or a budget already read (``features.uncertainty.read_budget``).
+        The uncertainty budget, a TOML file (e.g. ``experiments/data/paper_uncertainty.toml``;
+        read by ``features.uncertainty.read_budget``).
     arithmetic : {'iso', 'paper'}, optional
-        The arithmetic to report first; default the budget's ``arithmetic`` key (itself
-        'iso' by default). 'paper' needs the budget's ``[paper]`` table.
+        The arithmetic to report first, the other shown beside it; default the budget's
+        ``arithmetic`` key, else ``iso``. The arithmetic ``paper`` needs the budget's ``[paper]``
+        table.
 
     Returns
     -------

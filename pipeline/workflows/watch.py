@@ -30,18 +30,12 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "config": Param((str, os.PathLike), "WATCH.toml: the source (ca, pva, opcua or log) and "
-                    "the channels of each machine axis (docs/watch.md)", flag="WATCH"),
-    "store": Param((str, os.PathLike, "pipeline.store.base.Store"), "fleet store folder: where "
-                   "the days are recorded and the open days kept", metavar="STORE",
+    "config": Param((str, os.PathLike), flag="WATCH"),
+    "store": Param((str, os.PathLike, "pipeline.store.base.Store"), metavar="STORE",
                    required=True),
-    "until": Param((str, None), "stop at this time (ISO 8601, UTC unless it says), closing and "
-                   "recording the open days", metavar="TIME"),
-    "seconds": Param((_POSITIVE, None), "stop after this many seconds, closing and recording "
-                     "the open days (default: run until SIGTERM, which keeps them)",
-                     flag="--for", metavar="SECONDS"),
-    "take_up_mm": Param((_POSITIVE,), "travel after a reversal past which the play is taken "
-                        "up", metavar="X"),
+    "until": Param((str, None), metavar="TIME"),
+    "seconds": Param((_POSITIVE, None), flag="--for", metavar="SECONDS"),
+    "take_up_mm": Param((_POSITIVE,), metavar="X"),
     "settle_s": python_only(Interval(Real, 0, None, closed="left")),
     "status": python_only(None, callable),
 }
@@ -76,15 +70,22 @@ def watch(config, *, store, until: str | None = None, seconds: float | None = No
     Parameters
     ----------
     config : str or path-like
-        WATCH.toml (SCHEMA section 14).
+        WATCH.toml (SCHEMA section 14, docs/watch.md): the source (ca, pva, opcua or log) and
+        the channels of each machine axis.
     store : str, path-like or Store
-        A fleet store folder (made by ``ingest``).
+        A fleet store folder (made by ``ingest``): where the days are recorded and the open
+        days kept.
     until : str, optional
-        Stop at this time (ISO 8601); the open days are closed and recorded.
+        Stop at this time (ISO 8601, UTC unless it says); the open days are closed and
+        recorded.
     seconds : float, optional
-        Stop after this many seconds; the open days are closed and recorded.
-    take_up_mm, settle_s : float
-        As ``monitor``.
+        Stop after this many seconds; the open days are closed and recorded. Default: run
+        until SIGTERM, which keeps them open.
+    take_up_mm : float
+        Travel after a reversal past which the play is taken up [mm or deg]; larger than any
+        lost motion (as ``monitor``).
+    settle_s : float
+        As ``monitor``: time after an acceleration before a sample counts as steady [s].
     status : callable, optional
         ``status(line)`` per event (a dict: started, day_recorded, source_down, status, ...).
 
