@@ -32,8 +32,9 @@ EXAMPLE = (
 PARAMETERS = {
     "data": readings(flag="FILE"),
     "format": FORMAT,
-    "out": Param((str, os.PathLike), "output file, .csv or .parquet", required=True,
-                 output="file"),
+    # its own help: required on the command line, where Python may leave it out (None)
+    "out": Param((str, os.PathLike), "output file, .csv or .parquet; never the input file",
+                 required=True, output="file"),
     **RAW_LOG,
     "path": python_only(str, os.PathLike),
     "source": python_only(str, os.PathLike),

@@ -36,19 +36,11 @@ EXAMPLE = (
 PARAMETERS = {
     "files": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
     "format": FORMAT,
-    "store": Param((str, os.PathLike), "store folder (created when new or empty, inside an existing folder) or "
-                   "postgresql://USER@HOST/DB (password in ~/.pgpass or PGPASSWORD, not in the "
-                   "URL)", metavar="STORE", required=True),
-    "allow_future": Param(("boolean",), "keep tests started after today (refused otherwise: a "
-                          "mistyped year would pass for the latest visit)"),
-    "allow_unknown_columns": Param(("boolean",), "leave out columns outside the readings "
-                                   "contract (refused otherwise: a misspelled column would be "
-                                   "lost from the store)"),
-    "replace": Param(("boolean",), "replace stored tests by these corrected ones (same "
-                     "machine, axis, visit and test_id, other readings); needs --reason"),
-    "reason": Param((str, None), "why the stored tests are replaced (kept in the store's audit "
-                    "with the time, the user and the replaced readings' digest)",
-                    metavar="TEXT"),
+    "store": Param((str, os.PathLike), metavar="STORE", required=True),
+    "allow_future": Param(("boolean",)),
+    "allow_unknown_columns": Param(("boolean",)),
+    "replace": Param(("boolean",)),
+    "reason": Param((str, None), metavar="TEXT"),
 }
 
 
@@ -111,23 +103,26 @@ def ingest(files, store, *, format: str = "auto", allow_future: bool = False,
     files : str, path-like, DataFrame or list of them
         Readings files in any accepted layout, or frames ``read`` returned.
     store : str or path-like
-        A store folder (created when it does not exist or is empty) or a
-        ``postgresql://user@host/database`` URL (tables created by the first ingest; give
-        the password in ``~/.pgpass`` or ``PGPASSWORD`` rather than in the URL).
+        A store folder (created when it does not exist or is empty, inside an existing
+        folder) or a ``postgresql://USER@HOST/DB`` URL (tables created by the first ingest;
+        give the password in ``~/.pgpass`` or ``PGPASSWORD``, not in the URL).
     format : str
         Layout of the files, ``"auto"`` to recognise each one.
     allow_future : bool
         Keep tests started after today (UTC; a note names them); refused otherwise, as a
-        mistyped date would pass for an axis's latest visit.
+        date with a mistyped year would pass for an axis's latest visit.
     allow_unknown_columns : bool
         Leave out columns outside the readings contract (a note names each with the contract
-        column it is closest to); refused otherwise, as the store keeps only the contract.
+        column it is closest to); refused otherwise, as the store keeps only the contract: a
+        misspelled column would be lost.
     replace : bool
-        Put these readings in place of those stored for the same tests (each test must be
-        stored); the audit keeps the time, the user, ``reason`` and both digests. A voided
-        test stays voided.
+        Put these corrected readings in place of those stored for the same tests (same
+        machine, axis, visit and test_id; each test must be stored); needs a reason. The audit
+        keeps the time, the user, the reason and both readings' digests. A voided test stays
+        voided.
     reason : str, optional
-        Why the tests are replaced; required with ``replace`` and only with it.
+        Why the stored tests are replaced (kept in the store's audit with the time, the user
+        and both readings' digests); required when replacing tests, and only then.
     progress : callable, optional
         ``progress(done, total, what)`` after each file read.
 
@@ -146,29 +141,28 @@ def ingest(files, store, *, format: str = "auto", allow_future: bool = False,
         Interrupted (Ctrl-C) before the commit: nothing was added.
     """
     reason = _reason(replace, reason)
-    from pipeline.store import open_store, redact
-
     inputs = _inputs(files)
-    target = open_store(store, write=True, parameter="store")  # refused before any reading
-    new_store = not target.exists()
+    # ``store`` opened for writing by the runner (``Workflow.store_access``), before any reading
+    location = store.location
+    new_store = not store.exists()
     if replace and new_store:
         raise InputError("holds no store yet; --replace replaces tests of an existing store",
-                         file=redact(store), parameter="store")
+                         file=location, parameter="store")
     try:
         tables, digests, per_file, notes = _read_all(inputs, format, progress,
                                                      allow_future, allow_unknown_columns)
         import pandas as pd
         import pyarrow as pa
 
-        added = target.add(pa.concat_tables(tables), pd.concat(digests, ignore_index=True),
+        added = store.add(pa.concat_tables(tables), pd.concat(digests, ignore_index=True),
                            replace=replace, reason=reason)
     except KeyboardInterrupt:
-        raise IngestInterrupted(f"nothing was added to the store {redact(store)} (all files "
+        raise IngestInterrupted(f"nothing was added to the store {location} (all files "
                                 "go in one transaction, or none)") from None
-    result = IngestResult(store=redact(store), inputs=per_file, added=len(added.new),
+    result = IngestResult(store=location, inputs=per_file, added=len(added.new),
                           unchanged=len(added.same) + _repeated(per_file),
                           readings_added=int(added.new["readings"].sum()),
-                          tests_in_store=target.count(),
+                          tests_in_store=store.count(),
                           replaced=0 if added.replaced is None else len(added.replaced),
                           new_store=new_store and bool(len(added.new)))
     _count_per_file(result, added)

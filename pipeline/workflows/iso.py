@@ -36,9 +36,9 @@ EXAMPLE = (
 PARAMETERS = {
     "data": readings(flag="FILE", accepts=(*READINGS, list, tuple), nargs="+"),
     "format": FORMAT,
-    "drop_outliers": Param(("boolean",), "leave flagged outlier readings out of the figures"),
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add U_A_um ... U_B_um (expanded "
-                         "uncertainties at each test's measuring length)", metavar="BUDGET.toml"),
+    "drop_outliers": Param(("boolean",)),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
+    # its own help: every standard of the records, those not supported marked (refused)
     "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
     **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
 }
@@ -100,10 +100,10 @@ def iso(data, format: str = "auto", drop_outliers: bool = False,
     drop_outliers : bool
         Leave the readings flagged as outliers out of the figures (default: flag, keep).
     uncertainty : str, path-like, dict or UncertaintyBudget, optional
-        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): adds the expanded
-        uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every test, at its own
-        measuring length and runs per direction (``features.uncertainty.with_uncertainty``).
-        Linear axes only.
+        An ISO/TR 230-9 budget, a TOML file (e.g. ``experiments/data/paper_uncertainty.toml``):
+        adds the expanded uncertainties ``U_A_um, U_E_um, U_M_um, U_R_um, U_B_um`` of every
+        test, at its own measuring length and runs per direction
+        (``features.uncertainty.with_uncertainty``). Linear axes only.
     standard : str
         The standard whose figures to compute, a name of ``features.standards.STANDARDS``;
         only the supported ones are accepted (``"iso230-2"``).

@@ -40,14 +40,10 @@ PARAMETERS = {
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "folder for iso_report.html and iso_report.pdf",
                  metavar="DIR", required=True, output="folder"),
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: print every axis figure as value ± U",
-                         metavar="BUDGET.toml"),
-    "drop_outliers": Param(("boolean",), "leave flagged outliers out of the figures (still "
-                           "ringed on the charts)"),
-    "meta": Param((str, os.PathLike, dict, ReportMeta, None), "[report] table: operator, "
-                  "organisation, instrument, instrument_serial, instrument_calibrated_on, "
-                  "sensors, remarks; printed on every page above the signature block",
-                  metavar="META.toml"),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
+    "drop_outliers": Param(("boolean",)),
+    "meta": Param((str, os.PathLike, dict, ReportMeta, None), metavar="META.toml"),
+    # its own help: every standard of the records, those not supported marked (refused)
     "standard": Param((StrOptions(standards.NAMES),), standards.help_text()),
     **RAW_LOG,  # a raw log's reader's (the runner reads the log with them)
 }
@@ -94,14 +90,17 @@ def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=
     drop_outliers : bool
         Leave the flagged outliers out of the figures (they stay on the charts, ringed).
     uncertainty : str, path-like, dict or UncertaintyBudget, optional
-        An ISO/TR 230-9 budget of the tests' axis: every axis figure printed as ``value ± U``
-        (``iso``), with the coverage factor k and the budget's name (its ``name`` key, else
-        its file's name) and digest (``UncertaintyBudget.digest``).
+        An ISO/TR 230-9 budget of the tests' axis, a TOML file: every axis figure printed as
+        ``value ± U`` (U as the ``iso`` job computes it), with the coverage factor k and the
+        budget's name (its ``name`` key, else its file's name) and digest
+        (``UncertaintyBudget.digest``).
     standard : str
         The standard whose figures the pages print (``features.standards``).
     meta : str, path-like, dict or ReportMeta, optional
-        A meta file's ``[report]`` table (``pipeline.reports.report_meta``): operator, organisation,
-        instrument, its serial and calibration date, environment sensors, remarks.
+        A meta file's ``[report]`` table (``pipeline.reports.report_meta``), printed on every
+        page above the signature block: ``operator``, ``organisation``, ``instrument``, its
+        serial and calibration date (``instrument_serial``, ``instrument_calibrated_on``),
+        environment ``sensors``, ``remarks``.
 
     Returns
     -------

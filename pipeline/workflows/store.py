@@ -28,8 +28,7 @@ EXAMPLE = (
 
 PARAMETERS = {
     "store": STORE,
-    "repair": Param(("boolean",), "relink tests to the part that holds their readings intact "
-                    "and remove files and parts that are provably orphaned"),
+    "repair": Param(("boolean",)),
 }
 
 
@@ -70,11 +69,11 @@ def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResu
     Parameters
     ----------
     store : str or path-like
-        A store folder or a ``postgresql://`` URL.
+        A store folder or a ``postgresql://USER@HOST/DB`` URL.
     repair : bool
-        Relink tests to the recorded part that holds their readings intact, remove files the
-        manifest does not name and recorded parts no test reads (under the store's write
-        lock). Nothing else is ever changed.
+        Relink tests to the recorded part that holds their readings intact, remove the
+        provably orphaned files (the manifest does not name them) and recorded parts (no test
+        reads them), under the store's write lock. Nothing else is ever changed.
     progress : callable, optional
         Unused (a check reads the store once); accepted as every workflow does.
 
@@ -87,8 +86,7 @@ def check_store(store, *, repair: bool = False, progress=None) -> StoreCheckResu
     InputError
         A location that is no store or cannot be opened.
     """
-    from pipeline.store import open_store, redact
-
-    checked = open_store(store, write=repair, parameter="store").check(repair=repair)
-    return StoreCheckResult(store=redact(store), tests=checked.tests, readings=checked.readings,
+    # ``store`` opened by the runner, for writing with ``repair`` (``Workflow.store_access``)
+    checked = store.check(repair=repair)
+    return StoreCheckResult(store=store.location, tests=checked.tests, readings=checked.readings,
                             problems=checked.problems, repaired=checked.repaired)

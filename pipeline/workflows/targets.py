@@ -34,8 +34,7 @@ PARAMETERS = {
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "output folder: write targets.csv", output="folder"),
     "target": TARGET,
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 budget: add backlash_U_um (the expanded "
-                         "uncertainty of each point's backlash)", metavar="BUDGET.toml"),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
 }
 
 
@@ -115,8 +114,8 @@ def targets(data, *, format: str = "auto", target: str = "auto",
         Backlash definition: pendulum minus linear, the ISO reversal value, or chosen per
         machine axis from the measuring-system evidence.
     uncertainty : str, path-like, dict or UncertaintyBudget, optional
-        An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): every point gets
-        ``backlash_U_um``, the expanded uncertainty of its backlash
+        An ISO/TR 230-9 budget, a TOML file (e.g. ``experiments/data/paper_uncertainty.toml``):
+        every point gets ``backlash_U_um``, the expanded uncertainty of its backlash
         (``features.targets.point_uncertainty``). Linear axes only.
 
     Returns

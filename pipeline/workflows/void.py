@@ -26,13 +26,12 @@ EXAMPLE = (
 
 PARAMETERS = {
     "store": STORE,
-    "machine": Param((str,), "the machine", metavar="ID", required=True),
-    "axis": Param((str,), "the axis", metavar="AXIS", required=True),
-    "visit": Param((str, None), "only the tests of this visit", metavar="VISIT"),
-    "test_id": Param((str, None), "only this test", metavar="TEST"),
-    "reason": Param((str,), "why (kept in the store's audit table with the time and the user)",
-                    metavar="TEXT", required=True),
-    "undo": Param(("boolean",), "restore the voided tests instead"),
+    "machine": Param((str,), metavar="ID", required=True),
+    "axis": Param((str,), metavar="AXIS", required=True),
+    "visit": Param((str, None), metavar="VISIT"),
+    "test_id": Param((str, None), metavar="TEST"),
+    "reason": Param((str,), metavar="TEXT", required=True),
+    "undo": Param(("boolean",)),
 }
 
 
@@ -83,13 +82,17 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
     Parameters
     ----------
     store : str or path-like
-        A store folder or a ``postgresql://`` URL.
-    machine, axis : str
-        The machine axis whose tests are voided.
-    visit, test_id : str, optional
-        Only this visit's tests, only this test.
+        A store folder or a ``postgresql://USER@HOST/DB`` URL.
+    machine : str
+        The machine whose axis's tests are voided.
+    axis : str
+        The axis whose tests are voided.
+    visit : str, optional
+        Only this visit's tests.
+    test_id : str, optional
+        Only this test.
     reason : str
-        Why (kept in the audit table with the time and the user); not empty.
+        Why (kept in the store's audit table with the time and the user); not empty.
     undo : bool
         Restore the matching voided tests instead.
     progress : callable, optional
@@ -107,13 +110,11 @@ def void(store, *, machine: str, axis: str, visit: str | None = None,
     """
     if not reason.strip():
         raise InputError("is empty; say why the tests are voided", parameter="reason")
-    from pipeline.store import open_store, redact
-
-    target = open_store(store, write=True, parameter="store")
-    if not target.exists():
-        raise InputError("no such store", file=redact(store))
-    keys = target.void(machine, axis, visit, test_id, reason=reason.strip(), undo=undo)
-    result = VoidResult(store=redact(store), action="undo" if undo else "void",
+    # ``store`` opened for writing by the runner (``Workflow.store_access``)
+    if not store.exists():
+        raise InputError("no such store", file=store.location)
+    keys = store.void(machine, axis, visit, test_id, reason=reason.strip(), undo=undo)
+    result = VoidResult(store=store.location, action="undo" if undo else "void",
                         tests=[dict(zip(("machine_id", "axis", "visit", "test_id"), k))
                                for k in keys], reason=reason.strip())
     return result  # what was done is the result (``line``), not a note beside it
