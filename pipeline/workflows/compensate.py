@@ -28,7 +28,6 @@ from pipeline.steps.parameters import (
     SELECTION_GROUP,
     Param,
     comma_list,
-    readings,
 )
 from pipeline.workflows import readings_of
 from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
@@ -50,48 +49,29 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": readings("model directory (backlash train) or readings file (ISO tests)",
-                     flag="DATA|MODEL_DIR",
-                     accepts=(*_PATHS, "pandas.DataFrame", HasMethods(["predict"]))),
+    # the readings (as readings() declares them) or a model, described by the docstring
+    "data": Param((*_PATHS, "pandas.DataFrame", HasMethods(["predict"])), flag="DATA|MODEL_DIR",
+                  reads_readings=True),
     "format": FORMAT,
+    # its own help: every controller and alias of the records, which the docstring refers to
     "controller": Param((str, list, tuple), controller_help(), required=True),
     "out": Param((*_PATHS, None), "output folder", required=True, output="folder"),
-    "conditions": Param((None, str, dict), "conditions for a predictor, e.g. "
-                        "feed_mm_min=500,machine_temp_c=21", metavar="NAME=VALUE,..."),
-    "axis": Param((None, str), "axis name: a predictor's axis (default X), or only this "
-                  "axis's tests of DATA or a wear map's axes"),
-    "machine": Param((None, str, list, tuple), "only the tests of these machines, or their "
-                     "axes of a wear map", metavar="ID[,ID...]", parse=comma_list,
+    "conditions": Param((None, str, dict), metavar="NAME=VALUE,..."),
+    "axis": Param((None, str)),
+    "machine": Param((None, str, list, tuple), metavar="ID[,ID...]", parse=comma_list,
                      group=SELECTION_GROUP),
-    "at_hours": Param((None, Interval(Real, 0, None, closed="left")), "wear map: forecast the "
-                      "table for this reading of the axis's operating-hours counter (default: "
-                      "the middle of the next maintenance interval)", metavar="H"),
-    "at_date": Param((None, str, dt.date), "wear map: forecast the table for this day, "
-                     "through the axis's usage rate when the model records it",
-                     metavar="YYYY-MM-DD"),
-    "spacing": Param((None, Interval(Real, 0, None, closed="neither")), "table spacing of "
-                     "equidistant formats (default: a quarter of the smallest target interval, "
-                     "rounded down to 1/2/2.5/5 x 10^k)", metavar="MM"),
-    "reference_mm": Param((None, Interval(Real, None, None, closed="neither")), "reference "
-                          "point where SINUMERIK/Fanuc/Heidenhain tables are 0 (default: the "
-                          "table point nearest 0)"),
-    "fanuc_unit_um": Param((Interval(Real, 0, None, closed="neither"),),
-                           "Fanuc detection unit [um]"),
-    "active": Param((None, *_PATHS, list, tuple), "DATA was measured with this compensation "
-                    "file active (one controller's file for one machine axis; repeat for its "
-                    "table and its parameter file): write the active file plus the measured "
-                    "residual, and the change per target", metavar="FILE", repeated=True),
-    "sign": Param((None, StrOptions(SIGNS)), "what a positive table value means at this site "
-                  "(SINUMERIK, Fanuc, Heidenhain tables; default: each controller's documented "
-                  "convention); also how --active is read"),
+    "at_hours": Param((None, Interval(Real, 0, None, closed="left")), metavar="H"),
+    "at_date": Param((None, str, dt.date), metavar="YYYY-MM-DD"),
+    "spacing": Param((None, Interval(Real, 0, None, closed="neither")), metavar="MM"),
+    "reference_mm": Param((None, Interval(Real, None, None, closed="neither"))),
+    "fanuc_unit_um": Param((Interval(Real, 0, None, closed="neither"),)),
+    "active": Param((None, *_PATHS, list, tuple), metavar="FILE", repeated=True),
+    "sign": Param((None, StrOptions(SIGNS))),
     "store": Param((*_PATHS, None), "fleet store (folder or postgresql:// URL, made by "
                    "backlash ingest) to record this compensation in; backlash fleet shows the "
                    "last one", metavar="STORE"),
-    "uncertainty": Param(BUDGET, "uncertainty budget of the measurement (as backlash iso "
-                         "takes): say whether each file set's residual is within or beyond "
-                         "U(B)", metavar="BUDGET.toml"),
-    "verify": Param(("boolean",), "twin data only: re-run the ISO tests with the written files "
-                    "applied; report before/after (verify.html); exit 3 if worse"),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
+    "verify": Param(("boolean",)),
     "progress": PROGRESS,
 }
 
@@ -252,18 +232,20 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     Parameters
     ----------
     data : path, DataFrame or TrainedModel
-        A readings file, fleet store or frame (ISO tests: per machine axis, the latest
-        visit's linear tests), or a model directory written by ``train`` or a loaded model (its
-        backlash at ``conditions`` over its training target range, no position error; a wear
-        map's per machine axis it knows, forecast for ``at_hours``).
+        A readings file or a fleet store (a folder or a ``postgresql://`` URL made by
+        ``backlash ingest``) of ISO tests (per machine axis, the latest visit's linear tests),
+        or a model directory written by ``backlash train`` (its backlash at the conditions
+        given over its training target range, no position error; a wear map's per machine axis
+        it knows, forecast for the operating hours asked).
     controller : str or list of str, default "csv"
         Names or aliases of ``pipeline.compensation.CONTROLLERS`` (a list or comma-separated),
         or ``"all"``.
     format : str, default "auto"
         Input layout of a readings file.
     conditions : dict or str, optional
-        Conditions for a predictor (``{"feed_mm_min": 500}`` or ``"feed_mm_min=500"``);
-        conditions the model needs and is not given are its training medians.
+        Conditions for a predictor, ``NAME=VALUE,...`` such as
+        ``feed_mm_min=500,machine_temp_c=21``; conditions the model needs and is not given are
+        its training medians.
     at_hours : float, optional
         A wear map only: the operating hours [h] on the axis's hour counter the table is
         forecast for. Default the middle of the next maintenance interval (the last visit
@@ -273,13 +255,13 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     at_date : str or datetime.date, optional
         A wear map only: the day (``YYYY-MM-DD``) the table is forecast for, turned into
         operating hours with the axis's usage rate when the model records it (``model.json``
-        key ``usage``); otherwise an ``InputError`` asks for ``at_hours``.
+        key ``usage``); otherwise refused, asking for the operating hours instead.
     machine : str or list of str, optional
-        Only these machines: their tests of readings, or their axes of a wear map that knows
-        several machine axes.
+        Only these machines (comma-separated): their tests of the readings, or their axes of a
+        wear map that knows several machine axes.
     axis : str, optional
-        Only this axis: its tests of readings, or its axes of a wear map that knows its
-        machine axes; the axis a predictor's table is for (default "X").
+        Only this axis: its tests of the readings, or its axes of a wear map that knows its
+        machine axes; the axis a predictor's table is for (default X).
     spacing : float, optional
         Table spacing of equidistant formats [mm]; default: equidistant targets as they are,
         else a quarter of the smallest target interval rounded down to 1/2/2.5/5 x 10^k.
@@ -289,22 +271,25 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
     fanuc_unit_um : float, default 1.0
         Fanuc detection unit [um].
     active : path or list of paths, optional
-        The tests were measured with this compensation (one controller's files for one
-        machine axis: a table and/or its parameter file). The new file is the active file
-        plus the measured residual, for that controller only; each file written for it
-        reports its change per target (``changes``, also ``<stem>_<controller>_changes.csv``).
+        The tests were measured with this compensation active (one controller's files for one
+        machine axis: its table and/or its parameter file, one path each). The new file is the
+        active file plus the measured residual, for that controller only; each file written
+        for it reports its change per target (``changes``, also
+        ``<stem>_<controller>_changes.csv``).
     sign : {"error", "correction"}, optional
         What a positive table value means at this site, for the controllers whose table
         convention is a choice (SINUMERIK, Fanuc, Heidenhain; ``CONTROLLERS[name].sign``);
-        default each controller's documented convention. Also how ``active`` is read.
+        default each controller's documented convention. Also how the active files are read.
     verify : bool, default False
         Twin readings only (``parameters.json`` beside the file): re-measure the twin with the
-        files applied and compare the ISO figures before and after.
+        files applied and compare the ISO figures before and after (``verify.html``); the
+        command exits with status 3 when the check finds an axis made worse.
     uncertainty : path, dict or UncertaintyBudget, optional
-        The measurement's uncertainty budget (``features.uncertainty``): each file set's
-        residual (the reversal error B after compensation by ``verify``, else the largest
-        reversal value the files leave at the targets) is compared with U(B) at the axis's
-        measuring length and runs per direction (``resolution`` of each file set).
+        The measurement's uncertainty budget, a TOML file as ``iso`` takes it
+        (``features.uncertainty``): each file set's residual (the reversal error B after
+        compensation when verified, else the largest reversal value the files leave at the
+        targets) is within or beyond U(B) at the axis's measuring length and runs per
+        direction (``resolution`` of each file set).
     progress : callable, optional
         ``progress(done, total, what)`` during the closed-loop check.
 

@@ -136,7 +136,8 @@ def discover(data, *, format: str = "auto", baseline=DEFAULT_BASELINE,
     ----------
     data : str, path or DataFrame
         Readings (the columns of docs/data-contract.md; ``measured_at`` for time effects): a
-        file or a fleet store (a folder or a ``postgresql://`` URL, ``backlash ingest``).
+        file or a fleet store (a folder or a ``postgresql://`` URL made by
+        ``backlash ingest``).
     format : str, default 'auto'
         Input layout of a file.
     baseline : str or list of str, default 'backlash,lead_error_linear'

@@ -40,24 +40,15 @@ PARAMETERS = {
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "output folder for the report", required=True,
                  output="folder"),
-    "model": Param((*MODEL, None), "trained model directory; its predictor gives the "
-                   "permutation importance of the association views (default: a gradient "
-                   "boosting regressor fitted per cross-validation fold)", metavar="DIR"),
+    "model": Param((*MODEL, None), metavar="DIR"),
     "bins": Param((Interval(Integral, 2, None, closed="left"), str, "array-like"),
-                  "backlash classes: N quantile classes, or comma-separated class boundaries "
-                  "in um such as 2,4,6", parse=str),  # the text as given: parse_bins reads it
-    "features": replace(FEATURES, help="comma-separated feature-table columns (default: every "
-                        "input the data supply)"),
-    "target": Param((*TARGET.accepts, None), "backlash definition (default: the model's, else "
-                    "auto)"),
-    "k": Param((Interval(Integral, 1, None, closed="left"),), "k-NN neighbours"),
-    "rank_by": Param((StrOptions(("consensus", "anova")),), "order of the association views: "
-                     "mean rank of ANOVA, permutation and mutual information (default), or the "
-                     "ANOVA score as in the paper; the report lists drivers first either way"),
-    "boot": Param((Interval(Integral, 0, None, closed="left"),), "bootstrap resamples of the "
-                  "effect intervals and ANOVA spreads"),
-    "dropcolumn": Param(("boolean",), "compute the drop-column importance of gradient "
-                        "boosting (default); --no-dropcolumn skips it (faster)"),
+                  parse=str),  # the text as given: parse_bins reads it
+    "features": replace(FEATURES, help=None),  # described by rank's docstring
+    "target": Param((*TARGET.accepts, None)),
+    "k": Param((Interval(Integral, 1, None, closed="left"),)),
+    "rank_by": Param((StrOptions(("consensus", "anova")),)),
+    "boot": Param((Interval(Integral, 0, None, closed="left"),)),
+    "dropcolumn": Param(("boolean",)),
     "seed": RANDOM_SEED,
 }
 
@@ -163,25 +154,29 @@ def rank(data, *, format: str = "auto", model=None, bins=4, features=None,
     format : str, default 'auto'
         Input layout of a file (see ``features.readings.schema.FORMATS``).
     model : str, path or fitted predictor, optional
-        Trained model (directory or object): its predictor gives the permutation importance
-        (default: a gradient boosting regressor fitted per cross-validation fold); it also
-        sets the default features and target.
+        A trained model directory: its predictor gives the permutation importance of the
+        association views (default: a gradient boosting regressor fitted per cross-validation
+        fold); it also sets the default features and target.
     bins : int, str or list of float, default 4
-        Backlash classes: a count of quantile classes (at least 2), or class boundaries [um]
-        (a list, or comma-separated text such as ``"2,4,6"``).
+        Backlash classes: a count of quantile classes (at least 2), or class boundaries [um],
+        comma-separated such as ``2,4,6``.
     features : list of str, optional
-        Feature-table columns; default every input the data supply, or the model's inputs.
+        Feature-table columns, comma-separated; default every input the data supply, or the
+        model's inputs.
     target : {'auto', 'paper', 'iso'}, optional
-        Backlash definition; default the model's, else ``auto``.
+        Backlash definition: pendulum minus linear (``paper``), the ISO reversal value
+        (``iso``) or chosen from the measuring-system evidence (``auto``); default the
+        model's, else ``auto``.
     k : int, default 5
         Neighbours of the weighted k-NN.
     rank_by : {'consensus', 'anova'}, default 'consensus'
         Order of the association views: the mean rank of ANOVA, permutation and mutual
-        information, or the ANOVA score as in the paper.
+        information (``consensus``), or the ANOVA score as in the paper (``anova``); the
+        report lists drivers first either way.
     boot : int, default 200
         Bootstrap resamples of the effect intervals and the ANOVA spreads (0: none).
     dropcolumn : bool, default True
-        Compute the drop-column importance of gradient boosting (slower).
+        Compute the drop-column importance of gradient boosting; skipping it is faster.
     seed : int, default 0
         Random seed.
     progress : callable, optional

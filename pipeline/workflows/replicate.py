@@ -15,7 +15,7 @@ from pathlib import Path
 
 from features.readings.errors import Progress
 from pipeline.results import Result
-from pipeline.steps.parameters import FORMAT, RANDOM_SEED, TRUTH, Param, readings
+from pipeline.steps.parameters import FORMAT, RANDOM_SEED, READINGS, TRUTH, Param
 from pipeline.workflows import readings_of, source_of
 from pipeline.workflows.constraints import Interval
 
@@ -27,12 +27,11 @@ EXAMPLE = (
 )
 
 PARAMETERS = {
-    "data": readings("readings file with paired linear and pendulum tests"),
+    "data": Param(READINGS, flag="DATA", reads_readings=True),  # as readings(), described here
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "output folder", required=True, output="folder"),
-    "truth": replace(TRUTH, help="twin truth table: also the k-NN accuracy the true backlash "
-                     "would reach in the measured classes (the ceiling set by noise)"),
-    "boot": Param((Interval(Integral, 0, None, closed="left"),), "bootstrap resamples"),
+    "truth": replace(TRUTH, help=None),  # described by replicate's docstring
+    "boot": Param((Interval(Integral, 0, None, closed="left"),)),
     "seed": RANDOM_SEED,
 }
 
@@ -87,12 +86,12 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
     Parameters
     ----------
     data : str, path or DataFrame
-        Readings with paired linear and pendulum tests: a file or a frame as ``read``
-        returns it.
+        Readings with paired linear and pendulum tests: a file or a fleet store (a folder or a
+        ``postgresql://`` URL made by ``backlash ingest``).
     format : str, default 'auto'
         Input layout of a file.
     truth : str, path or DataFrame, optional
-        The twin's truth table (``simulate``): also the k-NN accuracy the true backlash would
+        The twin's truth table (written by ``simulate``): also the k-NN accuracy the true backlash would
         reach in the measured classes (the ceiling set by noise).
     boot : int, default 100
         Bootstrap resamples.
