@@ -274,8 +274,8 @@ def compensate(data, *, controller="csv", format: str = "auto", conditions=None,
         The tests were measured with this compensation active (one controller's files for one
         machine axis: its table and/or its parameter file, one path each). The new file is the
         active file plus the measured residual, for that controller only; each file written
-        for it reports its change per target (``changes``, also
-        ``<stem>_<controller>_changes.csv``).
+        for it reports its change per target (``changes``, also a ``..._changes.csv`` file per
+        machine axis and controller in the output folder).
     sign : {"error", "correction"}, optional
         What a positive table value means at this site, for the controllers whose table
         convention is a choice (SINUMERIK, Fanuc, Heidenhain; ``CONTROLLERS[name].sign``);
