@@ -22,10 +22,12 @@ done here, the same way for every entry point (kedro's runner and hooks):
    with the job after logging the result's record into it;
 4. **output**: ``out`` is written by ``result.write(out)`` (a workflow that takes ``out``
    itself writes it);
-5. **store recording** (``store``): a job whose record names its recorder
+5. **the fleet store** (``store``): a job whose record names its recorder
    (``Workflow.records``) records its result there after writing; the store is opened first,
-   so a bad store is refused before any work (a workflow that takes ``store`` itself records
-   it itself);
+   so a bad store is refused before any work, and the records are checked before the result
+   is written, so a result that cannot be recorded writes nothing. A job that operates on a
+   store (``Workflow.store_access``: ingest, void, check, watch) gets it opened as its record
+   says, before any work. A workflow never opens a store itself;
 6. **progress**: ``progress(done, total, what)`` goes to workflows that report it.
 
 Tracking default: ``TRACK = True``, for every entry point (the CLI's ``--no-track``,
@@ -37,8 +39,9 @@ A parameter whose default depends on where the job runs (a study storage in the 
 folder) is resolved here when the call leaves it None (``Workflow.runtime_defaults``).
 
 Everything that differs from one job to another is declared on its record
-(``pipeline.workflows.Workflow``: ``tracked``, ``source``, ``records``, ``model_logging``,
-``logs_while_running``, ``runtime_defaults``, ``reader_options``); this module names no job.
+(``pipeline.workflows.Workflow``: ``tracked``, ``source``, ``records``, ``store_access``,
+``model_logging``, ``logs_while_running``, ``runtime_defaults``, ``reader_options``); this
+module names no job.
 
 What the tracking gave (``run_id``; ``version`` and ``champion`` of a registered model) is
 ``result.tracking``; a store's record line is ``result.recorded``.
@@ -56,6 +59,7 @@ from features.readings.selection import NAMES as SELECTION
 TRACK = True  # the one default of every entry point
 READINGS = ("data", "files")  # the parameter of a workflow that takes the readings
 LIVE = "live"  # the parameter of a workflow that logs while it runs (its live run)
+STORE = "store"  # the fleet store a job records into or operates on (``data`` is what it reads)
 
 
 def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=None,
@@ -75,8 +79,8 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
     out : str or path-like, optional
         Where the result writes its files.
     store : str, path-like or Store, optional
-        Fleet store: the one a workflow takes, else where the result is recorded
-        (``Workflow.records``).
+        Fleet store: the one a job operates on (``Workflow.store_access``), else where its
+        result is recorded (``Workflow.records``).
     progress : callable, optional
         ``progress(done, total, what)``, for the workflows that report progress.
 
@@ -100,22 +104,20 @@ def run(job: str, /, *args, track: bool = TRACK, out=None, store=None, progress=
     bound = _defaults(record, bound)
     bound = _selected(record, declared, bound)
     opened = _opened(record, declared, store)
+    bound = _operated(record, declared, bound)
     live = _live(record, track and not nested)
     if live is not None:
         bound[LIVE] = live
     with _tracking(record, track and live is None, nested) as tracking, \
             live or contextlib.nullcontext():
         result = record.function(**bound)
+        if opened is not None:  # records that would be refused: nothing written or logged
+            _recorder(record)(None, result)
         tracking.write_and_log(result, None if "out" in declared else out)
         if live is not None:
             tracking.logged = live.finish(result)
     result.tracking = tracking.logged
-    if opened is not None:
-        from pipeline.workflows import imported
-
-        result.recorded = imported(record.records)(opened, result)
-    elif not hasattr(result, "recorded"):  # a workflow that records says it itself
-        result.recorded = None
+    result.recorded = None if opened is None else _recorder(record)(opened, result)
     return result
 
 
@@ -227,13 +229,49 @@ def _select(data, format: str, chosen: dict, raw: dict):
 def _opened(record, declared, store):
     """The store a result is recorded in, opened before any work (a bad store is refused
     first); None when nothing is recorded by the runner."""
-    if store is None or "store" in declared:
+    if store is None or STORE in declared:
         return None
     if record.records is None:
-        raise InputError(f"{record.name} records nothing in a fleet store", parameter="store")
+        raise InputError(f"{record.name} records nothing in a fleet store", parameter=STORE)
     from pipeline.store.records import open_for_records
 
     return open_for_records(store)
+
+
+def _recorder(record):
+    """``function(store, result)`` that records the job's result (``Workflow.records``)."""
+    from pipeline.workflows import imported
+
+    return imported(record.records)
+
+
+def _operated(record, declared, bound: dict) -> dict:
+    """The fleet store a job operates on (its ``store``), opened as its record says
+    (``Workflow.store_access``) before any work: the workflow gets the ``Store``."""
+    access = record.store_access
+    if access is None:
+        return bound
+    from pipeline.store import open_store
+    from pipeline.store.base import Store
+
+    location = bound.get(STORE)
+    if access == "record" and location is not None:  # a Store given is checked too
+        from pipeline.store.records import open_for_records
+
+        bound[STORE] = open_for_records(location)
+        return bound
+    if location is None or isinstance(location, Store):
+        return bound
+    if access.startswith("write if "):
+        flag = access.removeprefix("write if ")
+        write = bool(bound.get(flag, declared[flag].default))
+    elif access in ("read", "write"):
+        write = access == "write"
+    else:
+        raise ValueError(f"{record.name}: store_access {access!r} is not read, write, record "
+                         "or 'write if NAME'")
+    bound[STORE] = open_store(location, write=write, parameter=STORE)
+    return bound
 
 
 class _Untracked:

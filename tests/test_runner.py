@@ -228,6 +228,90 @@ def test_store_records_a_compensation_from_python_as_from_the_cli(two_axes, tmp_
     assert raised.value.parameter == "store"
 
 
+def test_a_workflow_is_handed_its_store_and_never_opens_one():
+    """A job whose table offers ``store`` records its result through its record
+    (``Workflow.records``: the function takes no ``store``; the runner opens the store and
+    records), is handed the store opened as its record says (``Workflow.store_access``), or
+    reads the store's records through its Source (``fleet``, ``drift``)."""
+    import inspect
+
+    from pipeline.workflows import WORKFLOWS
+
+    for record in WORKFLOWS:
+        takes = "store" in inspect.signature(record.function).parameters
+        assert not (record.records and record.store_access), record.name
+        if record.records is not None:
+            assert "store" in record.parameters and not takes, record.name
+        elif takes:
+            assert record.store_access is not None or record.source, record.name
+
+
+def test_the_runner_opens_the_store_a_job_operates_on_as_its_record_says(two_axes, tmp_path,
+                                                                         monkeypatch):
+    """ingest makes a new store (``write``), void is handed the opened ``Store``, a check
+    opens for writing only with ``repair`` (``write if repair``), watch records into an
+    existing store only (``record``): each refusal the one line it was, before any work."""
+    import functools
+
+    from pipeline.store.base import Store
+    from pipeline.workflows import workflow
+
+    store = tmp_path / "fleet"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the new store's note
+        assert bl.ingest(str(two_axes), store).new_store
+    module, handed = workflow("void").module, []
+    original = module.void
+
+    @functools.wraps(original)
+    def void(store, **params):
+        handed.append(store)
+        return original(store, **params)
+
+    monkeypatch.setattr(module, "void", void)
+    done = bl.void(str(store), machine="M01", axis="Y", reason="r")
+    assert isinstance(handed[0], Store) and done.store == str(store) and done.tests
+    new = tmp_path / "new"
+    with pytest.raises(InputError, match="no such store"):
+        bl.void(str(new), machine="M01", axis="Y", reason="r")
+    with pytest.raises(InputError, match="no such file or store folder") as read:
+        bl.check_store(str(new))
+    with pytest.raises(InputError, match=r"no such store \(no manifest\)") as written:
+        bl.check_store(str(new), repair=True)
+    assert read.value.parameter == written.value.parameter == "store"
+    with pytest.raises(InputError, match="holds no store yet") as watched:
+        bl.watch(str(tmp_path / "WATCH.toml"), store=str(new))  # the store before the config
+    assert watched.value.parameter == "store" and not new.exists()
+
+
+def test_the_records_are_checked_before_the_result_is_written(tmp_path, capsys):
+    """A result the store would refuse (circles without their date) writes nothing, from
+    Python as from the command line; the same circles dated record their backlash, and
+    ``result.recorded`` says so."""
+    import pandas as pd
+
+    from pipeline.store.records import read_records
+
+    store = tmp_path / "fleet"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bl.ingest(str(TWIN), store)
+    dated = ROOT / "experiments/data/circle/ballbar_xy.csv"
+    undated = tmp_path / "undated.csv"
+    pd.read_csv(dated).drop(columns="started_at").to_csv(undated, index=False)
+    with pytest.raises(InputError, match="needs its date"):
+        bl.circle(str(undated), store=str(store), out=tmp_path / "py")
+    assert main(["circle", str(undated), "--out", str(tmp_path / "cli"), "--store",
+                 str(store)]) == 2
+    assert not (tmp_path / "py").exists() and not (tmp_path / "cli").exists()
+    assert read_records(str(store), "ballbar") == {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = bl.circle(str(dated), store=str(store), out=tmp_path / "py")
+    assert result.recorded.added == 2 and (tmp_path / "py" / "circles.csv").is_file()
+    assert bl.circle(str(dated)).recorded is None
+
+
 def test_tracking_is_one_parameter_with_one_default(two_axes):
     """A tracked job logs its run by default from Python as from the CLI; ``track=False``
     logs nothing; an untracked job never touches MLflow."""

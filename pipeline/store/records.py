@@ -10,6 +10,11 @@ the same content twice adds nothing. Both engines keep them in two tables of the
 (``machine_id``, ``axis``, ``sha256``, ``recorded_at``, ``record``) through ``Store.put_records``
 and ``Store.get_records``, with the same SQL (``pipeline.store.tables``).
 
+A job records its result through the recorder its record names (``Workflow.records``:
+``record_forecast``, ``record_compensation``, ``record_trace``, ``record_ballbar``,
+``record_probing``, ``record_stiffness``, each ``function(store, result)``); the runner opens
+the store before the job runs and calls it, never the job itself.
+
 >>> from pipeline.store.records import record_compensation, read_records   # doctest: +SKIP
 >>> record_compensation("fleet/", bl.compensate("fleet/", controller="csv"))  # doctest: +SKIP
 >>> read_records("fleet/", "compensation")[("M01", "X")][-1]["controller"]    # doctest: +SKIP
@@ -372,9 +377,12 @@ def open_for_records(store):
     return opened
 
 
-def record(store, kind: str, records: list[dict], recorded_at: str | None = None) -> Recorded:
-    """Record ``records`` of ``kind`` (``forecast`` or ``compensation``) in one transaction:
-    all or none; those already stored with the same content are left as they are.
+def record(store, kind: str, records: list[dict], recorded_at: str | None = None
+           ) -> Recorded | None:
+    """Record ``records`` of ``kind`` (``CHECKS`` names the kinds) in one transaction: all or
+    none; those already stored with the same content are left as they are. ``store`` None:
+    every record is checked and none recorded (None returned): the runner asks so before it
+    writes a result, so that a result whose records would be refused writes nothing either.
 
     Raises
     ------
@@ -383,6 +391,8 @@ def record(store, kind: str, records: list[dict], recorded_at: str | None = None
         written; nothing is recorded.
     """
     rows = rows_of(kind, records, recorded_at)  # every record checked before the store
+    if store is None:
+        return None
     opened = open_for_records(store)
     added = opened.put_records(kind, rows)
     return Recorded(kind, added, len({r[:3] for r in rows}) - added, opened.location)
@@ -497,13 +507,14 @@ def compensation_records(result) -> list[dict]:
     return records
 
 
-def record_compensation(store, result, recorded_at: str | None = None) -> Recorded:
+def record_compensation(store, result, recorded_at: str | None = None) -> Recorded | None:
     """Record what a compensate workflow's result writes, per machine axis and controller.
 
     Parameters
     ----------
-    store : str, path-like or Store
-        An existing fleet store (folder or ``postgresql://`` URL).
+    store : str, path-like, Store or None
+        An existing fleet store (folder or ``postgresql://`` URL); None: check the records
+        only (``record``).
     result : CompensationResult
         What ``pipeline.workflows.compensate.compensate`` returned (written or not: the
         files are named as ``result.path`` names them).
@@ -512,10 +523,57 @@ def record_compensation(store, result, recorded_at: str | None = None) -> Record
 
     Returns
     -------
-    Recorded
+    Recorded or None
         ``added`` new records; recording the same compensation again adds none.
     """
     return record(store, "compensation", compensation_records(result), recorded_at)
+
+
+def record_forecast(store, result, recorded_at: str | None = None) -> Recorded | None:
+    """Record a predict workflow's forecast (``pipeline.workflows.predict.PredictionResult``),
+    one record per machine axis and visit (``forecast_records``): its ``points`` (the
+    predictions with the day and operating hours each is for), the model by its registry
+    name, the directory it was loaded from and the SHA-256 of its ``model.json``, and a wear
+    map's wear-rate map per machine axis (``model_wear_rates``)."""
+    import os
+
+    points, trained = getattr(result, "points", None), getattr(result, "trained", None)
+    if points is None or trained is None:
+        raise InputError("holds no forecast; expected the result of predict",
+                         parameter="result")
+    model_dir, sha = getattr(result, "model_dir", None), None
+    if model_dir is not None:
+        from pathlib import Path
+
+        from models.persistence import digest as file_digest
+        from models.registry import MODEL_FILE
+
+        model_dir, sha = os.fspath(model_dir), file_digest(Path(model_dir) / MODEL_FILE)
+    records = forecast_records(points, model=trained.name, source=result.points_source,
+                               model_dir=model_dir, model_sha256=sha,
+                               wear_rates=model_wear_rates(trained))
+    return record(store, "forecast", records, recorded_at)
+
+
+def model_wear_rates(trained) -> dict | None:
+    """The wear-rate map w(x) [um per 1000 h] of a wear-map model by (machine_id, axis) (key
+    None: a single map for any axis), or None for a model without one."""
+    import numpy as np
+
+    estimator = trained.estimator
+    if not hasattr(estimator, "wear_rate_map") or not getattr(estimator, "use_hours_", True):
+        return None
+    frame = estimator.wear_rate_map()
+    groups = (frame.groupby(["machine_id", "axis"], sort=True) if "machine_id" in frame
+              else [(None, frame)])
+
+    def plain(values):
+        return [float(v) if np.isfinite(v) else None for v in np.asarray(values, float)]
+
+    return {None if key is None else tuple(map(str, key)): {
+        "position_mm": plain(g["position_mm"]), "rate": plain(g["wear_rate_um_per_1000h"]),
+        "low": plain(g["wear_rate_low"]), "high": plain(g["wear_rate_high"])}
+        for key, g in groups}
 
 
 def _plain(value):
@@ -561,6 +619,30 @@ def ballbar_records(items, dates: dict, source: str) -> list[dict]:
     return out
 
 
+def record_trace(store, result, recorded_at: str | None = None) -> Recorded | None:
+    """Record a monitor result's daily lost motion (``trace_records`` of its ``daily``), one
+    trace record per machine axis and day with a value; the same days again add nothing."""
+    daily = getattr(result, "daily", None)
+    if daily is None:
+        raise InputError("holds no daily lost motion; expected the result of monitor",
+                         parameter="result")
+    return record(store, "trace", trace_records(daily, result.source), recorded_at)
+
+
+def record_ballbar(store, result, recorded_at: str | None = None) -> Recorded | None:
+    """Record a circle result's backlash per axis (``ballbar_records`` of its ``circles``,
+    dated by its ``dates``: the earliest ``started_at`` of each circle's runs); refused when
+    the circular-test table did not date every run."""
+    circles = getattr(result, "circles", None)
+    if circles is None:
+        raise InputError("holds no circle; expected the result of circle", parameter="result")
+    if result.dates is None:
+        raise InputError("a circle recorded in a fleet store needs its date: started_at on "
+                         "every row", file=result.source, column="started_at")
+    return record(store, "ballbar", ballbar_records(circles, result.dates, result.source),
+                  recorded_at)
+
+
 def probing_records(result) -> list[dict]:
     """One probing record per rotary axis of every machine and visit of a kinematics result
     (``pipeline.workflows.kinematics.KinematicsResult``): its play [arcsec] and its six
@@ -586,7 +668,7 @@ def probing_records(result) -> list[dict]:
     return out
 
 
-def record_probing(store, result, recorded_at: str | None = None) -> Recorded:
+def record_probing(store, result, recorded_at: str | None = None) -> Recorded | None:
     """Record a kinematics result's probing records (``probing_records``) in ``store``."""
     return record(store, "probing", probing_records(result), recorded_at)
 
@@ -622,6 +704,6 @@ def stiffness_records(result) -> list[dict]:
     return out
 
 
-def record_stiffness(store, result, recorded_at: str | None = None) -> Recorded:
+def record_stiffness(store, result, recorded_at: str | None = None) -> Recorded | None:
     """Record a stiffness result's stiffness records (``stiffness_records``) in ``store``."""
     return record(store, "stiffness", stiffness_records(result), recorded_at)

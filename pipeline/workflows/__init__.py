@@ -224,8 +224,20 @@ class Workflow:
         store the readings came from (its records, its voids) says so here.
     records : str or None
         The dotted name of ``function(store, result) -> Recorded`` that records the job's
-        result in the fleet store given as ``store`` (the runner opens the store before any
-        work); None: the job records nothing there (unless it takes ``store`` itself).
+        result in the fleet store given as ``store`` (``pipeline.store.records``): the runner
+        opens the store before any work, has the records checked before the result is written
+        (``function(None, result)``) and records them after; None: the job records nothing
+        there. The job's table declares ``store`` for the command line, its function does not
+        take it.
+    store_access : str or None
+        How the runner opens the fleet store a job operates on, named by its ``store``
+        parameter, before any work, to hand the workflow the opened ``Store`` (a workflow never
+        opens one; a ``Store`` given is handed on as it is): ``"read"``; ``"write"`` (this
+        user may write; a new or empty folder opens as a store not made yet, ``exists()``
+        False, which the job makes or refuses); ``"record"`` (for writing, refused when it
+        holds no store yet, as ``records`` opens it); ``"write if NAME"`` (for writing when the
+        job's boolean parameter ``NAME`` is true, else for reading). None: the job operates on
+        no store (one it reads as ``data`` the runner reads for it).
     model_logging : str or None
         The dotted name of the function the MLflow child runs before the result is ready, to
         prepare logging a model (the imports it needs, while the job computes).
@@ -257,6 +269,7 @@ class Workflow:
     module_name: str | None = None
     source: bool = False
     records: str | None = None
+    store_access: str | None = None
     model_logging: str | None = None
     reader_options: tuple[str, ...] = ()
     logs_while_running: str | None = None
@@ -300,14 +313,15 @@ WORKFLOWS = (
     Workflow('ingest',
              'Validate readings files (any accepted layout) and add their tests to a fleet store (a '
              'folder, or PostgreSQL for a team); the same test twice changes nothing.',
-             inputs=('files',)),
+             inputs=('files',), store_access='write'),
     Workflow('store',
              "Check a fleet store: every recorded test's readings present and intact, every part "
              "recorded, nothing orphaned (--repair mends what is provably safe).",
-             function_name='check_store'),
+             function_name='check_store', store_access='write if repair'),
     Workflow('void',
              'Retire tests of a fleet store from every reader, kept with when, who and why in its '
-             'audit table (--undo restores them).'),
+             'audit table (--undo restores them).',
+             store_access='write'),
     Workflow('iso',
              'ISO 230-2 analysis: per-target and axis figures (A, E, M, R, B) of every test.',
              inputs=('data', 'uncertainty'), reader_options=RAW_LOG_OPTIONS),
@@ -330,7 +344,7 @@ WORKFLOWS = (
     Workflow('predict',
              'Predict backlash with a trained model directory from new tests or from a plan table '
              '(targets and conditions); write a CSV.',
-             inputs=('model', 'data', 'plan')),
+             inputs=('model', 'data', 'plan'), records='pipeline.store.records.record_forecast'),
     Workflow('compare',
              'Train every predictor (network, physics baselines, comparators) on one split; compare.',
              inputs=('data', 'truth'), tracked=True),
@@ -383,7 +397,7 @@ WORKFLOWS = (
              'ISO 230-4 circular tests (ballbar): circular deviation G per direction, hysteresis H '
              'and the diagnosis per axis (backlash, reversal spike) and per plane (squareness, scale '
              'and servo mismatch), each with its uncertainty; polar plots.',
-             inputs=('data',)),
+             inputs=('data',), records='pipeline.store.records.record_ballbar'),
     Workflow('stiffness',
              'Static stiffness from loaded double-ballbar (LDBB) circles: per centre the stiffness '
              'in X and Y and the compliance with their uncertainty, a map over the workspace chosen '
@@ -397,11 +411,11 @@ WORKFLOWS = (
     Workflow('monitor',
              'Lost motion per machine axis and day from controller traces with motor- and load-side '
              'positions, with its uncertainty, change points and trend.',
-             inputs=('traces',)),
+             inputs=('traces',), records='pipeline.store.records.record_trace'),
     Workflow('watch',
              "Lost motion per machine axis and day from a live controller feed (EPICS CA or PVA, "
              "OPC UA, a growing camonitor log), recorded in a fleet store as each day ends.",
-             inputs=('config',)),
+             inputs=('config',), store_access='record'),
 )
 NAMES = tuple(w.name for w in WORKFLOWS)
 _BY_NAME = {w.name: w for w in WORKFLOWS}

@@ -37,7 +37,10 @@ PARAMETERS = {
                  "circles.csv, circles.html", metavar="DIR", output="folder"),
     "tolerance_um": Param((None, Interval(Real, 0, None, closed="neither")),
                           flag="--tolerance", metavar="UM"),
-    "store": Param((str, os.PathLike, None), metavar="STORE"),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL; "
+                   "docs/fleet.md) to record each diagnosed circle's backlash in: one ballbar "
+                   "record per axis of its plane, dated by the earliest started_at of its runs; "
+                   "the same circles again add nothing", metavar="STORE"),
 }
 
 # JSON keys of the diagnosis: (key, model term of the first axis, of the second) or (key, term).
@@ -130,14 +133,19 @@ class CircleResult(Result):
         The file the tests came from.
     tolerance_um : float or None
         The tolerance band drawn in the plots [um].
+    dates : dict or None
+        The day (ISO, UTC) of each circle, (machine, plane, visit, radius, feed) -> the
+        earliest ``started_at`` of its runs: what dates its backlash in a fleet store
+        (``pipeline.store.records.record_ballbar``); None when a run has no ``started_at``.
     recorded : pipeline.store.records.Recorded or None
-        What was recorded in the fleet store (``store``), else None.
+        What ``store`` recorded (the runner sets it).
     """
 
     circles: list
     source: str = ""
     tolerance_um: float | None = None
     parameters: dict = field(default_factory=dict)
+    dates: dict | None = field(default=None, repr=False)
     recorded: object = None
 
     def to_json(self) -> dict:
@@ -294,7 +302,7 @@ def _negative_play(item: CircleFigures, file) -> str | None:
             f"angle, {increasing})")
 
 
-def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResult:
+def circle(data, *, tolerance_um: float | None = None) -> CircleResult:
     """Evaluate circular tests: ISO 230-4 G and H and the diagnosis of each circle.
 
     Parameters
@@ -304,11 +312,6 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     tolerance_um : float, optional
         Width of the tolerance band drawn in the polar plots [um] (e.g. the G a machine's
         acceptance allows); not drawn when not given.
-    store : str or path-like, optional
-        A fleet store (folder or ``postgresql://`` URL; docs/fleet.md) to record each
-        diagnosed circle's backlash in: one ``ballbar`` record per axis of its plane, dated by
-        the earliest ``started_at`` of its runs (``pipeline.store.records.ballbar_records``);
-        the same circles again add nothing.
 
     Returns
     -------
@@ -321,20 +324,13 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     Raises
     ------
     InputError
-        The file breaks the contract (naming file, row and column); with ``store``, a store
-        that does not exist or cannot be written, or a circle without ``started_at`` (nothing
-        recorded).
+        The file breaks the contract (naming file, row and column).
 
     References
     ----------
     ISO 230-4:2022, Circular tests for numerically controlled machine tools.
     """
     from features import circle as fc
-
-    if store is not None:  # before any work: a store that cannot take the records
-        from pipeline.store.records import open_for_records
-
-        store = open_for_records(store)
     from features.readings.errors import note
 
     frame = fc.read_circles(data)
@@ -351,26 +347,19 @@ def circle(data, *, tolerance_um: float | None = None, store=None) -> CircleResu
     for text in notes:
         note(text)
     source = str(data) if file is not None else "<frame>"
-    result = CircleResult(circles=items, source=source, tolerance_um=tolerance_um,
-                          parameters={"tolerance_um": tolerance_um}, notes=notes)
-    if store is not None:
-        from pipeline.store.records import ballbar_records, record
-
-        records = ballbar_records(items, circle_days(frame, source), source)
-        result.recorded = record(store, "ballbar", records)
-    return result
+    return CircleResult(circles=items, source=source, tolerance_um=tolerance_um,
+                        parameters={"tolerance_um": tolerance_um}, notes=notes,
+                        dates=circle_days(frame))
 
 
-def circle_days(frame, source: str) -> dict:
+def circle_days(frame) -> dict | None:
     """The day (ISO, UTC) of each circle, (machine, plane, visit, radius, feed) -> the
     earliest ``started_at`` of its runs (``frame``: the circle readings, a DataFrame): what
-    dates its backlash in a fleet store."""
+    dates its backlash in a fleet store; None when a row has no ``started_at``."""
     from features import circle as fc
-    from features.readings.errors import InputError
 
     if "started_at" not in frame or frame["started_at"].isna().any():
-        raise InputError("a circle recorded in a fleet store needs its date: started_at on "
-                         "every row", file=source, column="started_at")
+        return None
     first = frame.groupby(list(fc.CIRCLE_KEYS), sort=False)["started_at"].min()
     return {(str(m), str(p), str(v), float(r), float(f)): t.date().isoformat()
             for (m, p, v, r, f), t in first.items()}

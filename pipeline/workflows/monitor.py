@@ -51,7 +51,10 @@ PARAMETERS = {
     "threshold_um": Param((_POSITIVE, None), metavar="X"),
     "take_up_mm": Param((_POSITIVE,), metavar="X"),
     "settle_s": python_only(Interval(Real, 0, None, closed="left")),
-    "store": Param((str, os.PathLike, None), metavar="STORE"),
+    "store": Param((str, os.PathLike, None), "fleet store (folder or postgresql:// URL; "
+                   "docs/fleet.md) to record the daily lost motion in: one trace record per "
+                   "machine axis and day with a value; the same days again add nothing",
+                   metavar="STORE"),
     "format": Param((StrOptions(("trace", "camonitor", "halsampler")),), flag="--log-format",
                     group=_RAW),
     "channels": Param((str, dict, None), metavar="MAP", group=_RAW),
@@ -111,7 +114,7 @@ class MonitorResult(Result):
     engine : str
         Where the partitions ran.
     recorded : pipeline.store.records.Recorded or None
-        What was recorded in the fleet store (``store``), else None.
+        What ``store`` recorded (the runner sets it).
     """
 
     daily: object
@@ -146,7 +149,7 @@ class MonitorResult(Result):
 
 def monitor(traces, *, engine: str = "local", address: str | None = None,
             threshold_um: float | None = None, take_up_mm: float = 0.05,
-            settle_s: float = 0.1, progress=None, store=None, format: str = "trace",
+            settle_s: float = 0.1, progress=None, format: str = "trace",
             channels=None, reference_scale=None, machine: str | None = None,
             axis: str | None = None, period_s: float | None = None) -> MonitorResult:
     """Lost motion per machine axis and day from dual-feedback traces, with change points.
@@ -172,10 +175,6 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         Time after an acceleration before a sample counts as steady [s].
     progress : callable, optional
         ``progress(done, total, what)`` per partition (local engine).
-    store : str or path-like, optional
-        A fleet store (folder or ``postgresql://`` URL; docs/fleet.md) to record the daily lost
-        motion in: one ``trace`` record per machine axis and day with a value
-        (``pipeline.store.records.trace_records``); the same days again add nothing.
     format : {'trace', 'camonitor', 'halsampler'}
         What the traces are: ``trace``, trace tables and datasets; ``camonitor`` (an EPICS
         camonitor log) or ``halsampler`` (LinuxCNC halsampler output or a halscope export),
@@ -204,17 +203,12 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     ------
     InputError
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
-        engine, a ``store`` that does not exist or cannot be written (nothing recorded); a
-        raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
+        engine; a raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
         axis neither named nor given (``features.traces.logs``), ``channels`` on a trace;
         a day that cannot be physical (``models.lost_motion.check_physical``; nothing is
         written or recorded).
     """
     log = _log_options(format, channels, reference_scale, machine, axis, period_s)
-    if store is not None:  # before any work: a store that cannot take the records
-        from pipeline.store.records import open_for_records
-
-        store = open_for_records(store)
     import pandas as pd
 
     from models.lost_motion import DAILY_COLUMNS
@@ -236,15 +230,10 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
     notes = offsets + _notes(daily)
     for text in notes:
         note(text)
-    result = MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
-                           parameters={"engine": engine, "threshold_um": threshold_um,
-                                       "take_up_mm": take_up_mm, "settle_s": settle_s},
-                           notes=notes)
-    if store is not None:
-        from pipeline.store.records import record, trace_records
-
-        result.recorded = record(store, "trace", trace_records(daily, result.source))
-    return result
+    return MonitorResult(daily=daily, axes=axes, source=_source(traces), engine=engine,
+                         parameters={"engine": engine, "threshold_um": threshold_um,
+                                     "take_up_mm": take_up_mm, "settle_s": settle_s},
+                         notes=notes)
 
 
 def _log_options(format, channels, reference_scale, machine, axis, period_s) -> dict | None:

@@ -9,7 +9,7 @@ suffice), or at the points of a plan (a visit not measured yet: targets and cond
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -63,12 +63,26 @@ class PredictionResult(Result):
         rotary axis).
     model : str
         Registry name of the predictor.
+    points : DataFrame or None
+        The predictions with the operating hours and the start (``started_at``) of the visit
+        each point is for, where known: what a fleet store records of the forecast
+        (``pipeline.store.records.record_forecast``).
+    points_source : str
+        Where the points came from (the readings or the plan).
+    trained : TrainedModel or None
+        The predictor (its registry name and, for a wear map, its wear-rate map).
+    model_dir : str or None
+        The model directory it was loaded from (None for a model given as an object).
     recorded : pipeline.store.records.Recorded or None
-        What was recorded in the fleet store (``store``), else None.
+        What ``store`` recorded (the runner sets it).
     """
 
     predictions: pd.DataFrame
     model: str
+    points: pd.DataFrame | None = field(default=None, repr=False)
+    points_source: str = field(default="", repr=False)
+    trained: TrainedModel | None = field(default=None, repr=False)
+    model_dir: str | None = field(default=None, repr=False)
     recorded: object = None
 
     @property
@@ -106,8 +120,7 @@ class PredictionResult(Result):
             artifacts=list(self.files.values()))
 
 
-def predict(model, data=None, *, plan=None, format: str = "auto",
-            store=None) -> PredictionResult:
+def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionResult:
     """Backlash [um] from a trained model at the points of new tests or of a plan.
 
     Parameters
@@ -122,11 +135,6 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         (``features.readings.plan``). Give ``data`` or ``plan``.
     format : str
         Input layout of ``data`` (default: detect).
-    store : str or path-like, optional
-        A fleet store (folder or ``postgresql://`` URL) to record the forecast in, one record
-        per machine axis and visit (``pipeline.store.records.forecast_records``): the points,
-        the day (``started_at``) and operating hours it is for, the model and, for a wear map,
-        its wear-rate map. Recording the same forecast again changes nothing.
 
     Returns
     -------
@@ -144,9 +152,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
         Neither or both of ``data`` and ``plan``; a point the model may not answer for (a
         machine axis it was not trained on, an axis of another unit; a fleet model forecasts
         another axis of a unit it has a fleet of, with a note: ``models.serving.answerable``),
-        or a model that does not record which axes it was trained on; a ``store`` that does
-        not exist or cannot be written, or points without ``machine_id`` and ``axis`` to
-        record them by (nothing is recorded).
+        or a model that does not record which axes it was trained on.
     """
     import pandas as pd
 
@@ -157,10 +163,6 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
 
     if (data is None) == (plan is None):
         raise InputError("give the readings (data) or a plan, not both", parameter="data")
-    if store is not None:  # before any work: a store that cannot take the records
-        from pipeline.store.records import open_for_records
-
-        store = open_for_records(store)
     trained = model if isinstance(model, TrainedModel) else load_model(model)
     if plan is None and isinstance(data, (str, os.PathLike)) and format in (
             "auto", "canonical") and is_plan(data):
@@ -183,15 +185,15 @@ def predict(model, data=None, *, plan=None, format: str = "auto",
     out = with_units(pd.concat([inputs[keys].reset_index(drop=True), predicted], axis=1))
     for line in lines:
         note(line)
-    result = PredictionResult(predictions=out, model=trained.name, notes=lines)
-    if store is not None:
-        points = out.copy()
-        if "operating_hours" not in points and "operating_hours" in inputs:
-            points["operating_hours"] = inputs["operating_hours"].to_numpy(float)
-        if plan is None and "started_at" in readings:
-            points["started_at"] = _visit_starts(readings, inputs)
-        result.recorded = record_forecast(store, points, trained, model, source)
-    return result
+    points = out.copy()
+    if "operating_hours" not in points and "operating_hours" in inputs:
+        points["operating_hours"] = inputs["operating_hours"].to_numpy(float)
+    if plan is None and "started_at" in readings:
+        points["started_at"] = _visit_starts(readings, inputs)
+    return PredictionResult(
+        predictions=out, model=trained.name, notes=lines, points=points, points_source=source,
+        trained=trained,
+        model_dir=str(model) if isinstance(model, (str, os.PathLike)) else None)
 
 
 def with_units(out: pd.DataFrame) -> pd.DataFrame:
@@ -215,44 +217,6 @@ def _visit_starts(readings: pd.DataFrame, inputs: pd.DataFrame):
     starts = readings.groupby(keys, observed=True)["started_at"].min()
     first = {tuple(map(str, k)): v for k, v in starts.items()}
     return [first.get(k) for k in inputs[keys].astype(str).itertuples(index=False, name=None)]
-
-
-def record_forecast(store, points: pd.DataFrame, trained, model, source: str):
-    """Record the forecast ``points`` in ``store`` (``pipeline.store.records``), naming the model by
-    its registry name, its directory and the SHA-256 of its ``model.json``; a wear map's
-    wear-rate map per machine axis goes with it."""
-    from pipeline.store.records import forecast_records, record
-
-    model_dir, sha = None, None
-    if isinstance(model, (str, os.PathLike)):
-        from models.persistence import digest
-        from models.registry import MODEL_FILE
-
-        model_dir, sha = str(model), digest(Path(model) / MODEL_FILE)
-    records = forecast_records(points, model=trained.name, source=source, model_dir=model_dir,
-                               model_sha256=sha, wear_rates=wear_rates(trained))
-    return record(store, "forecast", records)
-
-
-def wear_rates(trained) -> dict | None:
-    """The wear-rate map w(x) [um per 1000 h] of a wear-map model by (machine_id, axis) (key
-    None: a single map for any axis), or None for a model without one."""
-    import numpy as np
-
-    estimator = trained.estimator
-    if not hasattr(estimator, "wear_rate_map") or not getattr(estimator, "use_hours_", True):
-        return None
-    frame = estimator.wear_rate_map()
-    groups = (frame.groupby(["machine_id", "axis"], sort=True) if "machine_id" in frame
-              else [(None, frame)])
-
-    def plain(values):
-        return [float(v) if np.isfinite(v) else None for v in np.asarray(values, float)]
-
-    return {None if key is None else tuple(map(str, key)): {
-        "position_mm": plain(g["position_mm"]), "rate": plain(g["wear_rate_um_per_1000h"]),
-        "low": plain(g["wear_rate_low"]), "high": plain(g["wear_rate_high"])}
-        for key, g in groups}
 
 
 def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:

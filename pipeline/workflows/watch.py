@@ -107,12 +107,10 @@ def watch(config, *, store, until: str | None = None, seconds: float | None = No
         seconds = _seconds_until(until)
     from pipeline.live.config import read_config
     from pipeline.live.loop import run_watch
-    from pipeline.store.records import open_for_records
 
     settings = read_config(config)
-    opened = open_for_records(store)
-    _check_writable(opened)
-    watcher = run_watch(settings, opened, seconds=seconds, take_up=float(take_up_mm),
+    _check_writable(store)  # opened by the runner (``Workflow.store_access``)
+    watcher = run_watch(settings, store, seconds=seconds, take_up=float(take_up_mm),
                         settle_s=float(settle_s), status=status)
     days = [{k: _plain(v) for k, v in d.items()} for d in watcher.recorded]
     return WatchResult(days=days, updates=watcher.updates, config=str(config))
