@@ -77,7 +77,7 @@ def startup(env: dict) -> None:
 
 
 def main() -> None:
-    from models import registry
+    from models.serving import registry
 
     python = sys.executable
     with tempfile.TemporaryDirectory() as tmp:

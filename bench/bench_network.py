@@ -104,7 +104,7 @@ def main() -> None:
     import threadpoolctl
     import torch
 
-    from models import network
+    from models.estimators import network
 
     X, y = data()
     fixed = {"trainer": "lm", "epochs": EPOCHS, "min_grad": 0.0, "max_fail": EPOCHS + 1,

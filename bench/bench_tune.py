@@ -29,7 +29,7 @@ def main() -> None:
 
     import optuna
 
-    from models import tuning
+    from models.estimators import tuning
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     X, y = data()

@@ -19,9 +19,9 @@ NETWORK = size({}, {"epochs": 5})  # the paper network's settings; a tiny run's 
 
 def main() -> None:
     from features.table import feature_table
-    from models.evaluation import true_backlash, visit_order
+    from models.estimators.evaluation import true_backlash, visit_order
     from models.physics.campaign import load_config, simulate
-    from models.registry import make, with_axes
+    from models.serving.registry import make, with_axes
 
     config = load_config({"fleet": {"machines": MACHINES, "axes": list(AXES),
                                     "visits": VISITS}}, preset="wear")

@@ -27,7 +27,7 @@ TABLES = {
     "jobs": "pipeline.api:jobs_table",
     "formats": "features.readings.layouts:layouts_table",
     "controllers": "pipeline.compensation:controllers_table",
-    "predictors": "models.registry:predictors_table",
+    "predictors": "models.serving.registry:predictors_table",
     "effects": "models.physics.effects:effects_table",
 }
 # A marker is a line of its own (a page may name one in running text).

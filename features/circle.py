@@ -74,7 +74,7 @@ class Run:
     travel_deg: np.ndarray | None = None
 
     def fit_run(self) -> tuple:
-        """(direction, angle_deg, deviation_um, travel_deg): a run as ``models.circle``'s
+        """(direction, angle_deg, deviation_um, travel_deg): a run as ``models.machine.circle``'s
         fits take it."""
         return (self.direction, self.angle_deg, self.deviation_um, self.travel_deg)
 
@@ -109,7 +109,7 @@ class Circle:
 # --------------------------------------------------------------------------- reading
 def travel_deg(direction: str, theta_deg: np.ndarray) -> np.ndarray:
     """Travel [deg] of each reading since the run's first one, the readings in the order of
-    capture: the run's clock for its drift (``models.circle``). Readings sorted by angle instead
+    capture: the run's clock for its drift (``models.machine.circle``). Readings sorted by angle instead
     give a ramp from the smallest angle: a column the fit does not need, never a bias."""
     s = 1.0 if direction == "CCW" else -1.0
     theta = np.asarray(theta_deg, float)

@@ -65,7 +65,7 @@ def axis_backlash(readings: pd.DataFrame, stats: pd.DataFrame | None = None,
     For a visit of ``iso`` points this is k √((U(B)/k)² + u(b)²) with U(B) the largest of its
     tests' ([ISO230-9] through the backlash paper's Table 4, ``features.uncertainty``); with one
     setup at every visit the Abbe part cancels in the difference of two visits, so a step is
-    compared with k √(u_visit,a² + u_visit,b²) (``models.drift``).
+    compared with k √(u_visit,a² + u_visit,b²) (``models.condition.drift``).
 
     Parameters
     ----------

@@ -36,7 +36,7 @@ class RunRecord(TrackingRecord):
     ----------
     model : dict or None
         A trained model to log and register as ``backlash-predictor``
-        (``models.description.describe``).
+        (``models.serving.description.describe``).
     children : list of TrackingRecord
         Runs nested under this one (one per compared model, one per tuning trial).
     promote : bool

@@ -16,8 +16,8 @@ from features.readings.errors import BacklashWarning
 from features.table import feature_table
 from features.targets import backlash_targets
 from features.visits import DAYS_PER_MONTH, axis_backlash, months_between, visit_backlash
-from models import drift
-from models.evaluation import target_noise_floor, true_backlash
+from models.condition import drift
+from models.estimators.evaluation import target_noise_floor, true_backlash
 
 # --------------------------------------------------------------------------- own generator
 TARGETS_MM = np.array([4.0, 51.0, 97.0, 152.0, 203.0, 249.0])  # irregular, 4 interior

@@ -63,7 +63,7 @@ def test_program_logs_the_same_run_as_in_process_logging(tmp_path, capsys):
     assert served.metadata.signature is not None
     assert served.metadata.saved_input_example_info is not None
     inputs = pd.read_csv(tmp_path / "forked" / "training_inputs.csv").iloc[:4]
-    from models.registry import load_model
+    from models.serving.registry import load_model
 
     assert list(served.predict(inputs)["backlash_um"]) == pytest.approx(
         [max(v, 0.0) for v in load_model(tmp_path / "forked").predict(inputs)])

@@ -200,7 +200,7 @@ def test_twin_closed_loop_catches_a_flipped_sign(twin, tmp_path):
 def test_predictor_source(tmp_path, capsys):
     """A trained predictor's backlash at the given conditions becomes the reversal; no
     position error is claimed."""
-    from models.registry import TrainedModel, make, save_model
+    from models.serving.registry import TrainedModel, make, save_model
 
     X = pd.DataFrame({"target": [0.0, 100.0, 200.0, 300.0], "feed_mm_min": [500.0] * 4})
     y = np.array([3.0, 3.2, 2.8, 3.0])
@@ -334,7 +334,7 @@ def test_python_api_writes_what_the_cli_writes(ess_file, tmp_path, capsys):
 
 def test_python_api_takes_a_readings_frame_or_a_loaded_model(ess_file, tmp_path):
     import backlash as bl
-    from models.registry import TrainedModel, make
+    from models.serving.registry import TrainedModel, make
 
     readings = bl.read(ess_file)
     from_frame = bl.compensate(readings, controller="csv")

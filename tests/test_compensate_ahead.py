@@ -85,7 +85,7 @@ def test_mid_interval_table_beats_the_frozen_one(twin):
 
 def test_machine_selection_and_hours_in_json(twin, tmp_path, capsys):
     _, _, model = twin
-    from models.registry import save_model
+    from models.serving.registry import save_model
 
     save_model(model, tmp_path / "model")
     out = tmp_path / "out"
@@ -136,7 +136,7 @@ def test_a_model_without_usage_refuses_a_date(twin):
 ])
 def test_bad_forecast_options(twin, tmp_path, capsys, options, message):
     _, _, model = twin
-    from models.registry import save_model
+    from models.serving.registry import save_model
 
     save_model(model, tmp_path / "model")
     out = tmp_path / "out"
@@ -150,7 +150,7 @@ def test_bad_forecast_options(twin, tmp_path, capsys, options, message):
 def test_at_hours_needs_a_wear_map_model(tmp_path, capsys, ess_file):
     import pandas as pd
 
-    from models.registry import TrainedModel, make, save_model
+    from models.serving.registry import TrainedModel, make, save_model
 
     X = pd.DataFrame({"target": [0.0, 100.0, 200.0]})
     model = TrainedModel("constant", make("constant").fit(X, np.full(3, 3.0)), ["target"],

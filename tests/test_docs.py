@@ -118,7 +118,7 @@ def record_names() -> dict[str, tuple[str, list[str]]]:
     the records themselves."""
     from features.readings.layouts import LAYOUTS
     from models.physics.effects import EFFECTS
-    from models.registry import PREDICTORS
+    from models.serving.registry import PREDICTORS
     from pipeline import api
     from pipeline.compensation import CONTROLLERS
 
@@ -219,10 +219,10 @@ def test_every_path_the_docs_name_exists(page):
 
 
 def test_named_paths_finds_paths_and_skips_placeholders():
-    text = ("`models/registry.py`, `backlash run experiments/demo.toml --out x/`, "
+    text = ("`models/serving/registry.py`, `backlash run experiments/demo.toml --out x/`, "
             "`pipeline/workflows/<job>.py`, `features.readings.layouts`\n"
             "```sh\nmodels/gone.py\n```\n")
-    assert named_paths(text) == {"models/registry.py", "experiments/demo.toml",
+    assert named_paths(text) == {"models/serving/registry.py", "experiments/demo.toml",
                                  "pipeline/workflows/"}
 
 

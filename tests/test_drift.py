@@ -11,7 +11,7 @@ import pytest
 
 from features import visits
 from features.readings.errors import BacklashWarning, InputError
-from models import drift, monitoring
+from models.condition import drift, monitoring
 from pipeline.commands import drift as drift_cmd
 
 START = pd.Timestamp("2024-01-15T08:00:00Z")

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from features.visits import DAYS_PER_MONTH, visit_backlash
-from models import drift
+from models.condition import drift
 from models.physics.campaign import simulate
 
 THRESHOLD_UM = 8.0

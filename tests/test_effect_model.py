@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from models.effect_model import EffectModelBaseline
-from models.persistence import load_estimator, save_estimator
+from models.estimators.effect_model import EffectModelBaseline
+from models.serving.persistence import load_estimator, save_estimator
 
 
 @parametrize_with_checks([EffectModelBaseline()])

@@ -12,7 +12,7 @@ from sklearn.utils._param_validation import InvalidParameterError
 from sklearn.utils.estimator_checks import check_param_validation, parametrize_with_checks
 
 from features.readings.errors import InputError
-from models import registry
+from models.serving import registry
 
 # few epochs and trees keep the checks fast; Adam then needs a larger step to fit at all
 FAST = {"epochs": 30, "learning_rate": 0.1, "n_estimators": 10}
@@ -144,7 +144,7 @@ def _hours_points(seed=0, n=60):
                                              ("hybrid", "hybrid.json"),
                                              ("shallow-lm-ensemble", "ensemble.json")])
 def test_own_json_state_is_written_atomically_and_read_back(tmp_path, name, file_name):
-    from models import persistence
+    from models.serving import persistence
 
     X, y = _hours_points()
     model = fast(registry.make(name)).fit(X, y)

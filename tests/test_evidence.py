@@ -17,7 +17,7 @@ from store_files import cli, engine_location, refused, visits
 
 import backlash as bl
 from features.readings.errors import InputError
-from models.evidence import offset, pairs
+from models.condition.evidence import offset, pairs
 from pipeline.store.records import RECORD_FORMAT, check_ballbar, check_trace, read_records
 from tests import independent_circle, independent_fleet, independent_traces
 

@@ -19,8 +19,8 @@ import pytest
 
 import backlash as bl
 from features.readings import layouts, schema
-from models import registry
 from models.physics import effects
+from models.serving import registry
 from pipeline import compensation, workflows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +33,7 @@ PACKAGE = {
         """A site's additions to backlash-pipeline: one of each kind."""
 
         from features.readings import layouts
-        from models import registry
+        from models.serving import registry
         from models.physics import effects
         from pipeline import compensation, workflows
 
@@ -119,7 +119,7 @@ PACKAGE = {
         from sklearn.base import BaseEstimator, RegressorMixin
         from sklearn.utils.validation import check_is_fitted, validate_data
 
-        from models.registry import Predictor
+        from models.serving.registry import Predictor
 
 
         class SiteMean(RegressorMixin, BaseEstimator):

@@ -25,8 +25,8 @@ def model(tmp_path_factory):
     0-2700), saved without MLflow."""
     from features.readings import read_readings
     from features.table import feature_table
-    from models.registry import save_model
-    from models.training import fit_model
+    from models.estimators.training import fit_model
+    from models.serving.registry import save_model
 
     table = feature_table(read_readings(DATA / "twin" / "readings.csv"))
     fit = fit_model(table, "wear-map", "random", 0)
@@ -41,7 +41,7 @@ def predicted(model, plan):
 
 
 def test_the_trained_ranges_are_those_of_the_training_data(model):
-    from models.registry import load_model
+    from models.serving.registry import load_model
 
     ranges = load_model(model).input_ranges_
     readings = pd.read_csv(DATA / "twin" / "readings.csv")

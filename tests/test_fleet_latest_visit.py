@@ -21,7 +21,7 @@ import backlash as bl
 from features.readings.errors import BacklashWarning
 from features.readings.fileio import clean_nan
 from features.visits import visit_backlash
-from models import drift
+from models.condition import drift
 from models.wear.wear_map import found_adjustments
 from pipeline.workflows.fleet import fleet
 

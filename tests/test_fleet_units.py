@@ -16,9 +16,9 @@ from test_fleet_forecast import interior, rmse
 import backlash as bl
 from features.readings.errors import BacklashWarning, InputError
 from features.readings.schema import deviation_unit
-from models.evaluation import target_noise_floor
-from models.serving import served_inputs
-from models.training import earlier_inputs, with_earlier
+from models.estimators.evaluation import target_noise_floor
+from models.estimators.training import earlier_inputs, with_earlier
+from models.serving.signature import served_inputs
 from models.wear.wear_map import WearMap
 from pipeline.cli import main
 

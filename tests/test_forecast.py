@@ -34,8 +34,8 @@ def wear_model(campaign, tmp_path_factory):
     """A wear map trained on visits 1-7, saved as a model directory (without MLflow)."""
     from features.readings import read_readings
     from features.table import feature_table
-    from models.registry import save_model
-    from models.training import fit_model
+    from models.estimators.training import fit_model
+    from models.serving.registry import save_model
 
     folder, _ = campaign
     table = feature_table(read_readings(folder / "train.csv"))
@@ -153,8 +153,8 @@ def test_bootstrap_ensemble_gives_intervals_and_saves_its_members(tmp_path):
     from sklearn.linear_model import Ridge
 
     from features.table import feature_table
-    from models.ensemble import BootstrapEnsemble
-    from models.persistence import load_estimator, save_estimator
+    from models.estimators.ensemble import BootstrapEnsemble
+    from models.serving.persistence import load_estimator, save_estimator
 
     table = feature_table(simulate("demo", seed=2).readings)
     model = BootstrapEnsemble(Ridge(alpha=1.0), n_members=8).fit(table.X, table.y)

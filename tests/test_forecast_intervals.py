@@ -14,7 +14,7 @@ from independent_fleet import fleet as independent
 
 import backlash as bl
 from features.readings.errors import BacklashWarning
-from models.drift import DriftSeries, forecast_interval, forecast_terms
+from models.condition.drift import DriftSeries, forecast_interval, forecast_terms
 from pipeline.workflows.drift import drift
 from pipeline.workflows.fleet import fleet
 

@@ -1,7 +1,7 @@
 """What a model may answer for: a saved model records the machine axes and units it was trained
 on; ``predict`` and the served model refuse rows of other machine axes (one line, exit 2 / HTTP
 400), except a fleet model forecasting another axis of its unit, which says how it borrowed;
-both take their scope and extrapolation flags from one check (``models.serving.assess``).
+both take their scope and extrapolation flags from one check (``models.serving.signature.assess``).
 Coverage figures name what they cover; a NaN at train time names its test."""
 
 from __future__ import annotations

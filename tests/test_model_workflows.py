@@ -14,7 +14,7 @@ import pytest
 
 import backlash as bl
 from features.readings.errors import BacklashWarning, InputError
-from models import persistence, registry
+from models.serving import persistence, registry
 from pipeline.cli import main
 from pipeline.tracking import runs as tracking
 

@@ -14,7 +14,7 @@ import pytest
 
 from features.readings.errors import InputError
 from features.traces.io import read_trace, write_dataset, write_trace
-from models.lost_motion import fit_day, motion_state
+from models.condition.lost_motion import fit_day, motion_state
 from pipeline.cli import main
 from pipeline.workflows.monitor import monitor
 from tests.independent_traces import axis_day, fleet_traces

@@ -127,7 +127,7 @@ def test_every_side_in_counts_is_refused_before_its_statistics_grow(day):
 def test_lost_motion_larger_than_the_travel_is_refused():
     """500 mm of lost motion on 180 mm of travel, the channels' travels alike (what a fit
     gives from channels that agree with each other but not with the axis)."""
-    from models.lost_motion import check_physical
+    from models.condition.lost_motion import check_physical
 
     daily = pd.DataFrame([{"machine_id": "M1", "axis": "Y", "unit": "um", "date": "2026-03-02",
                            "lost_motion_um": 500_000.0, "lost_motion_u_um": 900.0,

@@ -8,8 +8,8 @@ import torch
 from sklearn.base import clone
 from sklearn.model_selection import KFold, cross_val_score
 
-from models import network
-from models.network import ShallowNetwork
+from models.estimators import network
+from models.estimators.network import ShallowNetwork
 
 
 def smooth(n=432, noise=0.0, seed=0, p=2):

@@ -221,7 +221,7 @@ def test_active_needs_one_machine_axis_of_measured_tests(ess_file, ess_profile, 
     with pytest.raises(bl.InputError, match="the data hold ess_mcu1025 X, other X") as err:
         bl.compensate(two, controller="csv", active=files)
     assert err.value.parameter == "active"
-    from models.registry import TrainedModel, make
+    from models.serving.registry import TrainedModel, make
 
     X = pd.DataFrame({"target": [15.0, 55.8], "feed_mm_min": [500.0] * 2})
     model = TrainedModel("constant", make("constant").fit(X, np.array([3.0, 3.0])),

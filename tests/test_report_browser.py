@@ -23,8 +23,8 @@ def drift_page(tmp_path_factory) -> Path:
     import pandas as pd
 
     from features.visits import DAYS_PER_MONTH
+    from models.condition.drift import analyse_series
     from models.condition.maintenance import axis_forecast
-    from models.drift import analyse_series
     from pipeline.reports.drift_report import write_drift_report
 
     months = np.arange(12.0)

@@ -43,7 +43,7 @@ def test_train_saves_model_figures_and_registers_champion(readings_csv, tmp_path
     # the registered model serves through MLflow without unpickling anything
     served = mlflow.pyfunc.load_model("models:/backlash-predictor@champion")
     inputs = pd.read_csv(out / "training_inputs.csv").iloc[:4]
-    from models.registry import load_model
+    from models.serving.registry import load_model
 
     # a frame of backlash_um (no interval for bspline), clipped at 0 like `predict`
     answer = served.predict(inputs)
@@ -131,8 +131,8 @@ def test_default_predictor_fits_saves_and_predicts_without_skops_torch_or_mlflow
         "import sys",
         "from features.readings import read_readings",
         "from features.table import feature_table",
-        "from models import registry",
-        "from models.training import fit_model",
+        "from models.serving import registry",
+        "from models.estimators.training import fit_model",
         "from pipeline.cli import main",
         f"table = feature_table(read_readings({str(readings_csv)!r}, 'auto'), target='auto')",
         "fit = fit_model(table, registry.RECOMMENDED)",
@@ -162,7 +162,7 @@ def test_the_champions_skill_is_the_jobs_tracked_or_not(monkeypatch):
 
     import backlash as bl
     from features.readings.errors import BacklashWarning
-    from models import backtest
+    from models.condition import backtest
     from pipeline.tracking import runs as tracking
 
     with warnings.catch_warnings():

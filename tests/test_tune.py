@@ -111,7 +111,7 @@ def test_workers_creating_one_fresh_storage_at_once_all_open_it(tmp_path):
     lose the race open what the winner made instead of failing."""
     storage = f"sqlite:///{tmp_path / 'optuna.db'}"
     start = time.time() + 2  # all four past their imports before any opens the storage
-    code = ("import sys, time; from models.tuning import open_storage\n"
+    code = ("import sys, time; from models.estimators.tuning import open_storage\n"
             f"time.sleep(max(0, {start} - time.time())); open_storage(sys.argv[1], 1)")
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     procs = [subprocess.Popen([sys.executable, "-c", code, storage], env=env,
@@ -124,7 +124,7 @@ def test_workers_creating_one_fresh_storage_at_once_all_open_it(tmp_path):
 def test_a_storage_error_other_than_the_schema_race_is_not_retried(tmp_path, monkeypatch):
     import sqlalchemy.exc
 
-    from models import tuning
+    from models.estimators import tuning
 
     calls = []
 
@@ -193,7 +193,7 @@ def test_killed_tune_fails_its_trial_and_resumes_honestly(readings_csv, tmp_path
 def test_a_trial_is_labelled_and_beating_from_its_creation(tmp_path):
     """A worker killed before its objective starts leaves a trial that goes stale and names
     its search: the sampler records the first heartbeat and the tag as Optuna creates it."""
-    from models import tuning
+    from models.estimators import tuning
 
     study = tuning.create_study("s", f"sqlite:///{tmp_path / 'optuna.db'}", 0, 1, tag="abc")
     with pytest.warns(UserWarning, match="Heartbeat"):  # no heartbeat thread: "killed" at once
@@ -207,7 +207,7 @@ def test_a_trial_is_labelled_and_beating_from_its_creation(tmp_path):
 def test_same_seed_same_study_across_processes(readings_csv, tmp_path):
     """The sampler's seed is the user's seed, not the process: a run in another process with
     the same seed draws the same trials."""
-    from models.tuning import sampler_seed
+    from models.estimators.tuning import sampler_seed
 
     runs = {}
     for name, where in (("a", "child"), ("b", "here")):
@@ -235,7 +235,7 @@ def test_a_swallowed_terminate_still_fails_the_running_trial(monkeypatch):
     on to its last trial."""
     import threading
 
-    from models import tuning
+    from models.estimators import tuning
 
     stop = threading.Event()
 
@@ -259,7 +259,7 @@ def test_a_sigterm_during_a_storage_read_lets_it_finish(tmp_path, monkeypatch):
 
     import sqlalchemy.engine.default
 
-    from models import tuning
+    from models.estimators import tuning
 
     execute = sqlalchemy.engine.default.DefaultDialect.do_execute
     fired = []

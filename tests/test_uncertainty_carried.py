@@ -16,7 +16,7 @@ import pytest
 from test_drift import _run, visit_readings
 
 from features.readings.errors import InputError
-from models import evaluation
+from models.estimators import evaluation
 
 BUDGET = "experiments/data/paper_uncertainty.toml"
 K = 2.0
@@ -115,7 +115,7 @@ def test_twin_fleet_changes_are_still_found_with_the_budget():
         assert min(j["backlash_U_um"]) >= U_B - 0.01
         # the twin has no event at its last visit: M03's last visit lies +0.54 um off its
         # trend, 3.4 sigma of the repeatability but within 3 standard errors once the trend
-        # line's own error at the last visit counts (models.drift._last_visit_jump); either
+        # line's own error at the last visit counts (models.condition.drift._last_visit_jump); either
         # way it is within U(Δ) and no alert
         assert not {"last_visit_jump", "last_visit_drop"} & {a["kind"] for a in j["alerts"]}
         assert j["change_points"][-1] != "20"

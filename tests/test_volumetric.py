@@ -11,7 +11,7 @@ import independent_machine as ind
 import numpy as np
 import pytest
 
-from models import volumetric as vol
+from models.machine import volumetric as vol
 from models.physics import machine as twin
 
 

@@ -20,8 +20,8 @@ import pytest
 import backlash as bl
 from features.readings.errors import InputError
 from features.traces.validation import check_trace
-from models.lost_motion import daily_lost_motion
-from models.lost_motion_stream import AxisStream, Binner, stream_days
+from models.condition.lost_motion import daily_lost_motion
+from models.condition.lost_motion_stream import AxisStream, Binner, stream_days
 from pipeline.store.records import read_records
 from pipeline.workflows.monitor import monitor
 from tests.independent_traces import fleet_traces

@@ -15,10 +15,10 @@ from independent_fleet import plan_and_truth
 import backlash as bl
 from features.table import FeatureTable, feature_table
 from features.visits import visit_backlash
-from models.backtest import backtest
-from models.evaluation import target_noise_floor, true_backlash
+from models.condition.backtest import backtest
+from models.estimators.evaluation import target_noise_floor, true_backlash
+from models.estimators.training import since_adjustment, visit_series
 from models.physics.campaign import simulate
-from models.training import since_adjustment, visit_series
 from models.wear.wear_map import WearMap, found_adjustments
 
 HOURS_PER_VISIT = 392.0  # the drift preset: 28 days x 14 h

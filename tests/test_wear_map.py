@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from features.table import feature_table
-from models.backtest import backtest, summary
-from models.evaluation import target_noise_floor, true_backlash, visit_order
+from models.condition.backtest import backtest, summary
+from models.estimators.evaluation import target_noise_floor, true_backlash, visit_order
 from models.physics.campaign import load_config, simulate, wear_rate_um_per_1000h
 from models.wear.wear_map import WearMap, latest_epoch
 
@@ -78,7 +78,7 @@ def test_backtest_wear_map_beats_persistence_and_the_paper_network(fleets):
 
 
 def test_saves_and_loads_itself_as_json(tmp_path, fleets):
-    from models.persistence import load_estimator, save_estimator
+    from models.serving.persistence import load_estimator, save_estimator
 
     _, table = fleets[0]
     model = WearMap().fit(table.X, table.y)

@@ -91,7 +91,7 @@ def verbose() -> bool:
     alembic, Optuna): ``BACKLASH_VERBOSE`` set to anything but ``0`` (the CLI's
     ``--verbose``), or a logging configuration of their own (a handler on the root logger,
     e.g. ``logging.basicConfig``). Otherwise those lines are off (``pipeline.tracking``,
-    ``models.tuning``)."""
+    ``models.estimators.tuning``)."""
     return (os.environ.get(VERBOSE, "") not in ("", "0")
             or bool(logging.getLogger().handlers))
 

@@ -7,5 +7,11 @@
   crossing and the expected next visit (``AxisForecast``);
 - ``schedule``: the scheduling policy of a fleet: when an axis is next due, the fleet's wear
   rate an axis without a trend is planned with, the day a forecast for operating hours is for,
-  overdue visits and the order worst first.
+  overdue visits and the order worst first;
+
+and what the condition is read from: ``drift`` (change points, robust trend, threshold
+forecast of a visit series), ``backtest`` (rolling-origin backtests of a forecast),
+``lost_motion`` and ``lost_motion_stream`` (lost motion from dual-feedback controller traces),
+``evidence`` (trace and ballbar evidence beside the laser visits), ``monitoring`` (a trained
+predictor's residuals and input drift).
 """

@@ -29,7 +29,7 @@ Rules:
   alerts, none; then the earliest next visit due, the earliest crossing date (none last), the
   highest backlash now, machine and axis.
 
-References: Sen (1968), Theil (1950) for the slopes (``models.drift.trend``); Hyndman & Fan
+References: Sen (1968), Theil (1950) for the slopes (``models.condition.drift.trend``); Hyndman & Fan
 (1996), Sample quantiles in statistical packages, Am. Stat. 50(4), definition 7 (numpy's
 default quantile).
 """
@@ -55,7 +55,7 @@ def fleet_wear_rates(series: list, hours: dict | None = None) -> dict[str, dict]
 
     Parameters
     ----------
-    series : list of models.drift.DriftSeries
+    series : list of models.condition.drift.DriftSeries
         Every analysed laser series of the fleet.
     hours : dict, optional
         Operating hours [h] per ``(machine_id, axis, visit)``; None: the readings carry none.
@@ -66,7 +66,7 @@ def fleet_wear_rates(series: list, hours: dict | None = None) -> dict[str, dict]
         Per unit: ``per_hour`` [unit/h] and ``per_month`` [unit/month], each None without an
         axis to take it from.
     """
-    from models.drift import trend
+    from models.condition.drift import trend
 
     found: dict[str, dict[str, list]] = {}
     for s in series:

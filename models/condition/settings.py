@@ -19,7 +19,7 @@ class MaintenanceSettings:
 
     Every value, limit and interval is in the axis's own unit: um for a linear axis, arcsec
     for a rotary one (``features.readings.schema.deviation_unit``); a limit is never compared
-    with a value in another unit (``models.drift.limit_of``).
+    with a value in another unit (``models.condition.drift.limit_of``).
 
     Attributes
     ----------
@@ -36,13 +36,13 @@ class MaintenanceSettings:
         slope's, the crossing's, the forecast's), in (0, 0.5).
     min_jump_sigma : float, default 3.0
         A change point must move the level by more than this many standard errors of the two
-        segment lines there (``models.drift.change_points``).
+        segment lines there (``models.condition.drift.change_points``).
     warn_months : float, default 6.0
         Alert ``crossing_soon`` when the early end of the crossing interval lies within this
         many months [month of 30.4375 d] of the last visit.
     crossing_horizon_months : float, default 120.0
         How far past the last visit [month] the prediction band is searched for the crossing
-        (``models.drift.crossing_forecast``): a late end beyond it is null.
+        (``models.condition.drift.crossing_forecast``): a late end beyond it is null.
     interval_days : float or None, default None
         The maintenance interval [d] of a schedule (``fleet``): the next visit is due this long
         after the last one at the latest, and the forecast is computed one interval ahead, up
@@ -68,13 +68,13 @@ class MaintenanceSettings:
     forecast_steps: int = 40
 
     def limits_of(self) -> dict:
-        """The keywords of the limits (``models.drift.analyse_visits``): ``threshold_um``,
+        """The keywords of the limits (``models.condition.drift.analyse_visits``): ``threshold_um``,
         ``threshold_arcsec``, ``limits``."""
         return {"threshold_um": self.threshold_um, "threshold_arcsec": self.threshold_arcsec,
                 "limits": self.limits}
 
     def trend_options(self) -> dict:
-        """The keywords of the trend analysis of one series (``models.drift.analyse_series``):
+        """The keywords of the trend analysis of one series (``models.condition.drift.analyse_series``):
         ``alpha``, ``min_jump_sigma``, ``warn_months``, ``horizon_months``."""
         return {"alpha": self.alpha, "min_jump_sigma": self.min_jump_sigma,
                 "warn_months": self.warn_months,

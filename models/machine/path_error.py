@@ -2,11 +2,11 @@
 model a test of the machine gave (seed 002's synthesis of bottom-up and top-down models):
 
 - **geometric**: the 21 geometric errors identified from laser tests
-  (``models.volumetric``), :math:`E(P, h)` at the tool point (``models.physics.machine
+  (``models.machine.volumetric``), :math:`E(P, h)` at the tool point (``models.physics.machine
   .tool_error_um``);
 - **backlash**: each axis trails its command by half its play in the direction it last moved,
   :math:`e_a = -s_a b_a / 2`, the play :math:`b_a` from the ballbar circles' diagnosis
-  (``models.circle``), the direction :math:`s_a` from the path (held through stops; before the
+  (``models.machine.circle``), the direction :math:`s_a` from the path (held through stops; before the
   axis first moves, the direction of its first move, as if the path were approached that way);
 - **load**: the deflection :math:`C(p) F` under the path's force, C from the stiffness map of
   loaded circles (``models.machine.stiffness``).

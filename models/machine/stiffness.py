@@ -57,7 +57,7 @@ PLANES = {"XY": ("X", "Y"), "YZ": ("Y", "Z"), "ZX": ("Z", "X")}
 # The map's candidate forms, simplest first (the one-standard-error rule picks the simplest).
 FORMS = ("constant", "linear", "cubic", "quadratic")
 # Decay of the lag-1 autocorrelation correction: the slopes' residuals along the path are
-# widened by (1 + rho) / (1 - rho) when rho > 0, as models.circle does for its fit.
+# widened by (1 + rho) / (1 - rho) when rho > 0, as models.machine.circle does for its fit.
 MAX_RHO = 0.9
 
 

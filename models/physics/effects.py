@@ -8,7 +8,7 @@ effect, everything the rest of the product needs to know about it (in the spirit
 amplitude and its plausible range, the nuisance parameters and the grids they are searched
 over, the readings it needs, the reference, the test that separates it from its look-alikes,
 the one-sentence physical reading, and the named default parameter set. The twin
-(``models.physics.axis``), the effect-model baseline (``models.effect_model``), the discovery
+(``models.physics.axis``), the effect-model baseline (``models.estimators.effect_model``), the discovery
 workflow (``models.discovery``) and the benchmark read only this table: adding an effect means
 adding one function and one record.
 

@@ -1,6 +1,6 @@
 """The wear-rate map of one machine axis since its last change point, as the fleet view shows
 it: ``models.wear.wear_map.WearMap`` fitted on the axis's interior backlash points of the
-visits since its last change point (``models.drift``: an adjustment restarts the wear),
+visits since its last change point (``models.condition.drift``: an adjustment restarts the wear),
 
 .. math:: b(x, h, f) = b_0(x) + w(x)\\, h / 1000 + k_f f / 1000
 

@@ -39,7 +39,7 @@ def wear_epochs(meta: pd.DataFrame, hours: pd.Series | None = None,
         kept, in order), ``dropped`` (number of earlier visits left out) and ``reason`` (what
         marked the start of the kept visits; empty when nothing did).
     """
-    from models.evaluation import visit_order
+    from models.estimators.evaluation import visit_order
 
     keep = np.ones(len(meta), bool)
     rank = visit_order(meta)
@@ -84,7 +84,7 @@ def wear_epochs(meta: pd.DataFrame, hours: pd.Series | None = None,
 
 def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     """Mechanical adjustments the drift statistics find in the per-visit backlash: downward
-    level change points (``models.drift.analyse_series``; an upward step is a failure, not an
+    level change points (``models.condition.drift.analyse_series``; an upward step is a failure, not an
     adjustment), the latest visit's drop included: a model trained after an adjustment learns
     from the visits since it only, however few.
 
@@ -92,7 +92,7 @@ def found_adjustments(visits: pd.DataFrame) -> pd.DataFrame:
     backlash_um, backlash_u_um``). Returns ``machine_id, axis, visit, jump_um, jump_sigma, reason``.
     """
     from features.readings.schema import deviation_unit
-    from models import drift
+    from models.condition import drift
 
     rows = []
     # two visits before a change at least; the last visit alone may follow one

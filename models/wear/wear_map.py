@@ -416,7 +416,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
     # ---- persistence (JSON, no pickle) ----------------------------------------------------
     def save(self, directory) -> Path:
         """Write ``wear_map.json`` (parameters and fitted state) into ``directory``."""
-        from models.persistence import write_state
+        from models.serving.persistence import write_state
 
         _check_fitted(self)
         directory = Path(directory)
@@ -439,7 +439,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
     def load(cls, directory) -> WearMap:
         """Read ``save``'s file; every problem is an ``InputError`` naming it."""
         from features.readings.errors import InputError
-        from models.persistence import checked_params, read_state
+        from models.serving.persistence import checked_params, read_state
 
         path = Path(directory) / FILE_NAME
         state = read_state(path, ("params",))
@@ -458,7 +458,7 @@ class WearMap(UnitGroups, FleetWearMap, RegressorMixin, BaseEstimator):
     def _restore_state(self, state: dict, path) -> WearMap:
         """Set ``_state``'s attributes (and the inputs ``state`` names) on this model."""
         from features.readings.errors import InputError
-        from models.persistence import restore_inputs
+        from models.serving.persistence import restore_inputs
 
         units = state.get("unit_maps_")
         needed = (*UNIT_STATE, "unit_maps_") if units is not None else _STATE
@@ -506,7 +506,7 @@ def _check_fitted(model) -> None:
 
 def _inputs(state: dict) -> dict:
     """The fitted inputs ``write_state`` put beside the state (a unit model shares them)."""
-    from models.persistence import INPUT_KEYS
+    from models.serving.persistence import INPUT_KEYS
 
     return {key: state[key] for key in INPUT_KEYS}
 

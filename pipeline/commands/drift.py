@@ -31,7 +31,7 @@ def print_summary(forecasts, html_path, file) -> None:
     """One line per analysed axis (``models.condition.maintenance.AxisForecast``; with a
     budget also the last visit's U), its alerts and the changes within the measurement
     uncertainty."""
-    from models.drift import WITHIN_KINDS
+    from models.condition.drift import WITHIN_KINDS
 
     budget = any(f.series.coverage_factor is not None for f in forecasts)
     print(f"{'machine':<12} {'axis':<4} {'unit':<6} {'visits':>6} {'backlash':>9} "

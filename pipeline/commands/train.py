@@ -46,7 +46,7 @@ def print_metrics(name: str, metrics: dict, file) -> None:
               f"{metrics['test_mae_arcsec']:.3f} arcsec, R^2 {metrics['test_r2_rotary']:.3f} "
               "(the line above: linear axes)", file=file)
     if "U_B_um" in metrics:
-        from models.evaluation import resolution_verdict
+        from models.estimators.evaluation import resolution_verdict
 
         print(f"  test |error| 95th percentile {metrics['test_abs_error_p95_um']:.3f} um, RMSE "
               f"{metrics['test_rmse_um']:.3f} um against U(B) {metrics['U_B_um']:.3f} um "

@@ -23,7 +23,7 @@ from features.readings.errors import InputError
 
 
 def wear_map_of(model, why: str):
-    """The wear map inside the trained ``model`` (``models.registry.TrainedModel``) when it can
+    """The wear map inside the trained ``model`` (``models.serving.registry.TrainedModel``) when it can
     forecast, else an ``InputError`` naming ``why`` (the parameter that needs it)."""
     from models.wear.wear_map import WearMap
 

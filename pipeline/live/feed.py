@@ -6,7 +6,7 @@ one, holding each channel's last value, from the first time every channel has on
 ``monitor`` reads a camonitor log (``features.readings.camonitor.read_camonitor``: updates in
 time order, the last of equal times). Updates are held until every channel has reported a later
 time (a watermark), so a late packet of one channel still lands in order; what is released goes
-to the estimator's bins and stream (``models.lost_motion_stream``).
+to the estimator's bins and stream (``models.condition.lost_motion_stream``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from features.readings.errors import InputError
-from models.lost_motion_stream import DAY_NS, AxisStream, Binner
+from models.condition.lost_motion_stream import DAY_NS, AxisStream, Binner
 
 CHANNELS = ("commanded", "motor", "load")
 # A linear position beyond this [mm] (100 m) is no machine tool's travel: encoder counts.

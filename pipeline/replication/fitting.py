@@ -30,7 +30,7 @@ DEVIATIONS = ("deviation_down_um", "deviation_up_um")
 
 def network_run(X: pd.DataFrame, y: pd.Series, random_state: int) -> dict:
     """Fig. 10 and 13: the paper's network on all points (its own 70/15/15 split)."""
-    from models.registry import make
+    from models.serving.registry import make
 
     net = make("shallow-lm", random_state).fit(X, y)
     out = np.asarray(net.predict(X), float)

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings import fileio
-from models.drift import WITHIN_KINDS
+from models.condition.drift import WITHIN_KINDS
 from pipeline.reports.fleet_charts import unit_label
 from pipeline.reports.report_page import new_figure, save_figure, write_page
 
@@ -83,7 +83,7 @@ def _panel(ax, f) -> None:
     if f.trend_line is not None:
         ax.plot(_naive(f.trend_line["at"]), f.trend_line["fit_um"], color="C1",
                 label="Theil-Sen trend since the last change point")
-    if f.band is not None:  # the next measurement's interval (models.drift)
+    if f.band is not None:  # the next measurement's interval (models.condition.drift)
         ax.fill_between(_naive(f.band["at"]), f.band["measurement_low_um"],
                         f.band["measurement_high_um"], color="C1", alpha=0.2, lw=0,
                         label=f"{100 * (1 - s.alpha):g} % forecast of the next measurement")
@@ -164,7 +164,7 @@ def _visit_row(r: dict) -> str:
 
 def _uncertainty_text(series) -> str:
     """What U means, when a budget was given (else nothing); ``series`` the analysed
-    ``models.drift.DriftSeries``."""
+    ``models.condition.drift.DriftSeries``."""
     k = next((s.coverage_factor for s in series if s.coverage_factor is not None), None)
     if k is None:
         return ""

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from models.description import training_history
+from models.serving.description import training_history
 from pipeline.reports.report_page import new_figure, save_figure
 
 

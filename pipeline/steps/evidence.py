@@ -1,6 +1,6 @@
 """The evidence a fleet store holds beside an axis's laser visits: its trace days and ballbar
 runs (``pipeline.store.records``, read through ``pipeline.steps.source.Source.records``), their
-offsets to the laser's definition (``models.evidence``), computed once per machine axis
+offsets to the laser's definition (``models.condition.evidence``), computed once per machine axis
 (``axes_evidence``), and the series of all sources that ``drift`` analyses and ``fleet``
 forecasts with.
 
@@ -16,7 +16,7 @@ import datetime as dt
 import pandas as pd
 
 from features.readings.errors import InputError
-from models.evidence import EVIDENCE_COLUMNS, OFFSET_WINDOW_DAYS, SOURCES, offsets
+from models.condition.evidence import EVIDENCE_COLUMNS, OFFSET_WINDOW_DAYS, SOURCES, offsets
 
 # Days a source must share with the laser before a series (drift's, the fleet's forecast)
 # leans on it: fewer pairs give an offset whose scatter (the Birge ratio) cannot be judged.
@@ -54,7 +54,7 @@ def _noon(day: str) -> pd.Timestamp:
 
 
 def laser_frame(visits: pd.DataFrame) -> pd.DataFrame:
-    """An axis's laser visits as ``models.evidence.offset`` reads them."""
+    """An axis's laser visits as ``models.condition.evidence.offset`` reads them."""
     return pd.DataFrame({"date": visits["date"].to_numpy(),
                          "value_um": visits["backlash_um"].to_numpy(float),
                          "u_um": visits["backlash_u_um"].to_numpy(float)})
@@ -131,7 +131,7 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
                   min_days: int = MIN_SHARED_DAYS,
                   keeps=None, evidence: dict | None = None) -> tuple[pd.DataFrame, dict, list]:
     """The laser visits of every machine axis with the points of the other ``sources``
-    shifted onto the laser's definition (``models.evidence.combined``), the offsets per
+    shifted onto the laser's definition (``models.condition.evidence.combined``), the offsets per
     machine axis, and the notes of sources without one. With a budget's ``coverage_factor``
     a point of another source gets ``backlash_U_um`` = k u and ``backlash_u_visit_um`` = u
     (all of its uncertainty changes from day to day). A source sharing fewer than
@@ -140,7 +140,7 @@ def with_evidence(visits: pd.DataFrame, records: dict, sources: tuple, as_of=Non
     selection's; default all). ``evidence``: what ``axes_evidence`` found for ``visits``,
     when computed already."""
     from features.visits import SERIES_KEYS
-    from models.evidence import combined
+    from models.condition.evidence import combined
 
     evidence_of = axes_evidence(visits, records, as_of) if evidence is None else evidence
     frames, found_all, notes = [], {}, []

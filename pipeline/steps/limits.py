@@ -12,7 +12,7 @@ axis, ``arcsec`` for a rotary one (A, B, C), so a limit is never read in the wro
     Y_um = 6.5
 
 An axis without an entry takes ``--threshold-um`` (linear) or ``--threshold-arcsec``
-(rotary). ``fleet`` and ``drift`` read it (``models.drift.limit_of``).
+(rotary). ``fleet`` and ``drift`` read it (``models.condition.drift.limit_of``).
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ def model_data(data, format: str = "auto", target: str = "auto", features=None,
     from features import iso230
     from features.table import check_features, feature_table
     from features.targets import MIXED
-    from models.evaluation import read_truth, target_noise_floor
+    from models.estimators.evaluation import read_truth, target_noise_floor
 
     readings = readings_of(data, format)
     source = source_of(data, readings)

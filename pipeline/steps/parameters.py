@@ -190,7 +190,7 @@ FORMAT = _format()
 PROGRESS = python_only(None, callable)
 JSON_HELP = "print the result as JSON on stdout"
 
-# the limits and the trend analysis of drift and fleet (models.drift), in each axis's unit
+# the limits and the trend analysis of drift and fleet (models.condition.drift), in each axis's unit
 _POSITIVE = Interval(Real, 0, None, closed="neither")
 THRESHOLD_UM = Param((_POSITIVE, None), "backlash limit of the linear axes [um]: forecast the "
                      "date each crosses it", metavar="X")

@@ -1,6 +1,6 @@
 """A rotary axis's probing evidence in the fleet view: its play per visit from the ``probing``
 records a fleet store holds (``backlash kinematics --store``), trended as the fleet trends an
-axis's laser visits (``models.drift.analyse_series``: change points, Theil-Sen slope, the
+axis's laser visits (``models.condition.drift.analyse_series``: change points, Theil-Sen slope, the
 crossing of the axis's limit, alerts), beside the axis's laser series or, when the axis has no
 laser tests, instead of it.
 
@@ -28,7 +28,7 @@ class ProbingView:
 
     Attributes
     ----------
-    series : models.drift.DriftSeries
+    series : models.condition.drift.DriftSeries
         The visits (``backlash_um``: the play [arcsec], ``backlash_u_um`` its standard
         uncertainty), change points, trend [arcsec/month], crossing of the axis's limit,
         alerts; every value in arcsec (``series.unit``).
@@ -132,11 +132,11 @@ def probing_views(records: dict, as_of: dt.date | None = None, *, keeps=None,
     (default all), alerting ones first, then by machine and axis; and the notes of records
     left out. ``laser``: the (machine_id, axis) with laser visits in the view; ``settings``
     (``models.condition.settings.MaintenanceSettings``, default its defaults): the limits
-    (each axis's is ``models.drift.limit_of``'s) and the trend analysis
-    (``models.drift.analyse_series``); with ``as_of`` a crossing before it alerts
+    (each axis's is ``models.condition.drift.limit_of``'s) and the trend analysis
+    (``models.condition.drift.analyse_series``); with ``as_of`` a crossing before it alerts
     ``limit_passed_unmeasured`` as on a laser series."""
+    from models.condition.drift import analyse_series, limit_of, limit_passed_alert
     from models.condition.settings import DEFAULTS
-    from models.drift import analyse_series, limit_of, limit_passed_alert
 
     settings = DEFAULTS if settings is None else settings
     views, notes = [], []

@@ -545,8 +545,8 @@ def record_forecast(store, result, recorded_at: str | None = None) -> Recorded |
     if model_dir is not None:
         from pathlib import Path
 
-        from models.persistence import digest as file_digest
-        from models.registry import MODEL_FILE
+        from models.serving.persistence import digest as file_digest
+        from models.serving.registry import MODEL_FILE
 
         model_dir, sha = os.fspath(model_dir), file_digest(Path(model_dir) / MODEL_FILE)
     records = forecast_records(points, model=trained.name, source=result.points_source,

@@ -44,7 +44,7 @@ import time
 from dataclasses import fields
 from pathlib import Path
 
-from models.description import FIGURES
+from models.serving.description import FIGURES
 from pipeline.results import TrackingRecord
 from pipeline.tracking import TRACKING_DIR  # the tracking folder's variable (--tracking-dir)
 
@@ -592,7 +592,7 @@ REQUIREMENTS = ["backlash-pipeline", "torch==2.13.0", "mlflow>=3.17,<3.18", "sci
 
 
 def log_model(model: dict) -> str:
-    """Log a trained model (a record's ``model``: its result's ``models.description.describe``
+    """Log a trained model (a record's ``model``: its result's ``models.serving.description.describe``
     with its ``model_dir``) into the active run: its estimator parameters, per-epoch history,
     backtest scores (``backtest_skill``, ``backtest_rmse_um``, ``backtest_persistence_rmse_um``),
     the model directory and the model from code, registered as ``backlash-predictor`` with the
@@ -624,7 +624,7 @@ def signature(spec: dict):
     from mlflow.models import ModelSignature
     from mlflow.types.schema import ColSpec, Schema
 
-    from models.serving import TEXT_OUTPUTS
+    from models.serving.signature import TEXT_OUTPUTS
 
     inputs = Schema([ColSpec(c["type"], c["name"], required=c["required"])
                      for c in spec["inputs"]])

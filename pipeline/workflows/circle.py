@@ -8,7 +8,7 @@ and the diagnosis of what made the path depart from the circle.
 
 A circle is one machine, plane, visit, radius and feed with a CW and a CCW run
 (``features.circle``). The diagnosis fits both runs at once with the error signatures of
-``models.circle``: each axis's play (the step where it reverses) and reversal spike,
+``models.machine.circle``: each axis's play (the step where it reverses) and reversal spike,
 out-of-squareness, scale mismatch and servo mismatch, each with its standard uncertainty.
 """
 
@@ -63,14 +63,14 @@ class CircleFigures:
         ISO 230-4 circular deviation of each run [um] (None for a missing direction).
     H_um : float or None
         Circular hysteresis [um]; None without both directions.
-    diagnosis : models.circle.Diagnosis or None
+    diagnosis : models.machine.circle.Diagnosis or None
         The effects fitted; None without both directions.
     """
 
     circle: object  # features.circle.Circle
     G_um: dict
     H_um: float | None
-    diagnosis: object  # models.circle.Diagnosis or None
+    diagnosis: object  # models.machine.circle.Diagnosis or None
 
     def diagnosis_json(self) -> dict | None:
         """The diagnosis as SCHEMA.md section 11 names it, keys by the plane's axes, with
@@ -255,7 +255,7 @@ def plot_names(items: list[CircleFigures]) -> list[str]:
 def evaluate(circle) -> CircleFigures:
     """G of each run; H and the diagnosis when both directions were run."""
     from features import circle as fc
-    from models import circle as mc
+    from models.machine import circle as mc
 
     g = {d: (fc.circular_deviation(circle.runs[d].angle_deg, circle.runs[d].deviation_um)
              if d in circle.runs else None) for d in fc.DIRECTIONS}
@@ -275,7 +275,7 @@ def _negative_play(item: CircleFigures, file) -> str | None:
     the runs fit the signatures clearly better with CW and CCW exchanged (the labels are
     swapped), else a note (an over-compensated axis, or swapped labels the fit cannot tell)."""
     from features.readings.errors import InputError
-    from models import circle as mc
+    from models.machine import circle as mc
 
     c, d = item.circle, item.diagnosis
     negative = mc.negative_plays(d)

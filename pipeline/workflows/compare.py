@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from features.readings.errors import InputError, Progress, note, report
-from models import registry
+from models.serving import registry
 from pipeline.results import Result
 from pipeline.steps.parameters import (
     FEATURES,
@@ -83,16 +83,16 @@ class CompareResult(Result):
         One row per predictor, best (lowest ``test_rmse_um``) first: the ``test_*`` and
         ``train_*`` scores, and ``truth_*`` on twin data.
     fits : dict
-        Predictor name -> ``models.training.Fit``.
+        Predictor name -> ``models.estimators.training.Fit``.
     noise_floor_um : float
         Standard uncertainty of one measured backlash point [um].
     skills : dict
         Predictor name -> its forecasting skill against persistence
-        (``models.backtest.forecast_skill``), which ranks the registered models for the
+        (``models.condition.backtest.forecast_skill``), which ranks the registered models for the
         champion.
     descriptions : dict
         Predictor name -> the model as plain data, what the registry keeps of it
-        (``models.description``).
+        (``models.serving.description``).
     """
 
     table: pd.DataFrame
@@ -112,7 +112,7 @@ class CompareResult(Result):
         """``comparison.csv`` and, per predictor, its model directory with figures under
         ``models/NAME``."""
         from features.readings.fileio import atomic_path
-        from models.description import FIGURES
+        from models.serving.description import FIGURES
         from pipeline.reports.model_report import write_figures
 
         out = Path(out)
@@ -141,7 +141,7 @@ class CompareResult(Result):
         becomes champion if it beats the champion on the same data."""
         import tempfile
 
-        from models.description import FIGURES
+        from models.serving.description import FIGURES
         from pipeline.results import RunRecord
 
         if "comparison" not in self.files:
@@ -176,9 +176,9 @@ def compare(data, *, models: list[str] | None = None, format: str = "auto",
     """
     import pandas as pd
 
-    from models.backtest import forecast_skill
-    from models.description import describe
-    from models.training import fit_model
+    from models.condition.backtest import forecast_skill
+    from models.estimators.training import fit_model
+    from models.serving.description import describe
     from pipeline.steps.model_data import model_data
 
     if split == "backtest":
@@ -212,9 +212,9 @@ class BacktestResult(Result):
     Attributes
     ----------
     origins : DataFrame
-        One row per predictor and origin (``models.backtest.backtest``).
+        One row per predictor and origin (``models.condition.backtest.backtest``).
     summary : DataFrame
-        Per predictor over all origins, best first (``models.backtest.summary``).
+        Per predictor over all origins, best first (``models.condition.backtest.summary``).
     wear_map : DataFrame or None
         The wear rate along the screw [um per 1000 h] with its 95 % interval, fitted on the
         visits since the last adjustment (when the wear map is compared and can forecast).
@@ -296,8 +296,8 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
 def _backtest(data, *, models, format, target, features, truth, seed,
               progress) -> BacktestResult:
     """``backtest`` on parameters checked already (compare's, by the runner)."""
-    from models import backtest as rolling
-    from models.training import visit_series
+    from models.condition import backtest as rolling
+    from models.estimators.training import visit_series
     from pipeline.steps.model_data import model_data
 
     names = model_names(models)
@@ -322,8 +322,8 @@ def wear_rates(table, readings=None, stats=None) -> pd.DataFrame | None:
     """The wear map fitted on the visits since the last adjustment: w(x) with its interval;
     None when the data cannot give a wear rate (one visit). ``stats``: the readings'
     ``features.iso230.per_target`` when already computed."""
-    from models.registry import with_axes
-    from models.training import hours_origins, since_adjustment
+    from models.estimators.training import hours_origins, since_adjustment
+    from models.serving.registry import with_axes
     from models.wear.wear_map import WearMap, epoch_lines
 
     kept, clock = since_adjustment(table, readings, stats)

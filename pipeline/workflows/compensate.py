@@ -418,7 +418,7 @@ def _profiles(data, format, conditions, ahead: dict, spacing, verify) -> list:
             raise InputError(f"needs twin readings, not a model{' directory' if is_path else ''}",
                              parameter="verify", file=data if is_path else None)
         if is_path:
-            from models.registry import load_model
+            from models.serving.registry import load_model
 
             data = load_model(data)
         return _predicted(data, conditions, spacing, **ahead)

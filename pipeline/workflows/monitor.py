@@ -6,14 +6,14 @@
 
 Each trace (docs/data-contract.md section 10: a CSV or Parquet table, or a Parquet dataset
 partitioned by machine, axis and date) is cut into partitions, one machine axis's day each
-(``models.lost_motion.daily_lost_motion``, a pure function of its partition); they run on the
+(``models.condition.lost_motion.daily_lost_motion``, a pure function of its partition); they run on the
 chosen engine (``pipeline.engines``: in-process by default, or Dask) and give the same numbers
 wherever they run. The daily series of each axis then gets the drift statistics of laser
-visits (``models.drift.analyse_series``): change points (an adjustment, a failure), the trend
+visits (``models.condition.drift.analyse_series``): change points (an adjustment, a failure), the trend
 since the last one, alerts.
 
 Before anything is recorded, every day is checked against what can be physical
-(``models.lost_motion.check_physical``): a load side that moves against the motor side, or
+(``models.condition.lost_motion.check_physical``): a load side that moves against the motor side, or
 travels more than twice or less than half as far (raw counts, a wrong unit or gear ratio), a
 lost motion larger than the day's travel or negative beyond its uncertainty are refused.
 """
@@ -81,7 +81,7 @@ class AxisMonitor:
     change_points: list = field(default_factory=list)  # ISO dates: first day after a change
     slope_um_per_day: float | None = None
     alerts: list = field(default_factory=list)
-    series: object = None  # models.drift.DriftSeries, or None below two days
+    series: object = None  # models.condition.drift.DriftSeries, or None below two days
 
     def to_json(self) -> dict:
         days = [{"date": r.date, "lost_motion_um": _num(r.lost_motion_um),
@@ -103,7 +103,7 @@ class MonitorResult(Result):
     Attributes
     ----------
     daily : DataFrame
-        One row per machine axis and day (``models.lost_motion.DAILY_COLUMNS``):
+        One row per machine axis and day (``models.condition.lost_motion.DAILY_COLUMNS``):
         ``lost_motion_um`` and its standard uncertainty ``lost_motion_u_um`` (um, arcsec on a
         rotary axis), ``reversals``, ``samples``, ``lag_s``, ``control_points``. What a fleet
         store records per axis and day.
@@ -205,13 +205,13 @@ def monitor(traces, *, engine: str = "local", address: str | None = None,
         A trace breaking the contract, without ``load_mm``, a day given twice, an unknown
         engine; a raw log without ``channels`` or its ``load`` channel, a channel it does not log, an
         axis neither named nor given (``features.traces.logs``), ``channels`` on a trace;
-        a day that cannot be physical (``models.lost_motion.check_physical``; nothing is
+        a day that cannot be physical (``models.condition.lost_motion.check_physical``; nothing is
         written or recorded).
     """
     log = _log_options(format, channels, reference_scale, machine, axis, period_s)
     import pandas as pd
 
-    from models.lost_motion import DAILY_COLUMNS
+    from models.condition.lost_motion import DAILY_COLUMNS
     from pipeline.engines import map_partitions
 
     options = {"take_up": float(take_up_mm), "settle_s": float(settle_s)}
@@ -309,7 +309,7 @@ def partition_days(task) -> object:
     holds one partition only) or a machine axis's trace frame. Pure: the same partition gives
     the same frame on every engine."""
     from features.traces.io import Partition, read_partition
-    from models.lost_motion import daily_lost_motion
+    from models.condition.lost_motion import daily_lost_motion
 
     item, options = task
     if isinstance(item, Partition):
@@ -325,7 +325,7 @@ def _check_physical(frames: list, sources: list, log: dict | None, take_up_mm: f
     """Refuse a day that cannot be physical (``check_physical``), naming its input and the
     channels as the user named them; the notes of load sides not in the motor's
     coordinates."""
-    from models.lost_motion import check_physical, offset_notes
+    from models.condition.lost_motion import check_physical, offset_notes
 
     if log is None:
         names = {k: f"{k}_mm" for k in ("commanded", "motor", "load")}
@@ -349,12 +349,12 @@ def _check_each_day_once(daily) -> None:
 
 
 def _axis_monitor(days, threshold_um) -> AxisMonitor:
-    """The drift analysis of one axis's days with a lost motion (``models.drift``)."""
+    """The drift analysis of one axis's days with a lost motion (``models.condition.drift``)."""
     import numpy as np
     import pandas as pd
 
     from features.visits import DAYS_PER_MONTH
-    from models.drift import analyse_series
+    from models.condition.drift import analyse_series
 
     first = days.iloc[0]
     value = days["lost_motion_um"].to_numpy()
@@ -379,7 +379,7 @@ def _axis_monitor(days, threshold_um) -> AxisMonitor:
 
 
 def _notes(daily) -> list[str]:
-    from models.lost_motion_stream import MIN_CLUSTERS
+    from models.condition.lost_motion_stream import MIN_CLUSTERS
 
     notes = []
     loose = daily[daily["lost_motion_um"].notna() & daily["lost_motion_u_um"].isna()]

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from features.readings.errors import InputError, note
-from models.registry import TrainedModel
+from models.serving.registry import TrainedModel
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only, readings
 from pipeline.workflows import readings_of, source_of
@@ -57,7 +57,7 @@ class PredictionResult(Result):
         interval adds ``backlash_low_um`` and ``backlash_high_um`` (95 %). Negative
         predictions are clipped at 0 (backlash is a magnitude). ``extrapolated`` names the
         point's inputs outside the ranges the model was trained on (``feed_mm_min;target``),
-        empty when none (``models.serving.trained_ranges``); a fleet model's ``borrowed``
+        empty when none (``models.serving.signature.trained_ranges``); a fleet model's ``borrowed``
         says how it forecast a machine axis it was not trained on (empty for its own). With a
         rotary axis among the points a ``unit`` column says each row's unit (``arcsec`` for a
         rotary axis).
@@ -143,7 +143,7 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
         naming the input, the points and the trained range (a ``BacklashWarning``, also in
         ``notes``), and the points say which in ``extrapolated``. A forecasting model (the wear
         map) extrapolates in operating hours by design: its hours get a note (with the
-        extrapolation factor) only beyond ``models.serving.FORECAST_HORIZON`` training spans
+        extrapolation factor) only beyond ``models.serving.signature.FORECAST_HORIZON`` training spans
         past the last trained hour.
 
     Raises
@@ -151,15 +151,15 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
     InputError
         Neither or both of ``data`` and ``plan``; a point the model may not answer for (a
         machine axis it was not trained on, an axis of another unit; a fleet model forecasts
-        another axis of a unit it has a fleet of, with a note: ``models.serving.answerable``),
+        another axis of a unit it has a fleet of, with a note: ``models.serving.signature.answerable``),
         or a model that does not record which axes it was trained on.
     """
     import pandas as pd
 
     from features.readings.plan import is_plan, plan_points, read_plan
     from features.table import prediction_inputs
-    from models.registry import load_model
-    from models.serving import answerable, predictions
+    from models.serving.registry import load_model
+    from models.serving.signature import answerable, predictions
 
     if (data is None) == (plan is None):
         raise InputError("give the readings (data) or a plan, not both", parameter="data")
@@ -220,10 +220,10 @@ def _visit_starts(readings: pd.DataFrame, inputs: pd.DataFrame):
 
 
 def plan_inputs(plan: pd.DataFrame, model, source: str) -> pd.DataFrame:
-    """Model inputs at the plan's points (``models.serving.filled_inputs``: what the plan
+    """Model inputs at the plan's points (``models.serving.signature.filled_inputs``: what the plan
     lacks and the estimator does not use takes its training mean, a missing condition is NaN,
     a missing deviation is one error line), checked for how far it forecasts."""
-    from models.serving import filled_inputs
+    from models.serving.signature import filled_inputs
 
     inputs = filled_inputs(model, plan, source)
     check_forecast(model, inputs, source, plan=True)

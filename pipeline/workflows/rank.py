@@ -237,7 +237,7 @@ def parse_bins(bins):
 
 def _predictor(model):
     if isinstance(model, (str, os.PathLike)):
-        from models.registry import load_model
+        from models.serving.registry import load_model
 
         return load_model(model)
     return model

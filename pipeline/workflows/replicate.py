@@ -112,7 +112,7 @@ def replicate(data, *, format: str = "auto", truth=None, boot: int = 100, seed: 
     table = feature_table(readings, target="paper", features=list(PAPER_FEATURES))
     truth_um = None
     if truth is not None:
-        from models.evaluation import read_truth, true_backlash
+        from models.estimators.evaluation import read_truth, true_backlash
 
         frame = truth if not isinstance(truth, (str, os.PathLike)) else read_truth(truth)
         truth_um = true_backlash(table.meta, frame, table.target_kind)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from features.readings.errors import InputError, note
-from models import registry
+from models.serving import registry
 from pipeline.results import Result
 from pipeline.steps.parameters import (
     BUDGET,
@@ -61,23 +61,23 @@ class TrainResult(Result):
     ----------
     model : str
         Registry name of the predictor.
-    fit : models.training.Fit
+    fit : models.estimators.training.Fit
         The fitted estimator, its split and predictions.
-    trained : models.registry.TrainedModel
+    trained : models.serving.registry.TrainedModel
         What ``write`` saves as a model directory (and ``predict`` takes).
     metrics : dict
         ``test_*``, ``train_*`` (RMSE and MAE [um], R^2, MAPE [%]), on twin data
         ``truth_*`` and ``noise_floor_um`` and, with an uncertainty budget, the test error
-        against U(B) (``models.evaluation.against_uncertainty``).
+        against U(B) (``models.estimators.evaluation.against_uncertainty``).
     parameters : dict
         What the run logs as its parameters (model, split, target, features, data hash...).
     skill : dict
         Forecasting skill against persistence from a backtest on the training table
-        (``models.backtest.forecast_skill``): ``skill`` (None for a predictor that does not
+        (``models.condition.backtest.forecast_skill``): ``skill`` (None for a predictor that does not
         forecast, or too few visits, with the ``reason``), ``rmse_um``,
         ``persistence_rmse_um``, ``origins``. It ranks registered models for the champion.
     description : dict
-        The model as plain data, what the registry keeps of it (``models.description``).
+        The model as plain data, what the registry keeps of it (``models.serving.description``).
     """
 
     model: str
@@ -113,7 +113,7 @@ class TrainResult(Result):
     def draw(self) -> list[Path]:
         """The second half of ``write``: the figures of the fit in the saved model directory's
         ``figures`` folder."""
-        from models.description import FIGURES
+        from models.serving.description import FIGURES
         from pipeline.reports.model_report import write_figures
 
         return self.drawn(write_figures(self.fit, self.files["model"] / FIGURES,
@@ -126,7 +126,7 @@ class TrainResult(Result):
         return self.figures
 
     def to_json(self) -> dict:
-        from models.evaluation import resolution_verdict
+        from models.estimators.evaluation import resolution_verdict
 
         verdict = ({"resolution": resolution_verdict(self.metrics)}
                    if "U_B_um" in self.metrics else {})
@@ -142,7 +142,7 @@ class TrainResult(Result):
         drawn."""
         import tempfile
 
-        from models.description import FIGURES
+        from models.serving.description import FIGURES
         from pipeline.results import RunRecord
 
         if "model" not in self.files:
@@ -155,7 +155,7 @@ class TrainResult(Result):
     def figures_record(self):
         """The figures alone, for the run ``tracking_record`` started before they were drawn:
         the model is logged while they are drawn."""
-        from models.description import FIGURES
+        from models.serving.description import FIGURES
         from pipeline.results import TrackingRecord
 
         return TrackingRecord(experiment="train", run_name=f"train {self.model}",
@@ -172,7 +172,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     data : str, path-like or DataFrame
         Readings file (any input format) or a readings frame from ``read``.
     model : str, optional
-        Predictor name (``models.registry.PREDICTORS``); default the recommended wear map.
+        Predictor name (``models.serving.registry.PREDICTORS``); default the recommended wear map.
     format : str
         Input layout of ``data`` (default: detect).
     target : {'auto', 'paper', 'iso'}
@@ -205,9 +205,9 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
         axis's data.
     """
     from features.uncertainty import checked_budget
-    from models.backtest import forecast_skill
-    from models.description import describe
-    from models.training import fit_model, since_adjustment
+    from models.condition.backtest import forecast_skill
+    from models.estimators.training import fit_model, since_adjustment
+    from models.serving.description import describe
     from pipeline.steps.model_data import model_data
 
     name = model or registry.RECOMMENDED
@@ -217,7 +217,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     U_B = None if budget is None else measurement_U_B_um(loaded.stats, budget)
     table, clock, origins, usage = loaded.table, None, {}, []
     if registry.predictor(name).wear_clock:  # the wear clock restarts at an adjustment
-        from models.training import hours_origins
+        from models.estimators.training import hours_origins
         from models.wear.wear_clock import usage_rates
         from models.wear.wear_map import epoch_lines
 
@@ -235,7 +235,7 @@ def train(data, *, model: str | None = None, format: str = "auto", target: str =
     metrics = fit.metrics
     resolution = {}
     if U_B is not None:
-        from models.evaluation import against_uncertainty, resolution_verdict
+        from models.estimators.evaluation import against_uncertainty, resolution_verdict
 
         y, test = fit.table.y.to_numpy(float), fit.test_index
         metrics = {**metrics, **against_uncertainty(y[test], fit.predicted_um[test], U_B)}
@@ -289,5 +289,5 @@ def borrowing_lines(axes: list[dict]) -> list[str]:
 
 def load_model(path):
     """A model directory written by ``train`` (``TrainResult.write``), checked before anything
-    is built (``models.registry.load_model``); ``predict`` takes it."""
+    is built (``models.serving.registry.load_model``); ``predict`` takes it."""
     return registry.load_model(path)

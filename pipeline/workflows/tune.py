@@ -1,6 +1,6 @@
 """Tune the shallow network (hidden sizes, activation, trainer, regularisation) by K-fold
 cross-validation; many processes or machines share a study through its storage. The search
-itself is ``models.tuning``'s; this job hands each finished trial, as its record, to the live
+itself is ``models.estimators.tuning``'s; this job hands each finished trial, as its record, to the live
 run the runner gives it (``live``), so a killed search keeps the trials it finished.
 
 >>> import backlash as bl
@@ -116,7 +116,7 @@ def run_name(study: str) -> str:
 
 
 def trial_record(trial: dict) -> TrackingRecord:
-    """What the run keeps of one finished trial (``models.tuning.trial_summary``)."""
+    """What the run keeps of one finished trial (``models.estimators.tuning.trial_summary``)."""
     from pipeline.results import RunRecord
 
     return RunRecord(
@@ -180,7 +180,7 @@ def tune(data, *, trials: int = 30, storage: str | None = None,
     -------
     TuneResult
     """
-    from models import tuning
+    from models.estimators import tuning
     from pipeline.steps.model_data import model_data
 
     if storage is None:

@@ -8,7 +8,7 @@ the machine twin, judged on the four body diagonals.
 
 The twin (``models.physics.machine.paper_machine``) is the paper's XHK714 with its travels and
 errors sized on its Figure 5; six-channel laser tests off the tool point identify the 21
-errors (``models.volumetric``) twice, once taking the optics to be at the tool point
+errors (``models.machine.volumetric``) twice, once taking the optics to be at the tool point
 (traditional) and once at their true offset (Abbe-aware); the control compensates with each,
 and the four ISO 230-6 body diagonals are measured before and after [Chen2022]_.
 """
@@ -197,7 +197,7 @@ def volumetric(*, seed: int = 0, targets: int = 11, radius_mm: float = 150.0, pa
         points = read_points(path, "path")
     import pandas as pd
 
-    from models import volumetric as vol
+    from models.machine import volumetric as vol
     from models.physics import machine as twin
 
     machine = twin.paper_machine()
@@ -226,7 +226,7 @@ def _path_error(machine, geometry, circles, points, stiffness, seed: int):
     """The path's points with the three parts of the error, the summary and notes."""
     import numpy as np
 
-    from models import circle as mc
+    from models.machine import circle as mc
     from models.machine import path_error as pe
     from models.machine import stiffness as st
     from models.physics import machine as twin

@@ -4,7 +4,7 @@ visits (docs/watch.md).
 >>> import backlash as bl
 >>> bl.watch("WATCH.toml", store="fleet/", seconds=3600)   # doctest: +SKIP
 
-A long-running job: the estimator is pure (``models.lost_motion_stream``: per move window the
+A long-running job: the estimator is pure (``models.condition.lost_motion_stream``: per move window the
 fit's statistics, per day one combiner, the same as ``monitor``'s), the I/O loop lives in
 ``pipeline.live`` and the open days' state in the store (``pipeline.store.live``).
 """

@@ -1,6 +1,6 @@
 """What a served model takes and gives: its input columns and a prediction frame.
 
-A trained model predicts from the columns ``models.registry.TrainedModel.inputs`` selects, but
+A trained model predicts from the columns ``models.serving.registry.TrainedModel.inputs`` selects, but
 a plan (a visit not measured yet) names only what the model really uses: for a wear map the
 machine axis (when the model knows several), ``target``, ``operating_hours`` and the
 conditions it fitted (``estimator.conditions_``), which a plan may omit. ``input_columns`` lists
@@ -31,7 +31,7 @@ import pandas as pd
 
 from features.readings.errors import InputError
 from features.readings.schema import deviation_unit
-from models.registry import AXIS_KEYS, TrainedModel, knows_axes
+from models.serving.registry import AXIS_KEYS, TrainedModel, knows_axes
 
 PREDICTION = "backlash_um"
 INTERVAL = ("backlash_low_um", "backlash_high_um")
@@ -255,7 +255,7 @@ def answerable(model: TrainedModel, inputs: pd.DataFrame, source: str = "request
 def forecasts(model: TrainedModel) -> bool:
     """Whether ``model`` forecasts in operating hours (its registry record says so and it was
     trained on a spread of hours)."""
-    from models.registry import PREDICTORS
+    from models.serving.registry import PREDICTORS
 
     record = PREDICTORS.get(model.name)
     return bool(record and record.forecasts

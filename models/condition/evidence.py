@@ -18,7 +18,7 @@ over the pairs ``k`` of a laser visit and the source's point nearest in time wit
 
 Shifted by its offset, a point reads :math:`y - \\hat\\delta_s` with the uncertainty
 :math:`\\sqrt{u^2 + u(\\hat\\delta_s)^2}`, and the series of all sources is analysed as one
-(``models.drift.analyse_series``): a trace sees an adjustment on the day it is made, months
+(``models.condition.drift.analyse_series``): a trace sees an adjustment on the day it is made, months
 before the next laser visit.
 """
 

@@ -1,6 +1,6 @@
 """Lost motion on a stream: per reversal window, then per day from the windows' statistics.
 
-The daily estimator of ``models.lost_motion`` (docs/monitor.md) written as sufficient
+The daily estimator of ``models.condition.lost_motion`` (docs/monitor.md) written as sufficient
 statistics that add up, so that a day seen in one piece (``monitor`` on a file) and a day seen
 sample by sample as a controller sends it (``watch``) give the same lost motion by
 construction: both feed the samples' 40 ms bins to one ``AxisStream`` and read the day from
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# The bins (a whole number make a day): see ``models.lost_motion.BIN_S``.
+# The bins (a whole number make a day): see ``models.condition.lost_motion.BIN_S``.
 BIN_NS = 40_000_000
 DAY_NS = 86_400_000_000_000
 STEADY = 1e-3
@@ -313,7 +313,7 @@ class AxisStream:
         n = len(t)
         c = self.carry
         first = c is None
-        if first:  # the day's first bin: as ``models.lost_motion.motion_state`` starts
+        if first:  # the day's first bin: as ``models.condition.lost_motion.motion_state`` starts
             c = {"t": t[0] - 1.0, "c": commanded[0], "v": None, "dir": 0.0, "travel": 0.0,
                  "unsteady_t": -np.inf, "move": 0, "has": False, "prev_has": False,
                  "rev": False, "counted": False}

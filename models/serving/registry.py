@@ -11,7 +11,7 @@ A trained model directory holds ``model.json`` (name, features, target definitio
 validation error, training input ranges, the machine axes and units it was trained on
 (``scope``), data hash, and the spec and sha256 of every part),
 ``training_inputs.csv`` (for input-drift tests) and the fitted estimator, written and read by
-``models.persistence`` (its own format, plain JSON or skops; the loader's checks are described
+``models.serving.persistence`` (its own format, plain JSON or skops; the loader's checks are described
 there). ``load_model`` is the only reader of model directories.
 """
 
@@ -47,8 +47,8 @@ class Predictor:
         ``build(random_state) -> estimator``: an unfitted scikit-learn style estimator (imports
         only what it needs).
     save_format : str
-        How ``models.persistence.save_estimator`` writes it (read back by
-        ``models.persistence.load_estimator`` with this record's estimator as the template):
+        How ``models.serving.persistence.save_estimator`` writes it (read back by
+        ``models.serving.persistence.load_estimator`` with this record's estimator as the template):
         ``json`` (plain numbers), ``torch`` (a state dict read with ``weights_only``),
         ``parts`` (a composite writing each part in its own format) or ``skops`` (allow-listed
         types only).
@@ -75,19 +75,19 @@ class Predictor:
 
 
 def _network(**params):
-    from models.network import ShallowNetwork
+    from models.estimators.network import ShallowNetwork
 
     return ShallowNetwork(**params)
 
 
 def _baselines():
-    from models import baselines
+    from models.estimators import baselines
 
     return baselines
 
 
 def _effect_model():
-    from models.effect_model import EffectModelBaseline
+    from models.estimators.effect_model import EffectModelBaseline
 
     return EffectModelBaseline()
 
@@ -111,7 +111,7 @@ def _wear_map_hybrid(seed: int):
 
 
 def _ensemble(seed: int):
-    from models.ensemble import BootstrapEnsemble
+    from models.estimators.ensemble import BootstrapEnsemble
 
     return BootstrapEnsemble(_network(trainer="lm", random_state=seed), n_members=5,
                              random_state=seed)
@@ -230,7 +230,7 @@ def predictors_table() -> str:
 
 def register(record: Predictor) -> Predictor:
     """Add a predictor from outside this module: ``train``, ``compare``, ``--model``'s help and
-    the docs' table read it from then on (``models.persistence`` saves it by its
+    the docs' table read it from then on (``models.serving.persistence`` saves it by its
     ``save_format``).
 
     Raises
@@ -303,7 +303,7 @@ THIRD_PARTY_DEVIATIONS = {
 
 def expected_failed_checks(estimator) -> dict[str, str]:
     """scikit-learn estimator checks ``estimator`` is declared to fail, with the reason."""
-    from models.persistence import class_name
+    from models.serving.persistence import class_name
 
     return dict(THIRD_PARTY_DEVIATIONS.get(class_name(type(estimator)), {}))
 
@@ -340,7 +340,7 @@ class TrainedModel:
 def save_model(model: TrainedModel, directory) -> Path:
     """Write a trained model directory (see module docstring)."""
     from features.readings.fileio import atomic_path, write_json
-    from models.persistence import digest, save_estimator
+    from models.serving.persistence import digest, save_estimator
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -367,7 +367,7 @@ def load_model(directory) -> TrainedModel:
     registry builds the template whose exact classes the saved parts must have), each part's
     path (inside the directory) and sha256.
     """
-    from models.persistence import load_estimator
+    from models.serving.persistence import load_estimator
 
     directory = Path(directory)
     meta_path = directory / MODEL_FILE
@@ -426,7 +426,7 @@ def _read_meta(path: Path) -> dict:
 
 
 def _check_scope(scope, path: Path) -> None:
-    """model.json's ``scope`` (``models.serving.scope_of``): the machine axes the model was
+    """model.json's ``scope`` (``models.serving.signature.scope_of``): the machine axes the model was
     trained on, each with the unit of its axis (``um`` linear, ``arcsec`` rotary)."""
     axes = scope.get("axes") if isinstance(scope, dict) else None
     if not isinstance(axes, list) or not axes:
@@ -449,7 +449,7 @@ def _read_training_inputs(directory: Path, sha256: str, where: Path):
 
     import pandas as pd
 
-    from models.persistence import confined
+    from models.serving.persistence import confined
 
     path = confined(directory, TRAINING_INPUTS, where)
     if not path.is_file():

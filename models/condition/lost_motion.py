@@ -35,7 +35,7 @@ cannot be told from the lead error or the lag, give the day's value without an u
 (NaN).
 
 The fit is written as sufficient statistics that add up per move and a combiner per day
-(``models.lost_motion_stream``): ``monitor`` on a file and ``watch`` on a live feed run the same
+(``models.condition.lost_motion_stream``): ``monitor`` on a file and ``watch`` on a live feed run the same
 code and agree by construction; a day's state is bounded whatever its length.
 
 References: [Mechta2022] (B-spline intra-axis error model); Eilers & Marx (1996), "Flexible
@@ -59,7 +59,7 @@ import numpy as np
 import pandas as pd
 
 from features.readings.schema import deviation_scale, deviation_unit
-from models.lost_motion_stream import BIN_NS, STEADY, stream_days
+from models.condition.lost_motion_stream import BIN_NS, STEADY, stream_days
 
 # Motor travel after a reversal past which the play is taken up [mm or deg]: larger than any
 # plausible lost motion (DESIGN.md: 0.5-15 um) with its wind-up.
@@ -83,7 +83,7 @@ class DayFit:
     lost_motion : float
         L [mm or deg] (NaN when the day cannot show it).
     lost_motion_u : float
-        Its standard uncertainty stated for k = 2 (``models.lost_motion_stream``'s
+        Its standard uncertainty stated for k = 2 (``models.condition.lost_motion_stream``'s
         jackknife) [mm or deg]; NaN when the day's moves cannot give one.
     reversals : int
         Reversals of the commanded path whose play was taken up on both sides.
@@ -215,7 +215,7 @@ def fit_days(t_s, day, commanded, motor, load, weight=None, *, take_up: float = 
     list of DayFit
         One per day index.
     """
-    from models.lost_motion_stream import DAY_NS, AxisStream
+    from models.condition.lost_motion_stream import DAY_NS, AxisStream
 
     day = np.asarray(day, np.int64)
     days = int(day[-1]) + 1 if len(day) else 0
@@ -280,7 +280,7 @@ def daily_lost_motion(trace: pd.DataFrame, *, take_up: float = TAKE_UP_MM,
                 *(part[c].to_numpy() for c in ("commanded_mm", "motor_mm", "load_mm")))
             dates, day = _runs((start + mean_ns.astype(np.int64)) // DAY_NS)
             # the samples through the stream and day combiner ``watch`` runs
-            # (models.lost_motion_stream): a file and a live feed agree by construction
+            # (models.condition.lost_motion_stream): a file and a live feed agree by construction
             extra = _travel(day, weight, *channels) if travel else {}
             if extra and _motor_off(extra, take_up).any():
                 # refused after (check_physical), so not fitted: a motor side in counts would

@@ -40,7 +40,7 @@ below / above the trend before it; an adjustment restarts the trend there, a jum
 next visit to be confirmed; without such a change point ``last_visit_jump`` also fires when
 the last visit lies that far above the line of its segment's earlier visits),
 ``limit_passed_unmeasured`` (``limit_passed_alert``: the crossing date lies before the day the
-view is computed as of) and, with a monitored model (``models.monitoring``), ``retrain``,
+view is computed as of) and, with a monitored model (``models.condition.monitoring``), ``retrain``,
 ``input_out_of_range``, ``input_drift``. Every value, limit and message is in the axis's unit
 (``DriftSeries.unit``: um, or arcsec for a rotary axis); ``limit_of`` gives each axis a limit
 in its own unit, so no alert compares unlike units.
@@ -934,7 +934,7 @@ def two_visit_notes(series: list[DriftSeries]) -> list[str]:
 
 # --------------------------------------------------------------------------- model alerts
 def attach_model(series: list[DriftSeries], monitoring: pd.DataFrame) -> None:
-    """Add per-visit model figures (``models.monitoring.monitor_model``) to each series and
+    """Add per-visit model figures (``models.condition.monitoring.monitor_model``) to each series and
     alert on its latest visit."""
     for s in series:
         mine = monitoring[(monitoring["machine_id"].astype(str) == s.machine_id)

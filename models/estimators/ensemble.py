@@ -5,7 +5,7 @@ Each member is a clone of ``estimator`` fitted on a bootstrap resample of the tr
 mean +- t(n - 1, 0.975) sd sqrt(1 + 1/n), sd the members' spread: the uncertainty of the fitted
 function from the data it saw (Efron and Tibshirani, An Introduction to the Bootstrap, 1993,
 ch. 6), which is what a forecast of the true backlash needs; measurement noise is not in it.
-Members are saved through ``models.persistence`` side by side with an ``ensemble.json``.
+Members are saved through ``models.serving.persistence`` side by side with an ``ensemble.json``.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.errors import InputError
-from models.persistence import (
+from models.serving.persistence import (
     check_spec,
     checked_params,
     load_estimator,

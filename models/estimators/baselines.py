@@ -15,7 +15,7 @@ training step refuses a feature set without them.
 - ``BezierPosition`` (degree 4) and ``BSplinePosition`` (degree 2, uniform clamped knots), five
   control points each, least squares over the position normalised to [0, 1] on the training
   range — the intra-axis error models of [Mechta2022] (eqs. 18 and 20), here for the backlash profile.
-- (the effect-model baseline, built from the effect records, is in ``models.effect_model``)
+- (the effect-model baseline, built from the effect records, is in ``models.estimators.effect_model``)
 - ``PhysicsHybrid``: a physics baseline plus any regressor fitted on its residual.
 """
 
@@ -34,14 +34,14 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from features.readings.errors import InputError
 from features.statistics import bspline_basis
-from models.persistence import (
+from models.physics.effects import REFERENCE_TEMP_C
+from models.serving.persistence import (
     load_estimator,
     read_state,
     restore_inputs,
     save_estimator,
     write_state,
 )
-from models.physics.effects import REFERENCE_TEMP_C
 
 HYBRID_FILE = "hybrid.json"
 
@@ -222,7 +222,7 @@ class PhysicsHybrid(RegressorMixin, BaseEstimator):
 
     Both parts see the inputs with their names (a DataFrame's columns, or ``features`` for a
     numpy input), so a physics part finds its named inputs either way. Saved as
-    ``hybrid.json`` plus one file or folder per part (``models.persistence``).
+    ``hybrid.json`` plus one file or folder per part (``models.serving.persistence``).
     """
 
     _parameter_constraints: ClassVar[dict] = {"physics": [HasMethods(["fit", "predict"])],

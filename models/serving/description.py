@@ -7,7 +7,7 @@ was tracked.
 Tags (``version_tags``): ``predictor``, ``target_kind``, ``data_sha256``, ``machines``,
 ``axes`` (``M1/X,M1/Y,...``, cut with a count), ``n_axes`` and ``backtest_skill``
 (``1 - RMSE / RMSE of persistence`` over a rolling-origin backtest on the training data,
-``models.backtest.forecast_skill``, or ``n/a: REASON``).
+``models.condition.backtest.forecast_skill``, or ``n/a: REASON``).
 """
 
 from __future__ import annotations
@@ -24,12 +24,12 @@ def describe(fit, data_sha256: str | None, skill: dict) -> dict:
 
     Parameters
     ----------
-    fit : models.training.Fit
+    fit : models.estimators.training.Fit
         The fitted predictor and its feature table.
     data_sha256 : str or None
         The training data's hash (``pipeline.results.data_hash``).
     skill : dict
-        Its forecasting skill (``models.backtest.forecast_skill``).
+        Its forecasting skill (``models.condition.backtest.forecast_skill``).
 
     Returns
     -------
@@ -38,7 +38,7 @@ def describe(fit, data_sha256: str | None, skill: dict) -> dict:
         ``outputs``: column names), ``example`` (the first rows of the inputs the signature
         lists, ``split`` orient), ``backtest`` (``skill``) and ``tags``.
     """
-    from models.serving import input_columns, output_columns
+    from models.serving.signature import input_columns, output_columns
 
     inputs = input_columns(fit.estimator, list(fit.table.X.columns))
     info = training_history(fit.estimator)
@@ -67,7 +67,7 @@ def training_history(estimator) -> dict | None:
 def _example(fit, inputs: list[dict], rows: int = 5):
     """The first ``rows`` training rows of the columns the signature lists (numbers as float),
     with their machine axis."""
-    from models.registry import with_axes
+    from models.serving.registry import with_axes
 
     frame = fit.inputs if fit.inputs is not None else fit.table.X
     if any(c["name"] not in frame for c in inputs):

@@ -43,7 +43,7 @@ def monitor_model(model, readings: pd.DataFrame, *, alpha: float = 0.01) -> pd.D
     features = list(model.feature_names_)
     table = feature_table(readings, target=getattr(model, "target_kind", "auto"),
                           features=features)
-    from models.registry import with_axes
+    from models.serving.registry import with_axes
 
     residual = table.y.to_numpy(float) - np.asarray(
         model.predict(with_axes(table.X, table.meta)), float)

@@ -25,7 +25,8 @@ import pandas as pd
 
 from features.readings.errors import InputError, Progress, report
 from features.table import FeatureTable
-from models import evaluation, registry
+from models.estimators import evaluation
+from models.serving import registry
 from models.wear.wear_map import found_adjustments, latest_epoch
 
 PERSISTENCE = "persistence"
@@ -126,7 +127,7 @@ def backtest(table: FeatureTable, names: list[str], truth: pd.DataFrame | None =
 def _forecast(table, name, train, test, random_state, params):
     if name == PERSISTENCE:
         return persistence(table, train, test), None, None
-    from models.training import model_inputs
+    from models.estimators.training import model_inputs
 
     estimator = registry.make(name, random_state, **params)
     (X, extra), y = model_inputs(table, name), table.y
@@ -161,12 +162,12 @@ def summary(results: pd.DataFrame) -> pd.DataFrame:
 
 def forecast_skill(fit, min_visits: int = MIN_SKILL_VISITS,
                    max_origins: int = MAX_SKILL_ORIGINS) -> dict:
-    """Forecasting skill of a predictor that forecasts (``models.registry`` record
+    """Forecasting skill of a predictor that forecasts (``models.serving.registry`` record
     ``forecasts``) from a rolling-origin backtest on its training table.
 
     Parameters
     ----------
-    fit : models.training.Fit
+    fit : models.estimators.training.Fit
         The fitted predictor; its table (for a wear map: the visits since each axis's last
         adjustment) is the backtest's data.
     min_visits : int

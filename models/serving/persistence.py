@@ -45,6 +45,7 @@ import numpy as np
 
 from features.readings.errors import InputError
 from features.readings.fileio import atomic_path, write_json
+from models import current_name
 
 SAVE_FORMATS = ("self", "json", "skops")
 JSON_SUFFIX = ".json"
@@ -275,7 +276,7 @@ def load_estimator(directory, spec: dict, template, where=None):
     path = confined(directory, spec["path"], where)
     if not path.exists():
         raise InputError(f"model part {spec['path']!r} is missing", file=where)
-    if spec["class"] != class_name(type(template)):
+    if current_name(spec["class"]) != class_name(type(template)):
         raise InputError(f"refusing estimator class {spec['class']!r}; this model's entry "
                          f"builds {class_name(type(template))}", file=where)
     if spec["format"] == "skops":
@@ -334,14 +335,15 @@ def _load_skops(path: Path, sha256: str, allowed: set[str]):
         if kind not in SKOPS_LOADERS:
             raise InputError(f"refusing skops node {kind} ({type_name}): the product never "
                              "saves one", file=path)
-        if type_name not in SKOPS_TYPES and type_name not in allowed:
+        if type_name not in SKOPS_TYPES and current_name(type_name) not in allowed:
             raise InputError(f"refusing to load type {type_name!r}: not among the types the "
                              "product saves", file=path)
     import skops.io
 
     try:
         untrusted = skops.io.get_untrusted_types(data=data)
-        refused = [t for t in untrusted if t not in SKOPS_TYPES and t not in allowed]
+        refused = [t for t in untrusted
+                   if t not in SKOPS_TYPES and current_name(t) not in allowed]
         if refused:
             raise InputError(f"refusing to load type {refused[0]!r}: not among the types the "
                              "product saves", file=path)

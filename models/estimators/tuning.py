@@ -62,7 +62,7 @@ def cv_rmse(X, y, params: dict, folds: int = 5, random_state: int = 0) -> np.nda
     """RMSE [um] of each of ``folds`` shuffled folds for a network with ``params``."""
     from sklearn.model_selection import KFold, cross_val_score
 
-    from models import registry
+    from models.serving import registry
 
     estimator = registry.make("shallow-lm", random_state, **params)
     split = KFold(folds, shuffle=True, random_state=random_state)
@@ -367,7 +367,7 @@ def work(name: str, storage: str, X, y, trials: int, folds: int, seed: int, tag:
     import sklearn.model_selection  # noqa: F401 - imported before a SIGTERM may interrupt cv_rmse
     import torch
 
-    import models.network  # noqa: F401
+    import models.estimators.network  # noqa: F401
 
     if threads:
         torch.set_num_threads(threads)

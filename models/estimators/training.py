@@ -14,7 +14,8 @@ import pandas as pd
 
 from features.readings.schema import is_rotary
 from features.table import FeatureTable, check_features
-from models import evaluation, registry
+from models.estimators import evaluation
+from models.serving import registry
 
 
 @dataclass
@@ -33,11 +34,11 @@ class Fit:
     def trained_model(self, meta: dict | None = None) -> registry.TrainedModel:
         """The fitted estimator with what monitoring needs (input ranges, training inputs) and
         what it may answer for: the machine axes and units of its table (``scope``,
-        ``models.serving.scope_of``)."""
+        ``models.serving.signature.scope_of``)."""
         X_train = self.table.X if self.refit_all else self.table.X.iloc[self.train_index]
         meta_train = self.table.meta if self.refit_all else self.table.meta.iloc[self.train_index]
         ranges = {c: (float(X_train[c].min()), float(X_train[c].max())) for c in X_train}
-        from models.serving import SCOPE, scope_of
+        from models.serving.signature import SCOPE, scope_of
 
         axes = _known_axes(self.estimator)
         return registry.TrainedModel(
@@ -65,7 +66,7 @@ def _known_axes(estimator) -> list[dict]:
 def fit_model(table: FeatureTable, name: str, split: str = "random", random_state: int = 0,
               truth: pd.DataFrame | None = None, noise_floor_um: float | None = None,
               source: str = "data", hours_origin: dict | None = None) -> Fit:
-    """Fit ``name`` (``models.registry``) on the training part of ``split`` and score it.
+    """Fit ``name`` (``models.serving.registry``) on the training part of ``split`` and score it.
 
     A per-axis predictor sees each row's machine axis and ``hours_origin`` (from
     ``since_adjustment``): where each axis's wear clock restarted with its counter running on.
