@@ -645,7 +645,8 @@ def _log_pyfunc(model: dict, model_dir: Path):
     example = pd.DataFrame(**model["example"])
     return Model.log(
         artifact_path=None, name="model", flavor=_PyfuncFlavor, flavor_name="pyfunc.ModelFromCode",
-        python_model=str(Path(__file__).parents[2] / "models" / "pyfunc_model.py"),
+        python_model=str(Path(__file__).parents[2] / "models" / "serving"
+                         / "pyfunc_model.py"),
         artifacts={"model_dir": str(model_dir)}, signature=signature(model["signature"]),
         input_example=example, registered_model_name=REGISTERED_NAME,
         tags=model.get("tags") or None,
