@@ -33,7 +33,7 @@ SAME = ("change_points", "change_jumps_um", "threshold_um",
         "crossing_interval", "forecast_date", "forecast_um", "forecast_measurement_low_um",
         "forecast_measurement_high_um", "forecast_lost_motion_low_um",
         "forecast_lost_motion_high_um", "forecast_model_error_um", "forecast_backtests",
-        "forecast_note")
+        "forecast_note", "forecast_lost_motion_reference", "forecast_lost_motion_note")
 
 
 def quiet(function, readings, **kwargs):
@@ -167,6 +167,9 @@ def test_next_visit_due_rules():
     rate = {"per_day": 0.05, "basis": "calendar"}
     assert due(LAST, 2.0, 4.0, 90, rate=rate) == (dt.date(2026, 4, 10), "fleet_rate")
     assert due(LAST, 2.0, 4.0, 30, rate=rate) == (dt.date(2026, 3, 31), "interval")
+    # a planned rate near zero: the limit lies past any calendar, the interval rules
+    slow = {"per_day": 1e-12, "basis": "calendar"}
+    assert due(LAST, 2.0, 4.0, 90, rate=slow) == (dt.date(2026, 5, 30), "interval")
     # the early end of the crossing interval, never before the last visit
     crossing = (LAST + pd.Timedelta(days=50), LAST + pd.Timedelta(days=20), None)
     assert due(LAST, 2.0, 4.0, 90, crossing=crossing) == (dt.date(2026, 3, 21), "crossing")
@@ -218,7 +221,7 @@ def test_the_fleet_wear_rate_is_a_high_quantile_of_the_axes_rates():
 
 # --------------------------------------------------------------------------- defined once
 def test_the_shared_settings_and_their_defaults_are_defined_once():
-    from models.drift import analyse_series
+    from models.condition.drift import analyse_series
     from pipeline.steps.parameters import MAINTENANCE
     from pipeline.workflows import drift as drift_module
     from pipeline.workflows import fleet as fleet_module
@@ -239,7 +242,7 @@ def test_a_line_too_flat_to_reach_the_limit_in_a_century_has_no_crossing_date(tm
     """A nearly flat trend (a tiny positive Theil-Sen slope) once put its crossing centuries
     ahead, past the last date pandas holds: drift and fleet stopped with OutOfBoundsTimedelta.
     Its crossing date is null, as a line not growing."""
-    from models.drift import MAX_CROSSING_MONTHS, crossing_forecast
+    from models.condition.drift import MAX_CROSSING_MONTHS, crossing_forecast
 
     t, y = np.arange(5.0), np.array([2.0, 2.1, 1.9, 2.0, 2.0])
     assert crossing_forecast(t, y, 0.1, 3.0, slope=1e-9, intercept=2.0)[0] is None

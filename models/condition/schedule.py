@@ -129,10 +129,12 @@ def next_visit_due(last_visit: pd.Timestamp, level_um: float, threshold_um: floa
     if threshold_um is not None and level_um >= threshold_um:
         return last_visit.date(), "above_threshold"
     if threshold_um is not None and rate is not None and rate["per_day"] > 0:
-        when = (last_visit + pd.Timedelta(days=(threshold_um - level_um) / rate["per_day"])
-                ).date()
-        if when < by_interval:
-            return when, "fleet_rate"
+        # compared in days first: a rate near zero puts the day past any calendar
+        days = (threshold_um - level_um) / rate["per_day"]
+        if days < interval_days:
+            when = (last_visit + pd.Timedelta(days=days)).date()
+            if when < by_interval:
+                return when, "fleet_rate"
     early = crossing[1] if crossing[1] is not None else crossing[0]
     if early is not None:
         when = max(early.date(), last_visit.date())
