@@ -8,7 +8,7 @@ of a day at 1 kHz on three axes, and the latency from a day's end to its record.
   ``AxisStream``, as the watcher does) in one-second chunks, in a child process: its peak
   resident set size. Goal < 200 MB. The stream is the day's last ``STREAMED_S`` seconds (six
   hours), then the next day's first second, which closes the day: the peak is that close (the
-  day's fit), and what a day keeps is bounded (``models.lost_motion_stream``), so the last
+  day's fit), and what a day keeps is bounded (``models.condition.lost_motion_stream``), so the last
   ten minutes, hour, six hours or the whole day all peak at 58 MB; the whole day took three
   to five minutes of the run;
 - latency: a watcher on a log; the first sample of the next day is appended and the time to
@@ -121,7 +121,7 @@ def _samples():
 _MEMORY = """
 import sys
 import numpy as np
-from models.lost_motion_stream import Binner, AxisStream
+from models.condition.lost_motion_stream import Binner, AxisStream
 streamed_s, rate = int(sys.argv[1]), int(sys.argv[2])
 t0 = (1_780_000_000 // 86400 * 86400 + 86400 - streamed_s) * 10**9  # streamed_s before a midnight
 axes = [(Binner(), AxisStream()) for _ in range(3)]

@@ -145,7 +145,9 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
          "forecast_lost_motion_low_um": (float, type(None)),
          "forecast_lost_motion_high_um": (float, type(None)),
          "forecast_model_error_um": (float, type(None)), "forecast_backtests": int,
-         "forecast_note": (str, type(None))}
+         "forecast_note": (str, type(None)),
+         "forecast_lost_motion_reference": (dict, type(None)),
+         "forecast_lost_motion_note": (str, type(None))}
 
 
 def test_json_keys_and_types(mixed):

@@ -458,7 +458,8 @@ def forecast_terms(series) -> ForecastTerms:
 
 def forecast_interval(t_month, y_um, u_um, at_month, *, alpha: float = 0.05,
                       scatter_um: float = float("nan"), scatter_dof: int = 0,
-                      model_error_um: float = float("nan"), target_u_um=None) -> dict | None:
+                      model_error_um: float = float("nan"), target_u_um=None,
+                      correction_um: float = 0.0, correction_u_um: float = 0.0) -> dict | None:
     """The forecast of a segment's straight line at ``at_month`` with its two intervals.
 
     Parameters
@@ -474,6 +475,9 @@ def forecast_interval(t_month, y_um, u_um, at_month, *, alpha: float = 0.05,
     target_u_um : the measured target's own standard uncertainty for the axis's lost motion
         [um] per visit (with a budget ``backlash_U_um`` / k: the parts that do not average out
         over the visit's points); default ``u_um``
+    correction_um, correction_u_um : the correction δ of the lost motion to reference
+        conditions and its standard uncertainty [um] (``models.condition.reference``): the
+        lost-motion interval is centred on ŷ + δ and its variance gains u²(δ); default none
 
     Returns
     -------
@@ -498,7 +502,8 @@ def forecast_interval(t_month, y_um, u_um, at_month, *, alpha: float = 0.05,
       repeatability: the line runs through measured values, so a target that reads low or high
       moves the line with it ([GUM] 6.3, F.2.4.5: an uncorrected bias enters as a standard
       uncertainty). Without a budget u_T = u and the two variances agree: only the budget knows
-      more of the target's own error than its repeatability.
+      more of the target's own error than its repeatability. With a correction to reference
+      conditions δ (``models.condition.reference``): ŷ + δ ± t sqrt(var + u²(δ)) ([GUM] 6.3).
 
     Both are ± t(1 - alpha/2, nu) sqrt(var), nu the dof of s² (Welch-Satterthwaite's count for a
     pooled variance, [GUM] G.4).
@@ -524,10 +529,11 @@ def forecast_interval(t_month, y_um, u_um, at_month, *, alpha: float = 0.05,
     q = float(stats.t.ppf(1 - alpha / 2, nu))
     fit = level + slope * at
     meas = np.sqrt(se2 + s2 + e2)
-    lost = np.sqrt(se2 + (s2 - u2) + ut2 + e2)
+    lost = np.sqrt(se2 + (s2 - u2) + ut2 + e2 + correction_u_um ** 2)
+    centre = fit + correction_um
     return {"fit_um": fit, "measurement_low_um": fit - q * meas,
-            "measurement_high_um": fit + q * meas, "lost_motion_low_um": fit - q * lost,
-            "lost_motion_high_um": fit + q * lost, "measurement_var_um2": se2 + s2 + e2,
+            "measurement_high_um": fit + q * meas, "lost_motion_low_um": centre - q * lost,
+            "lost_motion_high_um": centre + q * lost, "measurement_var_um2": se2 + s2 + e2,
             "scatter_um": float(np.sqrt(s2)), "dof": float(nu)}
 
 
@@ -553,6 +559,9 @@ class DriftSeries:
     coverage_factor: float | None = None  # k of backlash_U_um; None without a budget
     # the fleet's pooled scatter and backtests' model error (``forecast_terms``); None alone
     terms: ForecastTerms | None = None
+    # the lost motion at reference conditions (``models.condition.reference.AxisReference``);
+    # None: the lost-motion interval is at the tests' own conditions
+    reference: object | None = None
 
     @property
     def unit(self) -> str:
@@ -597,12 +606,38 @@ class DriftSeries:
                 "residual, so the scatter between visits cannot be estimated and no forecast "
                 "interval can be stated")
 
+    def lost_motion_reference(self) -> dict | None:
+        """The conditions the lost-motion interval states the lost motion at, for a line through
+        the visits since the last change point (``models.condition.reference``):
+        ``AxisReference.correction`` with ``conditions`` {"temp_c", "feed_mm_min"} (the
+        reference value of a corrected condition, else the tests' mean) and ``note`` (None when
+        both are at reference). None without a reference or a forecast."""
+        if self.reference is None or self.forecast_note is not None:
+            return None
+        c = self.reference.correction(self.visits["visit"].iloc[self.segment_start:]
+                                      .astype(str))
+        own = c["tests_mean"]
+        at = {"temp_c": 20.0 if "machine_temp_c" in c["corrected"] else own["machine_temp_c"],
+              "feed_mm_min": (self.reference.reference["feed_mm_min"]
+                              if "feed_mm_min" in c["corrected"] else own["feed_mm_min"])}
+        missing = [n for n, k in (("temperature", "machine_temp_c"), ("feed", "feed_mm_min"))
+                   if k not in c["corrected"]]
+        note = None if not missing else (
+            f"the lost motion is stated at the tests' own {' and '.join(missing)}: "
+            + ("a visit since the last change has no laser test conditions"
+               if c.get("reason") == "visits" else
+               "the data cannot estimate its sensitivity (one feed, too small a temperature "
+               "span, or feed and temperature collinear), so it is not corrected"))
+        return {**c, "conditions": at, "note": note}
+
     def forecast_at(self, at_month) -> dict | None:
         """``forecast_interval`` of the visits since the last change point at ``at_month``
         [month], with the fleet's ``terms``; with a budget the target's own uncertainty is
-        ``backlash_U_um`` / k. None where ``forecast_note`` says why."""
+        ``backlash_U_um`` / k; with a ``reference`` the lost motion at reference conditions
+        (``lost_motion_reference``). None where ``forecast_note`` says why."""
         if self.forecast_note is not None:
             return None
+        ref = self.lost_motion_reference() or {"correction_um": 0.0, "correction_u_um": 0.0}
         seg = self.visits.iloc[self.segment_start:]
         terms = self.terms or ForecastTerms()
         target = (seg["backlash_U_um"].to_numpy(float) / self.coverage_factor
@@ -611,7 +646,9 @@ class DriftSeries:
                                  seg[uncertainty_column(seg)].to_numpy(float), at_month,
                                  alpha=self.alpha, scatter_um=terms.scatter_um,
                                  scatter_dof=terms.scatter_dof,
-                                 model_error_um=terms.model_error_um, target_u_um=target)
+                                 model_error_um=terms.model_error_um, target_u_um=target,
+                                 correction_um=ref["correction_um"],
+                                 correction_u_um=ref["correction_u_um"])
 
     def forecast_json(self) -> dict:
         """The forecast of the next visit as the JSON of ``drift`` and ``fleet`` carry it."""
@@ -620,6 +657,8 @@ class DriftSeries:
 
         def r(key):
             return None if f is None else round(float(f[key]), 4)
+
+        ref = None if f is None else self.lost_motion_reference()
 
         return {"forecast_date": None if f is None else self.date_at(self.next_visit_month),
                 "forecast_um": r("fit_um"),
@@ -630,7 +669,13 @@ class DriftSeries:
                 "forecast_model_error_um": (round(terms.model_error_um, 4)
                                             if np.isfinite(terms.model_error_um) else None),
                 "forecast_backtests": terms.backtests,
-                "forecast_note": self.forecast_note}
+                "forecast_note": self.forecast_note,
+                "forecast_lost_motion_reference": None if ref is None else {
+                    **{k: (None if v is None else round(float(v), 4))
+                       for k, v in ref["conditions"].items()},
+                    "correction_um": round(ref["correction_um"], 4),
+                    "correction_u_um": round(ref["correction_u_um"], 4)},
+                "forecast_lost_motion_note": None if ref is None else ref["note"]}
 
     def forecast_curve(self, end_month: float,
                        steps: int = DEFAULTS.forecast_steps) -> dict | None:
@@ -885,12 +930,15 @@ def _alert(kind: str, message: str) -> dict:
 
 def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
                    threshold_um: float | None = None, threshold_arcsec: float | None = None,
-                   limits: dict | None = None, **options) -> list[DriftSeries]:
+                   limits: dict | None = None, reference: dict | None = None,
+                   **options) -> list[DriftSeries]:
     """``analyse_series`` of every machine axis in ``visits`` (``visit_backlash`` rows) with
     ``min_visits`` or more, in (machine_id, axis) order, each with its fleet's pooled scatter
     (``fleet_scatter_um``), its limit in its own unit (``limit_of``) and the terms of its
     forecast intervals from the series of its unit (``forecast_terms``: the pooled scatter of
-    their segments and the model error of their backtests)."""
+    their segments and the model error of their backtests). ``reference``: {(machine_id,
+    axis): AxisReference} (``models.condition.reference.reference_corrections``): the
+    lost-motion intervals state the lost motion at reference conditions."""
     from features.readings.schema import deviation_unit
 
     fleet = fleet_scatter_um(visits)
@@ -906,6 +954,8 @@ def analyse_visits(visits: pd.DataFrame, *, min_visits: int = 2,
         terms = forecast_terms(mine)
         for s in mine:
             s.terms = terms
+    for s in series:
+        s.reference = (reference or {}).get((s.machine_id, s.axis))
     return series
 
 

@@ -3,7 +3,7 @@
 An axis's series is its backlash at each visit (``features.visits.visit_backlash``: the lost
 motion by the axis's measuring system with its standard uncertainty, docs/backlash.md; with a
 store's trace days, those shifted onto the laser's definition, ``pipeline.steps.evidence``).
-``models.drift`` analyses it on a time axis in months τ of 30.4375 d since the series' first
+``models.condition.drift`` analyses it on a time axis in months τ of 30.4375 d since the series' first
 point: change points by exact optimal partitioning, the Theil-Sen trend since the last one,
 the crossing of the axis's limit with its interval, the alerts, each series' scatter shrunk
 toward its fleet's. This module computes, once per axis, everything both views show of it,
@@ -16,7 +16,7 @@ with t_0 the series' first point, so that dates of different axes compare as dat
 - the **trend line** since the last change point, ŷ(τ) = a + b τ (Theil-Sen intercept a and
   slope b [unit/month]), from the segment's first visit to the horizon;
 - the **forecast band** from the last visit to the horizon, ``forecast_steps`` points, with
-  the two 1 - α intervals of ``models.drift.forecast_interval`` (OLS line ŷ of the segment,
+  the two 1 - α intervals of ``models.condition.drift.forecast_interval`` (OLS line ŷ of the segment,
   se² its variance at τ, s² the scatter between visits pooled with the fleet's, ū² the
   visits' mean repeatability, u_T² the measured target's own uncertainty, e² the backtests'
   model error, t_ν Student's quantile):
@@ -24,10 +24,15 @@ with t_0 the series' first point, so that dates of different axes compare as dat
   .. math::
 
      \\text{measurement: } \\hat y \\pm t_\\nu \\sqrt{se^2 + s^2 + e^2}, \\qquad
-     \\text{lost motion: } \\hat y \\pm t_\\nu \\sqrt{se^2 + (s^2 - \\bar u^2) + u_T^2 + e^2}
+     \\text{lost motion: } \\hat y + \\delta \\pm
+     t_\\nu \\sqrt{se^2 + (s^2 - \\bar u^2) + u_T^2 + e^2 + u^2(\\delta)}
+
+  with δ, u(δ) the correction of the lost motion to reference conditions, 20 °C and the
+  axis's median test feed (``models.condition.reference``; zero where the data cannot decide
+  it, and the forecast's ``forecast_lost_motion_note`` says which condition stays the tests');
 
 - the **crossing** of the limit, (date, early, late): where the Theil-Sen line, the upper and
-  the lower OLS prediction bounds of a future visit reach it (``models.drift.crossing_forecast``);
+  the lower OLS prediction bounds of a future visit reach it (``models.condition.drift.crossing_forecast``);
 - the **next visit**: the forecast on the day the next visit is expected, the last plus the
   median time between the series' visits, with both intervals (``DriftSeries.forecast_json``:
   the keys ``drift --json`` and ``fleet --json`` carry).
@@ -41,7 +46,7 @@ asks the analysis for a further horizon; it never extends a curve itself.
 
 References: Sen (1968), Theil (1950); Jackson et al. (2005), IEEE SPL 12(2); Montgomery,
 Peck & Vining (2012), Introduction to Linear Regression Analysis, 5th ed., 2.4; Hyndman &
-Athanasopoulos (2021), Forecasting: Principles and Practice, 3rd ed., 5.5 (as ``models.drift``).
+Athanasopoulos (2021), Forecasting: Principles and Practice, 3rd ed., 5.5 (as ``models.condition.drift``).
 """
 
 from __future__ import annotations
@@ -52,8 +57,8 @@ import numpy as np
 import pandas as pd
 
 from features.visits import DAYS_PER_MONTH
+from models.condition.drift import DriftSeries, analyse_visits, limit_passed_alert
 from models.condition.settings import DEFAULTS, MaintenanceSettings
-from models.drift import DriftSeries, analyse_visits, limit_passed_alert
 
 
 @dataclass
@@ -63,7 +68,7 @@ class AxisForecast:
 
     Attributes
     ----------
-    series : models.drift.DriftSeries
+    series : models.condition.drift.DriftSeries
         The analysed series: the visits (``date``, ``backlash_um``, ``backlash_u_um``,
         ``sigma_um`` [unit], ``t_month``), change points, Theil-Sen trend [unit/month] since
         the last one, crossing [month], alerts; every value in ``unit``.
@@ -169,7 +174,7 @@ def horizon_month(series: DriftSeries, interval_days: float | None = None,
 
 # --------------------------------------------------------------------------- one axis
 def axis_forecast(series: DriftSeries, settings: MaintenanceSettings = DEFAULTS) -> AxisForecast:
-    """The forecast object of an analysed series (``models.drift.analyse_series``): its trend
+    """The forecast object of an analysed series (``models.condition.drift.analyse_series``): its trend
     line, band, crossing and next visit on the UTC time axis, up to its horizon."""
     end = horizon_month(series, settings.interval_days, settings.forecast_cap_months)
     curve = series.forecast_curve(end, settings.forecast_steps)
@@ -190,7 +195,8 @@ def axis_forecast(series: DriftSeries, settings: MaintenanceSettings = DEFAULTS)
 
 def analyse_axes(visits: pd.DataFrame, settings: MaintenanceSettings = DEFAULTS, *,
                  as_of=None, min_visits: int = 1,
-                 coverage_factor: float | None = None) -> list[AxisForecast]:
+                 coverage_factor: float | None = None,
+                 reference: dict | None = None) -> list[AxisForecast]:
     """The maintenance analysis of every machine axis in ``visits`` (``visit_backlash`` rows,
     with ``min_visits`` or more), in (machine_id, axis) order.
 
@@ -201,24 +207,29 @@ def analyse_axes(visits: pd.DataFrame, settings: MaintenanceSettings = DEFAULTS,
         ``backlash_um`` and ``backlash_u_um`` [unit] (``features.visits.visit_backlash``).
         The axes are analysed together: each series' scatter is shrunk toward the pooled
         scatter of its unit's series, its forecast intervals take their scatter and model
-        error (``models.drift.analyse_visits``).
+        error (``models.condition.drift.analyse_visits``).
     settings : MaintenanceSettings
         Limits, significance level, change-point rule and horizons.
     as_of : datetime.date, optional
         The day the analysis is computed as of: an axis whose crossing date lies before it
-        alerts ``limit_passed_unmeasured`` (``models.drift.limit_passed_alert``).
+        alerts ``limit_passed_unmeasured`` (``models.condition.drift.limit_passed_alert``).
+    reference : dict, optional
+        {(machine_id, axis): AxisReference} (``models.condition.reference
+        .reference_corrections``): each lost-motion interval states the axis's lost motion at
+        reference conditions (20 °C, the axis's median test feed); without, at the tests' own.
     min_visits : int, default 1
         The fewest visits of a series analysed.
     coverage_factor : float, optional
         k of the visits' ``backlash_U_um`` (an uncertainty budget): steps within U(Δ) do not
-        alert (``models.drift``).
+        alert (``models.condition.drift``).
 
     Returns
     -------
     list of AxisForecast
     """
     series = analyse_visits(visits, min_visits=min_visits, coverage_factor=coverage_factor,
-                            **settings.limits_of(), **settings.trend_options())
+                            reference=reference, **settings.limits_of(),
+                            **settings.trend_options())
     if as_of is not None:
         for s in series:
             s.alerts += [a for a in [limit_passed_alert(s, as_of)] if a is not None]

@@ -57,7 +57,7 @@ class DriftResult(Result):
 
     Attributes
     ----------
-    series : list of models.drift.DriftSeries
+    series : list of models.condition.drift.DriftSeries
         One per machine axis: the visits (the axis's backlash ``backlash_um`` [um] by its
         measuring system, ``backlash_u_um`` and sigma [um], ``target_kind``; see
         ``features.visits.visit_backlash``), change points, Theil-Sen trend [um/month] since the
@@ -71,7 +71,7 @@ class DriftResult(Result):
         The workflow's parameters as given (logged with the run).
     offsets : dict
         With ``evidence`` beyond the laser: per (machine_id, axis) the offset of each other
-        source to the laser's backlash (``models.evidence.offset``), None where it has no
+        source to the laser's backlash (``models.condition.evidence.offset``), None where it has no
         laser visit near.
     forecasts : list of models.condition.maintenance.AxisForecast
         The analysis of each series (its ``series``): trend line, forecast band, crossing and
@@ -194,13 +194,13 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         An ISO/TR 230-9 budget (``experiments/data/paper_uncertainty.toml``): every visit gets
         ``backlash_U_um``, the expanded uncertainty of its backlash
         (``features.visits.axis_backlash``), and a step within the expanded uncertainty of the
-        difference of two visits is a note, not an alert (``models.drift``). Linear axes only.
+        difference of two visits is a note, not an alert (``models.condition.drift``). Linear axes only.
     evidence : str or list of str, default 'laser'
         The sources of each axis's series: ``laser`` (the visits alone), ``trace`` (the lost
         motion of controller-trace days, ``monitor --store``), ``ballbar`` (the backlash of
         circular tests, ``circle --store``), a comma-separated list or ``all``. The laser
         visits are always in; another source's points are shifted by its offset to the laser
-        (estimated from the days both measured, ``models.evidence``) and left out, with a
+        (estimated from the days both measured, ``models.condition.evidence``) and left out, with a
         note, where it has none. The series' ``source`` column says where each point came
         from; a point of another source is named ``trace <day>`` or ``ballbar <plane>
         <visit>``.
@@ -221,10 +221,13 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
         without a fleet store. The runner (``pipeline.runner.run``, ``bl.drift``) refuses a
         parameter out of range first, naming it.
     """
+    from features import iso230
+    from features.targets import targets_of
     from features.visits import SERIES_KEYS, visit_backlash
-    from models import drift as drift_model
-    from models import monitoring
+    from models.condition import drift as drift_model
+    from models.condition import monitoring
     from models.condition.maintenance import analyse_axes
+    from models.condition.reference import reference_corrections
     from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
     from pipeline.steps.evidence import sources_of
     from pipeline.steps.limits import limit_notes, read_limits
@@ -239,7 +242,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
                                    min_jump_sigma=min_jump_sigma, warn_months=warn_months)
     predictor = model
     if isinstance(model, (str, os.PathLike)):
-        from models.registry import load_model
+        from models.serving.registry import load_model
 
         predictor = load_model(model)
     # today as any other day: a test dated ahead (a mistyped year) is no visit yet, and
@@ -250,7 +253,11 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
                          limits)
     # every axis computed as without a selection (the scatter is pooled over the fleet);
     # the selected axes reported
-    visits = visit_backlash(whole, budget=budget)
+    stats = iso230.per_target(whole)
+    points = targets_of(stats, "auto", whole.attrs.get("source", "readings"), budget,
+                        parts=True)
+    visits = visit_backlash(whole, stats, budget=budget, points=points)
+    reference = reference_corrections(whole, points)
     k = None if budget is None else budget.coverage_factor
     offsets = {}
     if records is not None:
@@ -266,7 +273,7 @@ def drift(data, *, format: str = "auto", threshold_um: float | None = None,
     for text in notes:
         note(text)
     forecasts = [f for f in analyse_axes(visits, settings, as_of=day, min_visits=2,
-                                         coverage_factor=k)
+                                         coverage_factor=k, reference=reference)
                  if source.keeps(f.machine_id, f.axis)]
     series = [f.series for f in forecasts]
     for text in drift_model.two_visit_notes(series):

@@ -111,7 +111,7 @@ class AxisView:
         [um], ``label``, ``plane``), up to the view's day; None for a file.
     offsets : dict
         Per source with points: its offset to the laser's backlash
-        (``models.evidence.offset``: ``value``, ``u`` [um], ``days_in_common``), or None
+        (``models.condition.evidence.offset``: ``value``, ``u`` [um], ``days_in_common``), or None
         without a laser visit near any of its points.
     evidence_notes : list of str
         Why a source has no offset.
@@ -149,7 +149,7 @@ class AxisView:
 
     @property
     def series(self):
-        """The laser visits' series (``models.drift.DriftSeries``)."""
+        """The laser visits' series (``models.condition.drift.DriftSeries``)."""
         return self.laser.series
 
     @property
@@ -405,8 +405,9 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     """
     from features import iso230
     from features.visits import visit_backlash
+    from models.condition.drift import two_visit_notes
     from models.condition.maintenance import analyse_axes
-    from models.drift import two_visit_notes
+    from models.condition.reference import reference_corrections
     from pipeline.steps.dated_view import as_of_date, dated_view, kept_view
     from pipeline.steps.evidence import axes_evidence
     from pipeline.steps.limits import limit_notes, read_limits
@@ -430,14 +431,15 @@ def fleet(data, *, format: str = "auto", threshold_um: float | None = None,
     # once, for the series and the pages alike; on every axis, as the fleet's wear rate is
     parts = fleet_parts(whole, iso230.per_target(whole))
     visits = visit_backlash(whole, parts.stats, points=parts.points, figures=parts.figures)
-    every = analyse_axes(visits, settings, as_of=day)
+    reference = reference_corrections(whole, parts.points)
+    every = analyse_axes(visits, settings, as_of=day, reference=reference)
     laser = [f for f in every if source.keeps(f.machine_id, f.axis)]
     notes += [f"{f.machine_id} axis {f.axis}: a single visit, no trend" for f in laser
               if len(f.series.visits) < 2]
     notes += two_visit_notes([f.series for f in laser])
     evidence = axes_evidence(visits, records, day) if records else {}
     traced, more = trace_forecasts(visits, records, evidence, day, settings,
-                                   keeps=source.keeps)
+                                   keeps=source.keeps, reference=reference)
     notes += more
     probing, more = probing_views(  # a rotary axis's probing plays, beside or without a laser
         records, day, keeps=source.keeps, laser={(f.machine_id, f.axis) for f in laser},
@@ -496,7 +498,8 @@ def live_alerts(views: list, watched: list, day: dt.date, stale_after_days: floa
 
 
 def trace_forecasts(visits, records: dict, evidence: dict, as_of: dt.date,
-                    settings: MaintenanceSettings, keeps=None) -> tuple[dict, list]:
+                    settings: MaintenanceSettings, keeps=None,
+                    reference: dict | None = None) -> tuple[dict, list]:
     """The maintenance analysis (``models.condition.maintenance.analyse_axes``) of each machine
     axis whose store holds trace days sharing ``MIN_SHARED_DAYS`` days or more with its laser
     visits: the laser visits with the trace days shifted onto the laser's definition and
@@ -505,7 +508,7 @@ def trace_forecasts(visits, records: dict, evidence: dict, as_of: dt.date,
     Returns {(machine_id, axis): AxisForecast} and the notes of the axes whose trace days are
     too few to be used (of those ``keeps(machine_id, axis)`` keeps, default all: the analysis
     pools the scatter over every axis given, so a selection's axes are given with the
-    others)."""
+    others; ``reference``: the axes' ``AxisReference``, ``analyse_axes``)."""
     if not records.get("trace"):
         return {}, []
     from models.condition.maintenance import analyse_axes
@@ -518,7 +521,7 @@ def trace_forecasts(visits, records: dict, evidence: dict, as_of: dt.date,
     used = {key for key, n in shared.items() if n >= MIN_SHARED_DAYS}
     notes = [few_days_note(key, "trace", n) for key, n in shared.items()
              if n < MIN_SHARED_DAYS and (keeps is None or keeps(*key))]
-    analysed = analyse_axes(joined, settings, as_of=as_of) if used else []
+    analysed = analyse_axes(joined, settings, as_of=as_of, reference=reference) if used else []
     return {(f.machine_id, f.axis): f for f in analysed if (f.machine_id, f.axis) in used}, notes
 
 
