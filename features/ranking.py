@@ -118,7 +118,7 @@ class Ranking:
     n_points: int
     notes: list[str] = field(default_factory=list)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """Machine-readable summary; ``features`` ordered by rank."""
         t = self.table
         features = [{

@@ -128,7 +128,7 @@ class ExperimentResult(Result):
         """0, or 3 when a step raised an alert."""
         return max((s.code for s in self.steps), default=0)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"name": self.experiment.name, "out": str(self.experiment.out),
                 "run_id": self.run_id, "code": self.code,
                 "steps": [{"index": s.step.index, "title": s.step.title, "job": s.step.job,

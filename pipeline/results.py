@@ -2,7 +2,7 @@
 
 A result holds frames, figures and notes; it knows which files it writes (``write``), what it
 logs to MLflow (``tracking_record``, logged by the one adapter ``pipeline.tracking.runs.log_result``)
-and its machine-readable form (``to_json``). It never prints: the CLI decides what to show.
+and its machine-readable form (``to_dict``; ``to_json`` its text). It never prints: the CLI decides what to show.
 """
 
 from __future__ import annotations
@@ -128,9 +128,15 @@ class Result:
         """Write the result's files under ``out`` (atomically) and return them by role."""
         return self.files
 
-    def to_json(self) -> dict | list:
-        """The machine-readable form the CLI prints with ``--json``."""
+    def to_dict(self) -> dict | list:
+        """The machine-readable form as Python objects (what ``to_json`` writes)."""
         raise NotImplementedError(f"{type(self).__name__} has no JSON form")
+
+    def to_json(self) -> str:
+        """The JSON text the CLI prints with ``--json`` (NaN as null)."""
+        from features.readings.fileio import clean_nan, dumps
+
+        return dumps(clean_nan(self.to_dict()))
 
     def tracking_record(self) -> TrackingRecord | None:
         """What to log to MLflow, or None for a result that is not tracked."""

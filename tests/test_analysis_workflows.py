@@ -84,7 +84,7 @@ def test_drift_from_python_on_the_twin(tmp_path):
     assert (series.machine_id, series.axis) == ("M01", "X")
     assert len(series.visits) == 6 and series.trend["slope"] > 0
     assert [a["machine_id"] for a in result.alerts] == ["M01"] * len(series.alerts)
-    assert result.to_json()["series"][0]["threshold_um"] == 4.0
+    assert result.to_dict()["series"][0]["threshold_um"] == 4.0
     files = result.write(tmp_path / "drift")
     assert {p.name for p in files.values()} == {"drift.png", "drift.html", "drift.json"}
     assert result.tracking_record().metrics["n_alerts"] == len(result.alerts)
@@ -92,8 +92,8 @@ def test_drift_from_python_on_the_twin(tmp_path):
 
 def test_drift_of_a_read_frame_matches_the_file():
     frame = bl.read(TWIN / "readings.csv")
-    a = bl.drift(frame).to_json()
-    b = bl.drift(TWIN / "readings.csv").to_json()
+    a = bl.drift(frame).to_dict()
+    b = bl.drift(TWIN / "readings.csv").to_dict()
     assert a == b
 
 

@@ -219,7 +219,7 @@ def test_drift_of_a_mixed_file_names_its_quantity(mixed, tmp_path):
 
     readings, truth = mixed
     result = drift_workflow(readings)
-    series = {s.machine_id: s.to_json() for s in result.series}
+    series = {s.machine_id: s.to_dict() for s in result.series}
     assert series["D1"]["target_kind"] == ["paper"] * 6
     assert series["I1"]["target_kind"] == ["iso"] * 6
     for key in ("backlash_um", "backlash_u_um", "n_points", "reversal_mean_um",
@@ -271,7 +271,7 @@ def test_twin_direct_series_is_the_true_lost_motion_and_not_half_of_it(direct_tw
 
 def test_twin_drift_follows_the_lost_motion(direct_twin):
     (series,) = drift.analyse_visits(visit_backlash(direct_twin.readings))
-    j = series.to_json()
+    j = series.to_dict()
     assert j["change_points"] == ["06"]                 # the adjustment
     truth = twin_truth(direct_twin).loc["06":]
     dates = direct_twin.visits.set_index("visit").loc[truth.index, "started_at"]

@@ -322,7 +322,7 @@ def test_python_api_writes_what_the_cli_writes(ess_file, tmp_path, capsys):
     assert main(["compensate", str(ess_file), "--controller", "linuxcnc,siemens", "--out",
                  str(tmp_path / "cli"), "--json"]) == 0
     cli = json.loads(capsys.readouterr().out)
-    api = json.loads(json.dumps(result.to_json()))
+    api = json.loads(json.dumps(result.to_dict()))
     assert api["axes"] == cli["axes"] and api["verify"] == cli["verify"] == []
     for a, c in zip(api["files"], cli["files"]):
         assert {k: Path(v).name for k, v in a.pop("files").items()} == {

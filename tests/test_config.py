@@ -164,7 +164,7 @@ def test_simulate_workflow_returns_frames_and_writes_them(tmp_path):
     files = result.write(tmp_path / "twin")
     assert sorted(p.name for p in files.values()) == ["parameters.json", "readings.csv",
                                                       "truth.csv", "truth_visits.csv"]
-    assert result.to_json()["readings"] == len(result.readings)
+    assert result.to_dict()["readings"] == len(result.readings)
     assert record.inputs == ("config",)
 
 

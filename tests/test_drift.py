@@ -398,7 +398,7 @@ def test_input_outside_training_range_and_ks_drift(tmp_path):
     drift.attach_model(series, mon)
     kinds = [a["kind"] for a in series[0].alerts]
     assert "input_out_of_range" in kinds and "input_drift" in kinds
-    assert series[0].to_json()["model"]["out_of_range"] == ["target"]
+    assert series[0].to_dict()["model"]["out_of_range"] == ["target"]
 
 
 def test_jump_at_the_last_visit_alerts_before_it_is_confirmed(tmp_path, capsys):

@@ -31,13 +31,13 @@ def test_detected_changes_are_the_true_adjustment_and_failure(fleet):
     assert len(series) == 3
     for s in series:
         visits = true_series(sim, s.machine_id)
-        assert s.to_json()["change_points"] == visits.index[visits["event"] != ""].tolist()
+        assert s.to_dict()["change_points"] == visits.index[visits["event"] != ""].tolist()
 
 
 def test_slope_interval_and_crossing_interval_cover_the_truth(fleet):
     sim, series = fleet
     for s in series:
-        j = s.to_json()
+        j = s.to_dict()
         truth = true_series(sim, s.machine_id)
         last = truth.loc[j["change_points"][-1]:]
         months = (last["started_at"] - last["started_at"].iloc[0]).dt.days / DAYS_PER_MONTH

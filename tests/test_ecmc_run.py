@@ -101,7 +101,7 @@ def test_iso_and_report_take_the_readers_options(run, tmp_path, capsys):
     assert cli["B"] == pytest.approx(34.0, abs=0.8)
     with pytest.warns(BacklashWarning):
         python = bl.iso(str(log), reference_scale=GEAR, track=False)
-    assert python.to_json()[0]["B"] == pytest.approx(cli["B"], abs=1e-9)
+    assert python.to_dict()[0]["B"] == pytest.approx(cli["B"], abs=1e-9)
     out = tmp_path / "report"
     assert main(["report", str(log), "--reference-scale", "-1.0036,50.3", "--out",
                  str(out)]) == 0

@@ -90,7 +90,7 @@ def evidence(tmp_path_factory):
 def test_the_offsets_to_the_laser_are_the_known_ones_within_their_uncertainty(evidence):
     store, truth = evidence
     view = bl.fleet(store, as_of="2026-12-31")
-    axes = {v.axis: v.to_json() for v in view.axes}
+    axes = {v.axis: v.to_dict() for v in view.axes}
     x, y = axes["X"], axes["Y"]
     trace = x["offsets_um"]["trace"]
     assert trace["days_in_common"] == 6
@@ -104,7 +104,7 @@ def test_the_offsets_to_the_laser_are_the_known_ones_within_their_uncertainty(ev
     assert {p["plane"] for p in x["evidence"]["ballbar"]} == {"XY"}
     # the laser's own keys are those of a fleet without evidence; X's analysis (trend, change
     # points, forecast) uses its trace days too, Y's (no trace) the laser alone
-    plain = {v.axis: v.to_json() for v in bl.fleet(bl.read(store), as_of="2026-12-31").axes}
+    plain = {v.axis: v.to_dict() for v in bl.fleet(bl.read(store), as_of="2026-12-31").axes}
     for key in ("backlash_um", "history", "visits", "last_visit"):
         assert x[key] == plain["X"][key]
     assert y == {**plain["Y"], "offsets_um": y["offsets_um"], "evidence": y["evidence"],
@@ -120,10 +120,10 @@ def test_the_offsets_to_the_laser_are_the_known_ones_within_their_uncertainty(ev
 def test_drift_with_the_traces_dates_an_adjustment_the_laser_never_saw(evidence):
     store, truth = evidence
     laser = bl.drift(store, as_of="2026-12-31")
-    x = next(s for s in laser.to_json()["series"] if s["axis"] == "X")
+    x = next(s for s in laser.to_dict()["series"] if s["axis"] == "X")
     assert x["change_points"] == [] and set(x.get("source", ["laser"])) == {"laser"}
     combined = bl.drift(store, as_of="2026-12-31", evidence="laser,trace")
-    j = combined.to_json()
+    j = combined.to_dict()
     x = next(s for s in j["series"] if s["axis"] == "X")
     assert x["change_points"] == [f"trace {truth['adjusted']}"], x["change_points"]
     assert x["change_jumps_um"][0] == pytest.approx(-ADJUST_DROP_UM, abs=0.5)
@@ -139,7 +139,7 @@ def test_drift_with_the_traces_dates_an_adjustment_the_laser_never_saw(evidence)
 def test_drift_uses_all_three_sources(evidence, tmp_path):
     store, _ = evidence
     result = bl.drift(store, as_of="2026-12-31", evidence="all")
-    y = next(s for s in result.to_json()["series"] if s["axis"] == "Y")
+    y = next(s for s in result.to_dict()["series"] if s["axis"] == "Y")
     assert y["source"].count("ballbar") == 3 and y["offsets_um"]["trace"] is None
     files = result.write(tmp_path / "report")
     assert "ballbar" in files["html"].read_text()
@@ -229,7 +229,7 @@ def test_a_store_of_records_before_evidence_reads_none_and_gets_its_tables(tmp_p
     conn.execute("DROP TABLE ballbar_runs")
     conn.close()
     assert read_records(location, "trace") == {} and read_records(location, "ballbar") == {}
-    assert bl.fleet(location).axes[0].to_json()["evidence"] == {"trace": [], "ballbar": []}
+    assert bl.fleet(location).axes[0].to_dict()["evidence"] == {"trace": [], "ballbar": []}
     frame = _ballbar([pd.Timestamp("2026-03-02")], [(4.0, 7.0)])
     assert bl.circle(frame, store=location).recorded.added == 2
     assert sorted(read_records(location, "ballbar")) == [("M1", "X"), ("M1", "Y")]

@@ -182,7 +182,7 @@ PACKAGE = {
         class SpreadResult(Result):
             spread_um: dict
 
-            def to_json(self):
+            def to_dict(self):
                 return {"spread_um": self.spread_um}
 
 

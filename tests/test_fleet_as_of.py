@@ -33,7 +33,7 @@ def view_as_of(readings, day, **kwargs):
 
 def test_overdue_and_limit_passed_unmeasured(readings):
     view = view_as_of(readings, LATE)
-    data = view.to_json()
+    data = view.to_dict()
     assert data["as_of"] == "2026-12-31"
     passed = 0
     for a in data["axes"]:
@@ -59,7 +59,7 @@ def test_overdue_and_limit_passed_unmeasured(readings):
 def test_as_of_the_last_visits_nothing_is_overdue(readings):
     last = pd.to_datetime(readings["started_at"], utc=True).max().date()
     view = view_as_of(readings, last)
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         assert "limit_passed_unmeasured" not in a["alerts"]
         if "overdue" in a["alerts"]:  # only an axis due before the fleet's last day
             assert a["next_visit_due"] < last.isoformat()
@@ -71,7 +71,7 @@ def test_a_view_as_of_an_earlier_day_leaves_the_later_tests_out(readings):
     with pytest.warns(BacklashWarning, match=r"test\(s\) started after 2026-05-01 left out"):
         view = fleet(readings, threshold_um=LIMIT_UM, as_of=day)
     before = readings[pd.to_datetime(readings["started_at"], utc=True).dt.date <= day]
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         assert a["last_visit_date"] <= "2026-05-01"
         assert a["last_visit"] == str(before.loc[before["machine_id"] == a["machine_id"],
                                                  "visit"].astype(int).max())
@@ -81,8 +81,8 @@ def test_the_default_is_today(readings):
     today = dt.datetime.now(dt.UTC).date().isoformat()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
-        assert fleet(readings, threshold_um=LIMIT_UM).to_json()["as_of"] == today
-        assert drift(readings).to_json()["as_of"] == today
+        assert fleet(readings, threshold_um=LIMIT_UM).to_dict()["as_of"] == today
+        assert drift(readings).to_dict()["as_of"] == today
 
 
 def test_drift_alerts_the_limit_passed_since_the_last_visit(readings):

@@ -43,7 +43,7 @@ def quiet(function, readings, **kwargs):
 
 def test_each_axis_carries_its_unit_and_its_own_limit(mixed):
     view = quiet(fleet, mixed, threshold_um=6.0, threshold_arcsec=60.0)
-    axes = view.to_json()["axes"]
+    axes = view.to_dict()["axes"]
     assert len(axes) == 10
     for a in axes:
         assert a["unit"] == UNITS[a["axis"]]
@@ -55,7 +55,7 @@ def test_each_axis_carries_its_unit_and_its_own_limit(mixed):
             assert (" um" in message) == (a["axis"] == "X"), message
     # the rotary axes are tens of arcsec: compared with 60 arcsec, one of them crosses soon
     assert any(a["alerts"] for a in axes if a["axis"] == "C")
-    series = quiet(drift, mixed, threshold_um=6.0, threshold_arcsec=60.0).to_json()["series"]
+    series = quiet(drift, mixed, threshold_um=6.0, threshold_arcsec=60.0).to_dict()["series"]
     assert {(s["axis"], s["unit"], s["threshold_um"]) for s in series} == {
         ("X", "um", 6.0), ("C", "arcsec", 60.0)}
 
@@ -64,7 +64,7 @@ def test_a_limit_in_um_is_never_compared_with_arcsec(mixed):
     """--threshold-um alone: the C axes (30-60 arcsec, far above 2 as numbers) get no limit
     and no threshold alert; the X axes above 2 um are above it."""
     view = quiet(fleet, mixed, threshold_um=2.0)
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         if a["axis"] == "C":
             assert a["backlash_um"] > 2.0 and a["threshold_um"] is None
             assert not {"above_threshold", "crossing_soon"} & set(a["alerts"])
@@ -77,16 +77,16 @@ def test_limits_per_machine_axis(mixed, tmp_path):
     path.write_text("[M1]\nX_um = 3.5\nC_arcsec = 45.0\n\n[M3]\nC_arcsec = 20\n")
     assert read_limits(path) == {("M1", "X"): 3.5, ("M1", "C"): 45.0, ("M3", "C"): 20.0}
     view = quiet(fleet, mixed, threshold_um=6.0, limits=path)
-    limits = {(a["machine_id"], a["axis"]): a["threshold_um"] for a in view.to_json()["axes"]}
+    limits = {(a["machine_id"], a["axis"]): a["threshold_um"] for a in view.to_dict()["axes"]}
     assert limits[("M1", "X")] == 3.5 and limits[("M1", "C")] == 45.0
     assert limits[("M3", "C")] == 20.0 and limits[("M2", "X")] == 6.0
     assert limits[("M2", "C")] is None  # no --threshold-arcsec, no entry
-    assert view.to_json()["limits"] == str(path)
+    assert view.to_dict()["limits"] == str(path)
     # the same limits as a dict, from Python
     again = quiet(fleet, mixed, threshold_um=6.0, limits={"M1": {"X_um": 3.5, "C_arcsec": 45.0},
                                                          "M3": {"C_arcsec": 20}})
-    assert [a["threshold_um"] for a in again.to_json()["axes"]] == [
-        a["threshold_um"] for a in view.to_json()["axes"]]
+    assert [a["threshold_um"] for a in again.to_dict()["axes"]] == [
+        a["threshold_um"] for a in view.to_dict()["axes"]]
 
 
 def test_the_pages_write_each_axis_in_its_unit(mixed, tmp_path):

@@ -63,7 +63,7 @@ def test_the_browser_shows_every_axis_worst_first_with_its_sparkline(site, tmp_p
     pages = re.findall(r'<a href="([^"]+\.html)">', dom)
     assert pages == [a.page for a in result.axes]       # one row per axis, worst first
     assert dom.count('class="spark"') + dom.count("class='spark'") == len(result.axes)
-    first = result.axes[0].to_json()
+    first = result.axes[0].to_dict()
     assert "above_threshold" in first["alerts"] and first["next_visit_due"] in dom
 
 

@@ -55,7 +55,7 @@ def true_level(truth: pd.DataFrame) -> pd.Series:
 
 def test_the_adjusted_axes_show_the_drop_at_the_last_visit(cut):
     _, truth, view = cut
-    axes = {(a["machine_id"], a["axis"]): a for a in view.to_json()["axes"]}
+    axes = {(a["machine_id"], a["axis"]): a for a in view.to_dict()["axes"]}
     assert len(axes) == 10
     true = true_level(truth)
     for (machine, axis), a in axes.items():
@@ -98,7 +98,7 @@ def test_one_visit_since_is_planned_with_the_fleets_wear_rate(cut):
     hours = truth.groupby(["machine_id", "axis", "visit"])["operating_hours"].first()
     reasons = []
     for v in view.axes:
-        a = v.to_json()
+        a = v.to_dict()
         if v.machine_id not in ADJUSTED:
             assert a["fleet_wear_rate_per_month"] is None
             continue
@@ -128,7 +128,7 @@ def test_the_issue_series_in_drift():
     b = [1.40, 2.49, 3.43, 4.74, 1.41]
     readings = bl.validate(visit_readings(b, months=np.arange(5) * 3.0, noise_um=0.05))
     (s,) = drift.analyse_visits(visit_backlash(readings), threshold_um=5.0)
-    j = clean_nan(s.to_json())
+    j = clean_nan(s.to_dict())
     assert j["change_points"] == ["v05"]
     assert [a["kind"] for a in s.alerts] == ["last_visit_drop"]
     fell = float(re.search(r"lost motion fell by ([\d.]+) um at visit v05",
@@ -160,7 +160,7 @@ def test_the_twin_fleet_preset_seen_at_its_adjustment():
     sim = bl.simulate(preset="fleet", seed=0, config={"fleet": {
         "machines": 2, "axes": ["X", "Y"], "visits": 5, "adjust_at": [5]}})
     view = fleet(sim.readings, threshold_um=4.0, as_of=last_day(sim.readings))
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         assert a["change_points"] == ["05"] and "last_visit_drop" in a["alerts"], a["axis"]
         assert "crossing_soon" not in a["alerts"]
         assert a["next_visit_due"] > a["last_visit_date"]

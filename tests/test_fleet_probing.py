@@ -56,7 +56,7 @@ def true_crossing(limit: float) -> pd.Timestamp:
 
 def test_the_fleet_trends_the_play_and_its_crossing(store):
     view = bl.fleet(store, threshold_arcsec=20.0, as_of=AS_OF, track=False)
-    found = by_axis(view.to_json())
+    found = by_axis(view.to_dict())
     a, c = found[(MACHINE, "A")], found[(MACHINE, "C")]
     assert (a["laser_visits"], c["laser_visits"]) == (False, True)
     assert [v.axis for v in view.axes] == ["C"]  # the laser series stays as it was
@@ -80,7 +80,7 @@ def test_the_fleet_trends_the_play_and_its_crossing(store):
 def test_limits_per_axis_move_the_crossing(store):
     view = bl.fleet(store, limits={MACHINE: {"A_arcsec": 30.0}}, as_of=AS_OF, track=False)
     assert not any("applies to nothing" in n for n in view.notes), view.notes  # A is probed
-    a = by_axis(view.to_json())[(MACHINE, "A")]
+    a = by_axis(view.to_dict())[(MACHINE, "A")]
     assert a["threshold_arcsec"] == 30.0
     assert abs((pd.Timestamp(a["crossing_date"]) - true_crossing(30.0)).days) <= 20
     assert a["alerts"] == []  # a crossing more than six months after the last visit
@@ -93,7 +93,7 @@ def test_cli_prints_what_python_gives_and_the_site_lists_it(store, tmp_path, cap
                  "--out", str(site), "--no-track"])
     assert code == 3  # the probing play's crossing_soon is an alert
     printed = json.loads(capsys.readouterr().out)
-    python = bl.fleet(store, threshold_arcsec=20.0, as_of=AS_OF, track=False).to_json()
+    python = bl.fleet(store, threshold_arcsec=20.0, as_of=AS_OF, track=False).to_dict()
     assert printed["probing"] == json.loads(json.dumps(python["probing"]))
     assert json.loads((site / "fleet.json").read_text())["probing"] == printed["probing"]
     index = (site / "index.html").read_text()

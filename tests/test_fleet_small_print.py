@@ -31,7 +31,7 @@ def test_a_trend_from_two_visits_has_no_interval(two, tmp_path):
                                              "estimated"):
         view = fleet(two, threshold_um=8.0, as_of=AS_OF, out=tmp_path / "site")
     for v in view.axes:
-        a = v.to_json()
+        a = v.to_dict()
         assert a["slope_um_per_month"] is not None and a["slope_interval"] == [None, None]
         page = (tmp_path / "site" / v.page).read_text(encoding="utf-8")
         assert "interval cannot be estimated from two visits" in page
@@ -39,7 +39,7 @@ def test_a_trend_from_two_visits_has_no_interval(two, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
         result = drift(two, as_of=AS_OF)
-    assert all(s["slope_interval"] == [None, None] for s in result.to_json()["series"])
+    assert all(s["slope_interval"] == [None, None] for s in result.to_dict()["series"])
     text = result.write(tmp_path / "drift")["html"].read_text(encoding="utf-8")
     assert "(interval cannot be estimated from two visits)" in text
 
@@ -48,7 +48,7 @@ def test_three_visits_give_an_interval(two):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
         view = fleet(bl.validate(independent(0, visits=3)[0]), as_of=AS_OF)
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         low, high = a["slope_interval"]
         assert low < high
 
@@ -59,7 +59,7 @@ def test_compensate_prints_the_reversal_compensation_beside_the_lost_motion(two)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
         view = fleet(two, as_of=AS_OF)
-        lost = {(a["machine_id"], a["axis"]): a["backlash_um"] for a in view.to_json()["axes"]}
+        lost = {(a["machine_id"], a["axis"]): a["backlash_um"] for a in view.to_dict()["axes"]}
         for machine in ("M1", "M3"):  # direct, indirect (rotary encoder)
             one = two[(two["machine_id"] == machine) & (two["axis"] == "X")]
             result = compensate(one, controller="csv")
@@ -70,7 +70,7 @@ def test_compensate_prints_the_reversal_compensation_beside_the_lost_motion(two)
             assert match, line
             scalar, motion = map(float, match.groups())
             assert motion == pytest.approx(lost[(machine, "X")], abs=1e-3)
-            assert result.to_json()["axes"][0]["lost_motion_um"] == pytest.approx(motion,
+            assert result.to_dict()["axes"][0]["lost_motion_um"] == pytest.approx(motion,
                                                                                 abs=1e-3)
             if machine == "M1":
                 assert scalar < 0.3 * motion

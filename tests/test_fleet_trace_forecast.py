@@ -72,7 +72,7 @@ def _axes(data, as_of, threshold):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         view = bl.fleet(data, as_of=as_of, threshold_um=threshold)
-    return {v.axis: v.to_json() for v in view.axes}, [str(w.message) for w in caught]
+    return {v.axis: v.to_dict() for v in view.axes}, [str(w.message) for w in caught]
 
 
 def _days(date: str, truth) -> int:
@@ -133,8 +133,8 @@ def test_drift_leaves_out_trace_days_sharing_too_few_days_with_the_laser(case):
     store, as_of, _, _ = case
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        both = bl.drift(store, as_of=as_of, evidence="laser,trace", track=False).to_json()
-        laser = bl.drift(store, as_of=as_of, track=False).to_json()
+        both = bl.drift(store, as_of=as_of, evidence="laser,trace", track=False).to_dict()
+        laser = bl.drift(store, as_of=as_of, track=False).to_dict()
     notes = [str(w.message) for w in caught]
     series = {s["axis"]: s for s in both["series"]}
     plain = {s["axis"]: s for s in laser["series"]}

@@ -81,7 +81,7 @@ RESOLUTION_UM = 0.1
 
 def test_backlash_now_is_the_true_lost_motion_of_the_last_visit(twin, mixed):
     truth = true_lost_motion(twin)
-    for a in mixed.to_json()["axes"]:
+    for a in mixed.to_dict()["axes"]:
         true = truth[(a["machine_id"], a["axis"], a["last_visit"])]
         error = a["backlash_um"] - true
         assert abs(error) < 3 * a["backlash_u_um"] + RESOLUTION_UM, (a["machine_id"],
@@ -94,7 +94,7 @@ def test_the_adjusted_axes_show_the_change_point(twin, mixed):
     adjusted = {(m, a): v for m, a, v in events[["machine_id", "axis", "visit"]].itertuples(
         index=False)}
     assert len(adjusted) == 4
-    for a in mixed.to_json()["axes"]:
+    for a in mixed.to_dict()["axes"]:
         visit = adjusted[(a["machine_id"], a["axis"])]
         assert a["change_points"] == [visit]
         assert a["change_jumps_um"][0] < 0          # an adjustment lowers the level
@@ -111,7 +111,7 @@ def test_the_independent_fleet_backlash_change_points_and_late_joiner():
 
     readings, truth, _ = independent(0)
     result = fleet(bl.validate(readings), threshold_um=6.0)
-    axes = {(a["machine_id"], a["axis"]): a for a in result.to_json()["axes"]}
+    axes = {(a["machine_id"], a["axis"]): a for a in result.to_dict()["axes"]}
     assert len(axes) == 10
     extent = truth.groupby(["machine_id", "axis"])["target"].transform
     inner = (truth["target"] > extent("min")) & (truth["target"] < extent("max"))
@@ -153,7 +153,7 @@ TYPES = {"machine_id": str, "axis": str, "unit": str, "visits": int, "first_visi
 def test_json_keys_and_types(mixed):
     from features.readings.fileio import dumps
 
-    data = json.loads(dumps(mixed.to_json()))  # what --json prints: strict JSON
+    data = json.loads(dumps(mixed.to_dict()))  # what --json prints: strict JSON
     assert set(data) == {"source", "as_of", "threshold_um", "threshold_arcsec", "limits",
                          "interval_days", "n_alerts", "axes", "probing"}
     assert data["probing"] == []  # a file: no probing records (tests/test_fleet_probing.py)
@@ -185,7 +185,7 @@ def _worst_key(a: dict) -> tuple:
 
 
 def test_axes_are_sorted_worst_first(mixed):
-    axes = mixed.to_json()["axes"]
+    axes = mixed.to_dict()["axes"]
     kinds = [set(a["alerts"]) for a in axes]
     assert any("above_threshold" in k for k in kinds)           # the case needs both kinds
     assert any(k and "above_threshold" not in k for k in kinds)
@@ -197,7 +197,7 @@ def test_axes_are_sorted_worst_first(mixed):
 def test_next_visit_due_rule(twin):
     for threshold in (MIXED_UM, CROSSING_UM, QUIET_UM, None):
         result = fleet(twin.readings, threshold_um=threshold, interval_days=45.0)
-        for a in result.to_json()["axes"]:
+        for a in result.to_dict()["axes"]:
             last = dt.date.fromisoformat(a["last_visit_date"])
             due = dt.date.fromisoformat(a["next_visit_due"])
             by_interval = last + dt.timedelta(days=45)
@@ -217,7 +217,7 @@ def test_next_visit_due_rule(twin):
 def test_no_alert_without_a_near_threshold(twin):
     quiet = fleet(twin.readings, threshold_um=QUIET_UM, as_of=last_day(twin))
     assert quiet.alerts == []
-    assert all(a["crossing_date"] is not None for a in quiet.to_json()["axes"])  # all growing
+    assert all(a["crossing_date"] is not None for a in quiet.to_dict()["axes"])  # all growing
     crossing = fleet(twin.readings, threshold_um=CROSSING_UM, as_of=last_day(twin))
     assert {a["kind"] for a in crossing.alerts} == {"crossing_soon"}
 
@@ -249,7 +249,7 @@ def test_the_site_files_exist_and_every_link_resolves(site, mixed):
         for link in _parse(page).links:
             assert (site / link).is_file(), (page.name, link)
     assert json.loads((site / "fleet.json").read_text()) == json.loads(
-        json.dumps(mixed.to_json()))
+        json.dumps(mixed.to_dict()))
 
 
 def test_the_index_lists_axes_worst_first_with_a_sparkline_each(site, mixed):
@@ -430,7 +430,7 @@ def test_the_last_forecast_and_compensation_of_each_axis(recorded):
     store, _, planned, latest, last = recorded
     view = fleet(store, threshold_um=QUIET_UM)
     profiles = {(p.machine_id, p.axis): p for p in latest.profiles}
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         key = (a["machine_id"], a["axis"])
         f, c = a["last_forecast"], a["last_compensation"]
         assert set(f) == FORECAST_KEYS and set(c) == COMPENSATION_KEYS
@@ -468,7 +468,7 @@ def test_a_forecast_with_its_own_day_is_shown_for_that_day(recorded, tmp_path):
     conn.execute("""DELETE FROM forecasts WHERE record LIKE '%"visit":"07"%'""")
     conn.close()
     p = measured.predictions
-    for a in fleet(copy, threshold_um=QUIET_UM).to_json()["axes"]:
+    for a in fleet(copy, threshold_um=QUIET_UM).to_dict()["axes"]:
         f = a["last_forecast"]
         assert (f["for_visit"], f["for_date"], f["for_date_estimated"]) == (
             a["last_visit"], a["last_visit_date"], False)
@@ -485,7 +485,7 @@ def test_the_printed_table_shows_the_last_forecast_and_compensation(recorded, ca
     print_summary(view, file=sys.stdout)
     lines = capsys.readouterr().out.splitlines()
     assert "last forecast" in lines[0] and "compensated" in lines[0] and "unit" in lines[0]
-    for line, a in zip(lines[1:], view.to_json()["axes"]):
+    for line, a in zip(lines[1:], view.to_dict()["axes"]):
         f = a["last_forecast"]
         assert (f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}, "
                 f"{f['backlash_high_um']:.2f}] ~{f['for_date']}") in line
@@ -497,7 +497,7 @@ def test_the_site_shows_the_records(recorded, tmp_path):
     view = fleet(store, threshold_um=QUIET_UM, out=tmp_path / "site")
     index = (tmp_path / "site" / "index.html").read_text()
     assert index.count("#9467bd") >= len(view.axes)  # the recorded forecast in each sparkline
-    for a in view.to_json()["axes"]:
+    for a in view.to_dict()["axes"]:
         f = a["last_forecast"]
         assert f"{f['backlash_um']:.2f} [{f['backlash_low_um']:.2f}" in index
         page = (tmp_path / "site" / a["page"]).read_text()

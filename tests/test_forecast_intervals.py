@@ -85,7 +85,7 @@ def test_two_visits_give_no_interval_and_say_why(tmp_path):
     with pytest.warns(BacklashWarning, match="nor a forecast interval"):
         view = fleet(two, as_of=AS_OF, out=tmp_path / "site")
     for v in view.axes:
-        a = v.to_json()
+        a = v.to_dict()
         assert all(a[k] is None for k in KEYS if k not in ("forecast_note", "forecast_backtests"))
         assert "two visits since visit 1" in a["forecast_note"]
         page = (tmp_path / "site" / v.page).read_text(encoding="utf-8")
@@ -104,10 +104,10 @@ def five():
 
 def test_drift_and_fleet_give_every_axis_the_same_forecast(five, tmp_path):
     by_fleet = {(a["machine_id"], a["axis"]): a for a in quiet(
-        fleet, five, threshold_um=6.0, as_of=AS_OF).to_json()["axes"]}
+        fleet, five, threshold_um=6.0, as_of=AS_OF).to_dict()["axes"]}
     result = quiet(drift, five, threshold_um=6.0, as_of=AS_OF)
     stated = 0
-    for s in result.to_json()["series"]:
+    for s in result.to_dict()["series"]:
         a = by_fleet[(s["machine_id"], s["axis"])]
         assert s["slope_um_per_month"] == pytest.approx(a["slope_um_per_month"], abs=1e-4)
         assert s["change_points"] == a["change_points"]

@@ -93,7 +93,7 @@ def test_new_tests_are_added_beside_the_stored_ones(store, tmp_path):
     result = bl.ingest([visit_file(tmp_path, "03"), visit_file(tmp_path, "04")], store=store)
     assert (result.added, result.unchanged, result.tests_in_store) == (18, 18, 72)
     assert result.readings_added == 1440
-    assert result.to_json()["files"][1] == {"file": str(tmp_path / "M01_v04.csv"),
+    assert result.to_dict()["files"][1] == {"file": str(tmp_path / "M01_v04.csv"),
                                             "readings": 1440, "tests": 18, "added": 18,
                                             "replaced": 0, "unchanged": 0}
 

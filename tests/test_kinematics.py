@@ -46,7 +46,7 @@ def test_the_field_at_192_points_matches_the_truth(fleet, result):
 def test_the_plays_come_within_one_arcsec(fleet, result):
     _, machines, _ = fleet
     for m, truth in zip(result.machines, machines):
-        j = m.to_json()
+        j = m.to_dict()
         for axis in "AC":
             assert abs(j["play_arcsec"][axis] - truth["play_arcsec"][axis]) < 1.0
             assert 0 < j["play_u_arcsec"][axis] < 0.5
@@ -55,7 +55,7 @@ def test_the_plays_come_within_one_arcsec(fleet, result):
 def test_the_inseparable_pairs_are_named_and_only_their_sums_reported(fleet, result):
     _, machines, _ = fleet
     for m, truth in zip(result.machines, machines):
-        j = m.to_json()
+        j = m.to_dict()
         assert j["not_identifiable"] == [["delta_x_A_um", "delta_x_C_um"],
                                          ["eps_alpha_A_urad", "eps_alpha_C_urad"]]
         for pair in j["not_identifiable"]:
@@ -107,7 +107,7 @@ def test_the_cli_and_python_give_the_same_json(tmp_path, capsys):
 
     data = "experiments/data/kinematics/probes.csv"
     cli = cli_json(["kinematics", data, "--json", "--no-track"], capsys, code=None)
-    python = json.loads(json.dumps(bl.kinematics(data, track=False).to_json()))
+    python = json.loads(json.dumps(bl.kinematics(data, track=False).to_dict()))
     assert cli == python
     with open("experiments/data/kinematics/truth.json") as handle:
         truth = json.load(handle)["machines"]
@@ -124,7 +124,7 @@ def test_out_writes_the_report_the_field_and_the_controller_files(tmp_path):
     assert {"kinematics.json", "errors.csv", "field.csv", "kinematics.html"} <= set(names)
     assert sum(n.endswith(".png") for n in names) == 2
     md = (out / "AC0_A_MD32450.INI").read_text()
-    play = result.machines[0].to_json()["play_arcsec"]["A"]
+    play = result.machines[0].to_dict()["play_arcsec"]["A"]
     assert f"$MA_BACKLASH[0,AX4]={play / 3600:.6f}" in md
     assert not any("EEC" in n for n in names)  # the axis's table is left alone
     field = pd.read_csv(out / "field.csv")
@@ -147,7 +147,7 @@ def test_store_records_each_rotary_axis(tmp_path):
     assert sorted(records) == [("AC0", "A"), ("AC0", "C"), ("AC1", "A"), ("AC1", "C")]
     rec = records[("AC0", "A")][-1]
     assert rec["date"] == "2026-03-02" and rec["errors"]["delta_x_A_um"] is None
-    assert rec["play_arcsec"] == first.machines[0].to_json()["play_arcsec"]["A"]
+    assert rec["play_arcsec"] == first.machines[0].to_dict()["play_arcsec"]["A"]
 
 
 def test_the_twin_writes_what_the_job_finds(tmp_path):
@@ -155,7 +155,7 @@ def test_the_twin_writes_what_the_job_finds(tmp_path):
 
     machine = rp.paper_machine()
     files = rp.write_run(tmp_path, [machine], seed=3)
-    found = bl.kinematics(str(files["probes"]), track=False).machines[0].to_json()
+    found = bl.kinematics(str(files["probes"]), track=False).machines[0].to_dict()
     truth = json.loads(files["truth"].read_text())["machines"][0]
     for axis in "AC":
         assert abs(found["play_arcsec"][axis] - truth["play_arcsec"][axis]) < 1
@@ -210,7 +210,7 @@ def test_one_sphere_off_the_axis_is_refused_unless_accepted_with_a_note(tmp_path
         warnings.simplefilter("always")
         result = bl.kinematics(frame, one_sphere=True, track=False)
     assert any("one sphere only" in n for n in result.notes)
-    assert abs(result.machines[0].to_json()["play_arcsec"]["A"] - m["play_arcsec"]["A"]) < 1
+    assert abs(result.machines[0].to_dict()["play_arcsec"]["A"] - m["play_arcsec"]["A"]) < 1
 
 
 def test_angles_in_radians_are_refused(tmp_path, capsys):

@@ -68,7 +68,7 @@ def assert_the_same(readings, **limits):
         assert d.series.change_points == f.series.change_points, key
         assert d.crossing == f.crossing and d.next_visit == f.next_visit, key
         np.testing.assert_equal(astuple(d.series.terms), astuple(f.series.terms))
-        dj, fj = d.to_json(), v.to_json()
+        dj, fj = d.to_dict(), v.to_dict()
         for name in SAME:
             assert dj[name] == fj[name], (key, name)
         assert dj["threshold_crossing"] == fj["crossing_date"]

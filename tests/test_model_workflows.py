@@ -41,7 +41,7 @@ def test_train_from_python_scores_writes_and_loads(trained):
     assert (files["model"] / "model.json").is_file() and files["regression"].is_file()
     model = bl.load_model(files["model"])
     assert model.name == "wear-map" and model.meta["split"] == "forward"
-    assert trained.to_json()["metrics"] == trained.metrics
+    assert trained.to_dict()["metrics"] == trained.metrics
 
 
 def test_train_takes_a_validated_frame_as_well_as_a_path(trained):
@@ -208,7 +208,7 @@ def test_tune_from_python_then_logged_by_the_adapter(tmp_path):
                          progress=lambda done, total, what: steps.append(done),
                          track=False)  # logged below
     assert result.trials == {"complete": 2} and steps == [1, 2]
-    assert result.to_json()["best_cv_rmse_um"] == result.best_cv_rmse_um > 0
+    assert result.to_dict()["best_cv_rmse_um"] == result.best_cv_rmse_um > 0
     logged = tracking.log_result(result)
     assert set(logged["children"]) == {"trial 0", "trial 1"}
     run = mlflow.MlflowClient().get_run(logged["children"]["trial 0"]["run_id"])

@@ -144,7 +144,7 @@ def test_engine_local_mode_gives_the_in_process_result(tmp_path):
         here = monitor(tmp_path / "ds")
         there = monitor(tmp_path / "ds", engine="dask")
     pd.testing.assert_frame_equal(here.daily, there.daily, check_exact=True)
-    assert here.to_json() == there.to_json()
+    assert here.to_dict() == there.to_dict()
 
 
 def test_engine_on_a_dask_scheduler_address(tmp_path):

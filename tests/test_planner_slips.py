@@ -79,7 +79,7 @@ def test_a_view_as_of_today_leaves_a_test_dated_ahead_out(six, tmp_path, capsys)
     dated three months ahead must not make it look measured."""
     ahead = dated_ahead(tmp_path)[0]
     frame = bl.validate(pd.concat([bl.read(six), bl.read(ahead)], ignore_index=True))
-    view = quiet(bl.fleet, frame).to_json()["axes"][0]
+    view = quiet(bl.fleet, frame).to_dict()["axes"][0]
     assert "overdue" in view["alerts"] and view["last_visit"] == "06", view["alerts"]
     store = tmp_path / "fleet"
     quiet(bl.ingest, visits(tmp_path), store=store)
@@ -91,7 +91,7 @@ def test_a_view_as_of_today_leaves_a_test_dated_ahead_out(six, tmp_path, capsys)
     assert any(f"18 test(s) started after {TODAY.isoformat()} left out" in e for e in err)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", BacklashWarning)
-        drifted = bl.drift(store).to_json()["series"][0]
+        drifted = bl.drift(store).to_dict()["series"][0]
     assert drifted["visits"][-1] == "06"
 
 

@@ -187,7 +187,7 @@ def test_prefit_predictor_with_predict_only():
 
 def test_json_is_strict_and_ordered_by_rank(truth):
     result = truth[2]
-    payload = json.loads(dumps(clean_nan(result.to_json())))
+    payload = json.loads(dumps(clean_nan(result.to_dict())))
     assert 0.0 < payload["knn_accuracy"] <= 1.0
     ranks = [f["rank"] for f in payload["features"]]
     assert ranks == sorted(ranks) == [1, 2, 3, 4, 5]

@@ -130,7 +130,7 @@ def test_read_and_iso_on_the_real_ecmc_file(ess_file, psi_file, capsys):
     # from a path, the same figures; and the JSON form is what `backlash iso --json` prints
     again = bl.iso(psi_file)
     assert main(["iso", str(psi_file), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(again.to_json()))
+    assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(again.to_dict()))
     assert again.notes == [] and again.outliers.empty
 
 
@@ -205,7 +205,7 @@ def test_convert_workflow(tmp_path, psi_file):
     result = convert(psi_file, tmp_path / "psi.csv")
     assert result.tests == 1 and result.out == tmp_path / "psi.csv"
     assert len(pd.read_csv(result.out)) == len(result.readings) == 50
-    assert result.to_json() == {"readings": 50, "tests": 1, "out": str(tmp_path / "psi.csv")}
+    assert result.to_dict() == {"readings": 50, "tests": 1, "out": str(tmp_path / "psi.csv")}
     assert convert(psi_file).out is None  # nothing written without out
     assert result.write(tmp_path / "folder") == {"readings": tmp_path / "folder/readings.csv"}
     with pytest.raises(InputError, match="is the input file") as err:

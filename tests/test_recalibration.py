@@ -324,7 +324,7 @@ def test_real_ess_reversal_varies_and_psi_does_not(ess_file, psi_file, capsys):
     assert per_direction == {**dict.fromkeys(("linuxcnc", "csv", "fanuc"), True),
                              **dict.fromkeys(("siemens", "heidenhain", "marlin", "reprap",
                                               "grblhal"), False)}
-    axis = ess.to_json()["axes"][0]["reversal_variation"]
+    axis = ess.to_dict()["axes"][0]["reversal_variation"]
     assert axis["direction_dependent"] is True and axis["dof"] == 4
     with warnings.catch_warnings():  # no note of a varying reversal (the axis's name is noted)
         warnings.simplefilter("error", BacklashWarning)

@@ -98,7 +98,7 @@ def test_pendulum_tests_tell_a_settling_offset_from_lost_motion():
     assert test.pendulum_mean_um == pytest.approx(-4.8, abs=0.3)
     assert abs(test.pendulum_statistic) > abs(test.statistic)  # ... but not lost motion
     assert test.system == "direct"
-    assert "pendulum_statistic" in test.to_json()
+    assert "pendulum_statistic" in test.to_dict()
 
 
 def test_a_profile_in_the_baseline_is_its_finest_general_form():

@@ -64,7 +64,7 @@ def py_json(job: str, *args, **params) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = getattr(bl, name)(*args, **params)
-    return json.loads(dumps(result.to_json()))
+    return json.loads(dumps(result.to_dict()))
 
 
 def without_paths(value):
@@ -343,6 +343,6 @@ def test_an_experiment_step_selects_and_gives_what_python_gives(two_axes, tmp_pa
     spec.write_text(f'out = "out"\n[[steps]]\njob = "iso"\n[steps.with]\ndata = "{two_axes}"\n'
                     'axis = "Y"\nout = "{out}/iso"\n')
     done = experiment.execute(experiment.load(spec, str(tmp_path / "out")))
-    from_file = json.loads(dumps(done.steps[0].result.to_json()))
+    from_file = json.loads(dumps(done.steps[0].result.to_dict()))
     assert from_file == py_json("iso", str(two_axes), axis="Y")
     assert (tmp_path / "out" / "iso" / "iso_figures.csv").is_file()

@@ -62,7 +62,7 @@ def store(tmp_path_factory) -> Path:
 
 
 def _plain(result) -> dict:
-    return json.loads(dumps(result.to_json()))
+    return json.loads(dumps(result.to_dict()))
 
 
 def _quiet(job: str, *args, **params) -> dict:

@@ -167,7 +167,7 @@ def test_the_command_gives_the_python_json_and_writes_the_files(table, tmp_path,
     assert main(["stiffness", str(path), "--at", str(at), "--ram-top", "0", "--out", str(out),
                  "--json", "--no-track"]) == 0
     printed = json.loads(capsys.readouterr().out)
-    python = stiffness(str(path), at=str(at), ram_top_mm=0.0).to_json()
+    python = stiffness(str(path), at=str(at), ram_top_mm=0.0).to_dict()
     assert printed == json.loads(json.dumps(python))
     centre = printed["machines"][0]["centres"][0]
     assert set(centre) >= {"centre_mm", "plane", "stiffness_n_per_um", "stiffness_u_n_per_um",

@@ -306,7 +306,7 @@ def test_the_password_never_shows(postgres_url, tmp_path, capsys):
     assert any("error: " in line for line in outputs)
     assert any("postgres:***@" in text for text in outputs)
     result = bl.ingest(visit_file(tmp_path, "03"), store=url)
-    outputs += [json.dumps(result.to_json()), *result.notes, bl.read(url).attrs["source"]]
+    outputs += [json.dumps(result.to_dict()), *result.notes, bl.read(url).attrs["source"]]
     runs = mlflow.search_runs(search_all_experiments=True)
     assert len(runs)
     outputs += [str(v) for v in runs.to_numpy().ravel()]
@@ -328,4 +328,4 @@ def test_an_experiment_step_reads_a_store_url_as_it_is(postgres_url, tmp_path):
     loaded = experiment.load(spec)
     assert loaded.steps[0].parameters["data"] == url
     result = experiment.execute(loaded)
-    assert PASSWORD not in json.dumps(result.to_json(), default=str)
+    assert PASSWORD not in json.dumps(result.to_dict(), default=str)

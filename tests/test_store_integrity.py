@@ -79,7 +79,7 @@ def fleet_json(store) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = bl.fleet(store, threshold_um=4.0).to_json()
+        result = bl.fleet(store, threshold_um=4.0).to_dict()
     assert result.pop("source") == str(store)  # the one place the store's name shows
     return result
 
@@ -360,13 +360,13 @@ def test_the_fleet_view_lists_an_axis_s_voided_tests_and_reads_them_not(tmp_path
     bl.ingest(fleet_files, store=store)
     bl.void(store, machine="M1", axis="X", visit="03", reason="laser misaligned")
     result = bl.fleet(store, threshold_um=4.0, out=tmp_path / "site")
-    axis = next(a for a in result.to_json()["axes"] if (a["machine_id"], a["axis"]) == ("M1", "X"))
+    axis = next(a for a in result.to_dict()["axes"] if (a["machine_id"], a["axis"]) == ("M1", "X"))
     assert axis["history"]["visits"] == ["01", "02"]
     assert [(t["visit"], t["reason"]) for t in axis["voided_tests"]] == [
         ("03", "laser misaligned")] * 2
     page = (tmp_path / "site" / axis["page"]).read_text(encoding="utf-8")
     assert "Voided tests" in page and "laser misaligned" in page
-    others = [a for a in result.to_json()["axes"] if a["axis"] != "X" or a["machine_id"] != "M1"]
+    others = [a for a in result.to_dict()["axes"] if a["axis"] != "X" or a["machine_id"] != "M1"]
     assert all(a["voided_tests"] == [] for a in others)
 
 
@@ -379,5 +379,5 @@ def test_an_undated_test_in_a_store_is_left_out_of_the_fleet_view_with_one_note(
     notes = [str(w.message) for w in caught if "no start date" in str(w.message)
              or "undated" in str(w.message) or "without a start" in str(w.message)]
     assert len(notes) == 1 and "ess_mcu1025_ISO230" in notes[0], notes
-    assert {(a["machine_id"], a["axis"]) for a in result.to_json()["axes"]} == {
+    assert {(a["machine_id"], a["axis"]) for a in result.to_dict()["axes"]} == {
         ("M1", "X"), ("M1", "Y"), ("M2", "X")}

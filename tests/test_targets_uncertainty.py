@@ -120,7 +120,7 @@ def test_without_a_budget_no_column_is_added():
 
     result = bl.targets(readings)
     assert "backlash_U_um" not in result.points and result.coverage_factor is None
-    assert result.to_json()["coverage_factor"] is None
+    assert result.to_dict()["coverage_factor"] is None
 
 
 def test_each_visit_combines_its_points(printed):

@@ -325,11 +325,11 @@ def test_each_data_has_its_own_study_and_a_resumed_one_says_so(readings_csv, tmp
     common = {"trials": 1, "folds": 2, "storage": f"sqlite:///{tmp_path / 'studies.db'}",
               "track": False}
     first, second = bl.tune(readings_csv, **common), bl.tune(other, **common)
-    assert first.to_json()["study"] != second.to_json()["study"]
+    assert first.to_dict()["study"] != second.to_dict()["study"]
     assert first.trials == second.trials == {"complete": 1}
     assert not any("resumed" in n for n in first.notes + second.notes)
     again = bl.tune(readings_csv, **common)
-    assert again.to_json()["study"] == first.to_json()["study"]
+    assert again.to_dict()["study"] == first.to_dict()["study"]
     assert again.trials == {"complete": 2}
     assert any("resumed with its 1 earlier trials" in n and "other data" not in n
                for n in again.notes)

@@ -109,7 +109,7 @@ def test_twin_fleet_changes_are_still_found_with_the_budget():
     for s in result.series:
         events = sim.visits[(sim.visits["machine_id"] == s.machine_id)
                             & (sim.visits["event"] != "")]["visit"].tolist()
-        j = s.to_json()
+        j = s.to_dict()
         assert j["change_points"] == events  # the adjustment and the failure exceed U(Δ)
         assert all(u < abs(d) for u, d in zip(j["change_U_um"], j["change_jumps_um"]))
         assert min(j["backlash_U_um"]) >= U_B - 0.01
@@ -135,8 +135,8 @@ def test_train_scores_the_error_against_U_B(trained):
     error = np.abs(fit.predicted_um - fit.table.y.to_numpy(float))[fit.test_index]
     assert m["test_abs_error_p95_um"] == pytest.approx(np.percentile(error, 95))
     assert m["test_rmse_over_U_B"] == pytest.approx(m["test_rmse_um"] / U_B)
-    assert trained.to_json()["resolution"] == "within what the measurement can resolve"
-    assert trained.trained.meta["uncertainty"]["verdict"] == trained.to_json()["resolution"]
+    assert trained.to_dict()["resolution"] == "within what the measurement can resolve"
+    assert trained.trained.meta["uncertainty"]["verdict"] == trained.to_dict()["resolution"]
 
 
 def test_verdict_beyond_when_the_error_exceeds_U():

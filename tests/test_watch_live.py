@@ -481,7 +481,7 @@ def test_fleet_shows_a_watched_axis_last_sample_and_alerts_when_it_goes_silent(
     store = _store(fleet, tmp_path)
     _watched(store, last, limit)
     axes = {(a["machine_id"], a["axis"]): a
-            for a in bl.fleet(store, as_of="2026-06-30").to_json()["axes"]}
+            for a in bl.fleet(store, as_of="2026-06-30").to_dict()["axes"]}
     x = axes["M01", "X"]
     assert x["last_sample"] == last
     assert x["stale_after_s"] == (limit or 2 * 86400.0)

@@ -692,7 +692,7 @@ class DriftSeries:
                 "lost_motion_low": f["lost_motion_low_um"],
                 "lost_motion_high": f["lost_motion_high_um"]}
 
-    def to_json(self, forecast: dict | None = None) -> dict:
+    def to_dict(self, forecast: dict | None = None) -> dict:
         """The series as ``drift --json`` carries it; ``forecast`` the forecast of the next
         visit when computed already (``forecast_json``)."""
         v = self.visits

@@ -133,10 +133,10 @@ class AxisForecast:
         """A time of the forecast as its ISO day (``YYYY-MM-DD``), None as None."""
         return None if when is None else when.date().isoformat()
 
-    def to_json(self) -> dict:
-        """The series as ``drift --json`` carries it (``DriftSeries.to_json``), with the
+    def to_dict(self) -> dict:
+        """The series as ``drift --json`` carries it (``DriftSeries.to_dict``), with the
         forecast of the next visit computed here."""
-        return self.series.to_json(forecast=self.next_visit)
+        return self.series.to_dict(forecast=self.next_visit)
 
 
 # --------------------------------------------------------------------------- the time axis

@@ -83,7 +83,7 @@ class Discovery:
     measuring_system: dict | None = None           # the decision and its test
     unit: str = "um"                               # of every value: arcsec on a rotary axis
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"named": self.named, "ambiguous": self.ambiguous,
                 "steps": [s.__dict__ for s in self.steps],
                 "rmse_before_um": self.rmse_before_um, "rmse_after_um": self.rmse_after_um,
@@ -277,7 +277,7 @@ def _choose_system(design: Design, model: dict, readings: pd.DataFrame,
     test = measuring_system(readings)
     if test.system is not None:
         design.system = test.system
-        result.measuring_system = test.to_json()
+        result.measuring_system = test.to_dict()
         result.notes.append(test.note())
         return
     if not any(EFFECTS[m].kind == "lost_motion" for m in model):

@@ -49,7 +49,7 @@ class SystemTest(NamedTuple):
     pendulum_mean_um: float = math.nan
     unit: str = "um"      # of the reversal values: arcsec on a rotary axis
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         out = {"system": self.system, "test": "t-test of the mean interior reversal value "
                "of the linear tests against zero", "statistic": self.statistic,
                "p_value": self.p_value, "mean_um": self.mean_um, "n": self.n}

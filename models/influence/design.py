@@ -84,7 +84,7 @@ class Design:
     counts: dict                         # number of runs, visits, units
     confounded: list[dict] = field(default_factory=list)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"counts": self.counts,
                 "varies": {name: {"level": self.level[name],
                                   "shares": {k: float(v) for k, v in self.shares.loc[name].items()}}

@@ -35,12 +35,12 @@ class Explanation:
     def drivers(self) -> list[str]:
         return self.influence.drivers()
 
-    def to_json(self) -> dict:
-        """``features.ranking.Ranking.to_json`` plus, per feature, ``verdict``, ``effect_um``
+    def to_dict(self) -> dict:
+        """``features.ranking.Ranking.to_dict`` plus, per feature, ``verdict``, ``effect_um``
         with ``effect_interval_um``, ``proxy_for`` and the conditional tests; ``rank`` is the
         verdict order, ``association_rank`` the marginal views' rank; ``design`` holds the
         diagnostics."""
-        base = self.ranking.to_json()
+        base = self.ranking.to_dict()
         by_name = {f["name"]: f for f in base["features"]}
         features = []
         for position, name in enumerate(self.table.index, start=1):
@@ -51,7 +51,7 @@ class Explanation:
             features.append(item)
         base.update(features=features, drivers=self.drivers(),
                     verdict_alpha=self.influence.alpha, n_boot=self.influence.n_boot,
-                    design=self.influence.design.to_json(), notes=[*base["notes"], *self.notes])
+                    design=self.influence.design.to_dict(), notes=[*base["notes"], *self.notes])
         return base
 
 

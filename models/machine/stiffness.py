@@ -322,7 +322,7 @@ class StiffnessMap:
             u[:, i, j] = u[:, j, i] = s
         return value, u
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"form": self.form, "terms": terms(self.form), "ram_top_mm": self.ram_top_mm,
                 "position_unit": "m",
                 "components": {name: {"coefficients_um_per_n": [float(c) for c in coef],
@@ -476,7 +476,7 @@ def deflection_um(stiffness_map: StiffnessMap, point_mm, force_n) -> tuple[np.nd
 
 
 def map_from_json(saved: dict) -> StiffnessMap:
-    """A map written by ``backlash stiffness --out`` (``StiffnessMap.to_json`` plus
+    """A map written by ``backlash stiffness --out`` (``StiffnessMap.to_dict`` plus
     ``covariance``: component -> its coefficients' covariance) back as a ``StiffnessMap``.
 
     Raises

@@ -16,7 +16,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("circle", args)
@@ -26,5 +25,5 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {len(result.files)} files to {args.out}", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

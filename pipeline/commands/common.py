@@ -93,7 +93,7 @@ def show(result, args, table) -> int:
     else ``table(json)``; what it recorded and wrote on stderr."""
     from features.readings.fileio import dumps
 
-    document = result.to_json()
+    document = result.to_dict()
     print(dumps(document) if args.json else table(document))
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)

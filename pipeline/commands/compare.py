@@ -18,7 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     backtest = args.split == "backtest"
@@ -34,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"best: {result.best}{' (now champion)' if logged.get('champion') else ''}"
               f"{run_id}; table -> {result.files['comparison']}", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0
 
 

@@ -14,7 +14,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("compensate", args, "compensate")
@@ -22,5 +21,5 @@ def run(args: argparse.Namespace) -> int:
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0 if result.passed else 3

@@ -28,7 +28,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(result.readings)} readings in {result.tests} tests -> {args.out}",
           file=sys.stderr)
     if args.json:
-        from features.readings.fileio import dumps
 
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

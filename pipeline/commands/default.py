@@ -21,14 +21,13 @@ def command(job: str) -> SimpleNamespace:
     def run(args: argparse.Namespace) -> int:
         import sys
 
-        from features.readings.fileio import dumps
         from pipeline.commands.data import run_job
         from pipeline.results import ALERT_EXIT
 
         result = run_job(job, args)
         print(repr(result), file=sys.stderr)
         if args.json:
-            print(dumps(result.to_json()))
+            print(result.to_json())
         return ALERT_EXIT if getattr(result, "alerts", None) else 0
 
     return SimpleNamespace(add_arguments=add_arguments, run=run)

@@ -14,7 +14,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("discover", args)
@@ -28,5 +27,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"gap {result.rmse_before_um:.3f} -> {result.rmse_after_um:.3f} {unit}, repeatability "
           f"{result.repeatability_um:.3f} {unit}; report {result.files['html']}", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

@@ -17,13 +17,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("drift", args)  # without --out or --json: the table alone, as fleet
     print_summary(result.forecasts, result.files.get("html"), file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return ALERT_EXIT if result.alerts else 0
 
 
@@ -38,7 +37,7 @@ def print_summary(forecasts, html_path, file) -> None:
           + (f"{'U':>6} " if budget else "")
           + f"{'target':>6} {'slope /mo':>12} {'changes':>7}  crossing", file=file)
     for f in forecasts:
-        s, j = f.series, f.to_json()
+        s, j = f.series, f.to_dict()
         slope = j["slope_um_per_month"]
         kind = (j.get("target_kind") or ["-"])[-1]
         u = f"{j['backlash_U_um'][-1]:>6.2f} " if budget else ""

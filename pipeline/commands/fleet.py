@@ -18,13 +18,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("fleet", args)
     print_summary(result, file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return ALERT_EXIT if result.alerts else 0
 
 
@@ -37,7 +36,7 @@ def print_summary(result, file) -> None:
     print(f"{'#':>3} {'machine':<12} {'axis':<4} {'unit':<6} {'visits':>6} {'backlash':>9} "
           f"{'slope /mo':>10}  {'crossing':<10}  {'next due':<10}{extra}  alerts", file=file)
     for rank, view in enumerate(result.axes, 1):
-        j = view.to_json()
+        j = view.to_dict()
         slope = j["slope_um_per_month"]
         extra = f"  {_forecast(j['last_forecast']):<28}  {_compensation(j['last_compensation']):<18}"
         print(f"{rank:>3} {view.machine_id:<12} {view.axis:<4} {j['unit']:<6} {j['visits']:>6} "

@@ -16,7 +16,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("hidden-effects", args, "scenarios")
@@ -31,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
           f"{score['max_gap_after_over_noise']:.2f}, slowest scenario "
           f"{score['max_seconds_per_scenario']:.2f} s CPU", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

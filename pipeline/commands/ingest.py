@@ -16,7 +16,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
     from pipeline.workflows.ingest import IngestInterrupted
 
@@ -31,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
               f"{replaced}{f['unchanged']} already stored", file=sys.stderr)
     print(f"store {result.store}: {result.tests_in_store} tests", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

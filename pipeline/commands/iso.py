@@ -21,7 +21,6 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from features.readings.errors import InputError
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     if args.plot and not args.plot.lower().endswith(".png"):  # refused before any reading
@@ -31,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
         result.plot(args.plot)
     print(result.table(), file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

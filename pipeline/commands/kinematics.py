@@ -37,7 +37,7 @@ def _unit(name: str) -> str:
 
 
 def table(found: dict) -> str:
-    """The printed table of a kinematics result's JSON (``KinematicsResult.to_json``)."""
+    """The printed table of a kinematics result's JSON (``KinematicsResult.to_dict``)."""
     lines = []
     for m in found["machines"]:
         lines.append(f"{m['machine_id']} visit {m['visit']} ({m['kinematics']}), tests "

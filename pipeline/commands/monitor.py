@@ -16,7 +16,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("monitor", args)
@@ -24,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return ALERT_EXIT if result.alerts else 0
 
 

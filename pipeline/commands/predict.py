@@ -17,7 +17,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from features.readings.errors import InputError
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     if not str(args.out).lower().endswith(".csv"):  # before any work
@@ -32,5 +31,5 @@ def run(args: argparse.Namespace) -> int:
     if result.recorded is not None:
         print(result.recorded.text, file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

@@ -16,13 +16,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("rank", args, "rank")
     print_table(result, result.files["html"], file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0
 
 

@@ -23,7 +23,6 @@ def run(args: argparse.Namespace) -> int:
     print(result.markdown(), file=sys.stderr)
     print(f"report: {result.files['html']}", file=sys.stderr)
     if args.json:
-        from features.readings.fileio import dumps
 
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

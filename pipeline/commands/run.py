@@ -40,9 +40,8 @@ def run(args: argparse.Namespace) -> int:
         files = _listing([Path(f) for f in done.paths()])
         print(f"[{done.step.index}] {done.step.job}{alert}: {files}", file=sys.stderr)
     if args.json:
-        from features.readings.fileio import dumps
 
-        print(dumps(result.to_json()))
+        print(result.to_json())
     print(f"experiment {loaded.name!r}: MLflow run {result.run_id} in {result.tracking_uri}; "
           f"outputs in {_short(loaded.out)}/", file=sys.stderr)
     return result.code

@@ -22,8 +22,7 @@ def run(args: argparse.Namespace) -> int:
 
     result = run_job("simulate", args)
     if args.json:
-        from features.readings.fileio import dumps
 
-        print(dumps(result.to_json()))
+        print(result.to_json())
     print(f"{result.summary()} -> {args.out}/{WRITTEN[args.traces]}", file=sys.stderr)
     return 0

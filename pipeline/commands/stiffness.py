@@ -30,7 +30,7 @@ def _num(value, fmt: str = ".2f", width: int = 9) -> str:
 
 
 def table(found: dict) -> str:
-    """The printed table of a stiffness result's JSON (``StiffnessResult.to_json``)."""
+    """The printed table of a stiffness result's JSON (``StiffnessResult.to_dict``)."""
     lines = []
     for m in found["machines"]:
         lines.append(f"{m['machine_id']}: {len(m['centres'])} centres; stiffness [N/um] ± "

@@ -21,12 +21,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("store", args)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     else:
         for line in result.repaired:
             print(f"repaired: {line}")

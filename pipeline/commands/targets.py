@@ -18,7 +18,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("targets", args)
@@ -31,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         print(f"wrote {result.files['targets']}", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

@@ -27,9 +27,8 @@ def run(args: argparse.Namespace) -> int:
                f"{' (champion)' if logged['champion'] else ''}" if logged else "")
     print(f"model -> {result.files['model']}/{tracked}", file=sys.stderr)
     if args.json:
-        from features.readings.fileio import dumps
 
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0
 
 

@@ -17,7 +17,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("tune", args, "trials")
@@ -31,5 +30,5 @@ def run(args: argparse.Namespace) -> int:
     for line in result.notes:
         print(f"note: {line}", file=sys.stderr)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

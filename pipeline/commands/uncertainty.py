@@ -17,12 +17,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("uncertainty", args)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     else:
         print_budget(result, file=sys.stdout)
     return 0

@@ -17,11 +17,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
 
     result = run_job("void", args)
     print(result.line, file=sys.stderr)  # one line per action, never the result's repr
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
     return 0

@@ -16,13 +16,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from features.readings.fileio import dumps
     from pipeline.commands.data import run_job
     from pipeline.workflows.volumetric import PAPER_TABLE1
 
     result = run_job("volumetric", args)
     if args.json:
-        print(dumps(result.to_json()))
+        print(result.to_json())
         return 0
     print(f"volumetric compensation on the twin (seed {result.seed}): extreme deviation [um]; "
           "paper's Table 1 in brackets")

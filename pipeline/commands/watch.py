@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
 
     result = run_job("watch", args, status=status)
     if args.json:  # the last line: the result, as bl.watch returns it
-        print(json.dumps(result.to_json(), allow_nan=False, default=str), flush=True)
+        print(json.dumps(result.to_dict(), allow_nan=False, default=str), flush=True)
     else:
         print(repr(result), file=sys.stderr)
     return 0

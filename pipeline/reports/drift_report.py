@@ -41,7 +41,7 @@ def write_drift_report(forecasts, out_dir, *, source: str = "", notes=(),
     write_page(paths["html"], TITLE, render_body(forecasts, source=source, notes=notes,
                                                  as_of=as_of))
     fileio.write_json(paths["json"], fileio.clean_nan(
-        {"source": source, "as_of": as_of, "series": [f.to_json() for f in forecasts]}))
+        {"source": source, "as_of": as_of, "series": [f.to_dict() for f in forecasts]}))
     return paths
 
 
@@ -181,7 +181,7 @@ def render_body(forecasts, *, source: str = "", notes=(), as_of: str | None = No
     series = [f.series for f in forecasts]
     rows = []
     for f, s in zip(forecasts, series):
-        j = f.to_json()
+        j = f.to_dict()
         rows.append(
             f"<tr><td>{html.escape(s.machine_id)}</td><td>{html.escape(s.axis)}</td>"
             f"<td>{unit_label(s.unit)}</td>"

@@ -63,7 +63,7 @@ def write_site(result, out) -> dict[str, Path]:
     if out.exists() and not out.is_dir():
         raise InputError("is a file; expected a folder for the site", file=out, parameter="out")
     texts = {INDEX: page(TITLE, STYLE + index_body(result)),
-             JSON: json.dumps(clean_nan(result.to_json()), indent=2) + "\n"}
+             JSON: json.dumps(clean_nan(result.to_dict()), indent=2) + "\n"}
     for view in result.axes:
         texts[view.page] = page(f"{view.machine_id} axis {view.axis}", STYLE + axis_body(view))
     tmp = temp_folder(out)
@@ -218,7 +218,7 @@ def _limits_text(p: dict) -> str:
 
 
 def _index_row(rank: int, view) -> str:
-    j = view.to_json()
+    j = view.to_dict()
     unit = _unit(view)
     threshold = view.series.threshold_um
     spark = fleet_charts.sparkline(_history(view), _band(view), threshold_um=threshold,
@@ -294,7 +294,7 @@ def recorded_point(view, j: dict) -> dict | None:
 def axis_body(view) -> str:
     """An axis's page: summary, alerts, history chart, visits, wear map, ISO chart; every
     value in the axis's unit."""
-    j = view.to_json()
+    j = view.to_dict()
     return "\n".join([
         f'<nav><a href="{INDEX}">← fleet</a></nav>', _summary(view, j), _alerts(view),
         "<h2>History and forecast</h2>", _history_chart(view, j),

@@ -71,7 +71,7 @@ def _tables_html(machine) -> str:
 
 
 def _errors_html(machine) -> str:
-    j = machine.to_json()
+    j = machine.to_dict()
     rows = "".join(
         f"<tr><td>{html.escape(n)}</td><td>{_cell(v)}</td><td>{_cell(j['errors_u'][n])}</td>"
         f"<td>{'' if v is not None else 'not identifiable'}</td></tr>"

@@ -65,7 +65,7 @@ def write_rank_report(result, out_dir, *, source: str = "", target_kind: str = "
     table["physical_path"] = [",".join(p) for p in table["physical_path"]]
     with atomic_path(paths["csv"]) as tmp:
         table.to_csv(tmp)
-    write_json(paths["json"], clean_nan(result.to_json()))
+    write_json(paths["json"], clean_nan(result.to_dict()))
     all_notes = [*result.ranking.notes, *result.notes, *notes]
     write_page(paths["html"], "Which conditions drive backlash",
                render_body(result, source=source, target_kind=target_kind, notes=all_notes,

@@ -75,7 +75,7 @@ class IsoFigures(Result):
     def repr_items(self) -> dict[str, str]:
         return {"tests": str(len(self.figures)), **super().repr_items()}
 
-    def to_json(self) -> list[dict]:
+    def to_dict(self) -> list[dict]:
         """One object per test with ``JSON_KEYS`` (and, with a budget,
         ``features.uncertainty.TEST_UNCERTAINTY_KEYS``)
         and its ``per_target`` rows (``PER_TARGET_KEYS``); NaN becomes None."""

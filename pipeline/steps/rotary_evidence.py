@@ -56,7 +56,7 @@ class ProbingView:
         return [{**a, "message": f"probing play: {a['message']}", "source": "probing"}
                 for a in self.series.alerts]
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """The axis as ``fleet --json`` prints it under ``probing`` (docs/fleet.md)."""
         s, v = self.series, self.series.visits
         trend, last = s.trend, self.records[-1]
@@ -168,7 +168,7 @@ def probing_section(result) -> str:
         return ""
     rows = []
     for view in views:
-        j = view.to_json()
+        j = view.to_dict()
         days = list(fleet_charts.days_since(view.series.origin, view.series.visits["date"]))
         spark = fleet_charts.sparkline(
             {"days": days, "backlash_um": view.series.visits["backlash_um"].to_numpy(float),

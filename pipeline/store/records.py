@@ -652,7 +652,7 @@ def probing_records(result) -> list[dict]:
 
     out = []
     for m in getattr(result, "machines", None) or []:
-        j = m.to_json()
+        j = m.to_dict()
         for axis in axes_of(m.kinematics):
             own = [n for n in j["errors"] if n.split("_")[2] == axis]
             out.append({"kind": "probing", "format": RECORD_FORMAT, "machine_id": m.machine_id,

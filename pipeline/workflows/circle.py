@@ -148,7 +148,7 @@ class CircleResult(Result):
     dates: dict | None = field(default=None, repr=False)
     recorded: object = None
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """``{"circles": [...]}`` as SCHEMA.md section 11 names it; NaN becomes None."""
         from features.readings.fileio import clean_nan
 

@@ -129,7 +129,7 @@ class CompareResult(Result):
         self.files = {"comparison": out / "comparison.csv", **files}
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         return clean_nan({"target_kind": self.target_kind, "noise_floor_um": self.noise_floor_um,
@@ -248,7 +248,7 @@ class BacktestResult(Result):
         self.files = files
         return files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         return clean_nan({"target_kind": self.target_kind, "noise_floor_um": self.noise_floor_um,

@@ -177,7 +177,7 @@ class CompensationResult(Result):
                          f"{c['after']['E']:.3f} {u} -> {c['report']}")
         return lines
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         return clean_nan({"axes": [_profile_json(p) | {"reversal_variation": r}

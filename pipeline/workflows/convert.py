@@ -157,7 +157,7 @@ class ConvertResult(Result):
         self.files["readings"] = self.out
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"readings": len(self.readings), "tests": self.tests,
                 "out": None if self.out is None else str(self.out)}
 

@@ -107,10 +107,10 @@ class DiscoveryResult(Result):
         self.files = discovery_report.write(self.discovery, self.readings, out, self.source)
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
-        return clean_nan(self.discovery.to_json())
+        return clean_nan(self.discovery.to_dict())
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``discover``: baseline, effects named, the gap, the report."""

@@ -98,10 +98,10 @@ class DriftResult(Result):
                                         notes=self.notes, as_of=self.parameters.get("as_of"))
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
-        series = [f.to_json() for f in self.forecasts]
+        series = [f.to_dict() for f in self.forecasts]
         others = [k for k in (self.parameters.get("evidence") or "laser").split(",")
                   if k != "laser"]
         for j, s in zip(series if others else (), self.series):  # each source's offset

@@ -3,7 +3,7 @@ limit, when it is next due, its alerts, worst first; a static site that opens fr
 
 >>> import backlash as bl
 >>> view = bl.fleet("readings.csv", threshold_um=8.0, out="fleet/")   # doctest: +SKIP
->>> view.axes[0].to_json()["next_visit_due"]                          # doctest: +SKIP
+>>> view.axes[0].to_dict()["next_visit_due"]                          # doctest: +SKIP
 
 The fleet is ``drift``'s analysis per axis, a schedule and a site. This module only wires:
 
@@ -185,7 +185,7 @@ class AxisView:
         late = None if self.as_of is None else (self.as_of - self.next_visit_due).days
         return late if late is not None and late > 0 else None
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """The axis as ``--json`` prints it (docs/fleet.md lists every key and its unit)."""
         from features.visits import DAYS_PER_MONTH
         from pipeline.store.records import summary
@@ -305,7 +305,7 @@ class FleetResult(Result):
         self.files = write_site(self, out)
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         p = self.parameters
         limits = p.get("limits")
         return {"source": self.source, "as_of": p.get("as_of"),
@@ -314,8 +314,8 @@ class FleetResult(Result):
                 "limits": None if limits is None else str(limits) if isinstance(
                     limits, (str, os.PathLike)) else "given",
                 "interval_days": p.get("interval_days"), "n_alerts": len(self.alerts),
-                "axes": [v.to_json() for v in self.axes],
-                "probing": [p.to_json() for p in self.probing]}
+                "axes": [v.to_dict() for v in self.axes],
+                "probing": [p.to_dict() for p in self.probing]}
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``fleet``: parameters, per-axis figures, the site's files."""
@@ -325,7 +325,7 @@ class FleetResult(Result):
         params = {"data": self.source, "data_sha256": data_hash(self.readings),
                   **{k: p.get(k) for k in ("threshold_um", "threshold_arcsec", "interval_days",
                                            "warn_months", "alpha", "min_jump_sigma")},
-                  "limits": self.to_json()["limits"] or "",
+                  "limits": self.to_dict()["limits"] or "",
                   "n_axes": len(self.axes)}
         metrics = {"n_alerts": float(len(self.alerts))}
         for v in self.axes:

@@ -72,14 +72,14 @@ class HiddenEffectsResult(Result):
         self.files = paths
         return paths
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         return clean_nan(self.score)
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``hidden-effects``: the score as metrics, the files."""
-        score = {k: v for k, v in self.to_json().items() if v is not None}
+        score = {k: v for k, v in self.to_dict().items() if v is not None}
         return TrackingRecord("hidden-effects", "hidden-effect benchmark", metrics=score,
                               artifacts=list(self.files.values()))
 

@@ -86,7 +86,7 @@ class IngestResult(Result):
     replaced: int = 0
     new_store: bool = False
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"store": self.store, "files": self.inputs, "added": self.added,
                 "unchanged": self.unchanged, "replaced": self.replaced,
                 "readings_added": self.readings_added, "tests_in_store": self.tests_in_store,

@@ -3,7 +3,7 @@
 
 >>> import backlash as bl
 >>> result = bl.kinematics("experiments/data/kinematics/probes.csv")   # doctest: +SKIP
->>> result.to_json()["machines"][0]["play_arcsec"]                       # doctest: +SKIP
+>>> result.to_dict()["machines"][0]["play_arcsec"]                       # doctest: +SKIP
 {'A': 9.8..., 'C': 4.1...}
 
 The numbers come from ``models.machine.kinematics`` (linear least squares on the error chain,
@@ -73,7 +73,7 @@ class MachineKinematics:
     tables: dict
     date: str | None = None
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.probing import axes_of, error_names
         from models.machine.kinematics import play_names
 
@@ -128,11 +128,11 @@ class KinematicsResult(Result):
     parameters: dict = dataclass_field(default_factory=dict)
     recorded: object = None
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         return clean_nan({"source": self.source,
-                          "machines": [m.to_json() for m in self.machines],
+                          "machines": [m.to_dict() for m in self.machines],
                           "compensation_files": sorted(self.compensation),
                           "notes": list(self.notes)})
 
@@ -140,7 +140,7 @@ class KinematicsResult(Result):
         """Per machine: the plays, then every error (or its group) with its uncertainty."""
         lines = []
         for m in self.machines:
-            j = m.to_json()
+            j = m.to_dict()
             plays = ", ".join(f"{a} {v} ± {j['play_u_arcsec'][a]} arcsec"
                               for a, v in j["play_arcsec"].items())
             lines.append(f"{m.machine_id} visit {m.visit} ({m.kinematics}): play {plays}; "
@@ -164,7 +164,7 @@ class KinematicsResult(Result):
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        self.files = {"json": write_json(out / "kinematics.json", self.to_json())}
+        self.files = {"json": write_json(out / "kinematics.json", self.to_dict())}
         rows = []
         for m in self.machines:
             i = m.ident

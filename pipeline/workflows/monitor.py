@@ -83,7 +83,7 @@ class AxisMonitor:
     alerts: list = field(default_factory=list)
     series: object = None  # models.condition.drift.DriftSeries, or None below two days
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         days = [{"date": r.date, "lost_motion_um": _num(r.lost_motion_um),
                  "lost_motion_u_um": _num(r.lost_motion_u_um), "reversals": int(r.reversals)}
                 for r in self.days.itertuples()]
@@ -128,8 +128,8 @@ class MonitorResult(Result):
     def alerts(self) -> list[dict]:
         return axis_alerts(self.axes)
 
-    def to_json(self) -> dict:
-        return {"axes": [a.to_json() for a in self.axes], "notes": list(self.notes)}
+    def to_dict(self) -> dict:
+        return {"axes": [a.to_dict() for a in self.axes], "notes": list(self.notes)}
 
     def write(self, out) -> dict[str, Path]:
         """``monitor.json``, ``daily.csv`` and the report page ``monitor.html`` (with its
@@ -138,7 +138,7 @@ class MonitorResult(Result):
         from pipeline.reports.monitor_report import write_monitor_report
 
         out = Path(out)
-        files = {"json": write_json(out / "monitor.json", self.to_json())}
+        files = {"json": write_json(out / "monitor.json", self.to_dict())}
         with atomic_path(out / "daily.csv") as tmp:
             self.daily.to_csv(tmp, index=False)
         files["daily"] = out / "daily.csv"

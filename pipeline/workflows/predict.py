@@ -100,7 +100,7 @@ class PredictionResult(Result):
         self.files = {"predictions": Path(out)}
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
         out = self.predictions

@@ -109,10 +109,10 @@ class RankResult(Result):
                                        target_kind=self.target_kind, unit=self.unit)
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from features.readings.fileio import clean_nan
 
-        return clean_nan(self.explanation.to_json())
+        return clean_nan(self.explanation.to_dict())
 
     def tracking_record(self) -> TrackingRecord:
         """One run in experiment ``rank``: parameters, every score as a metric, the files."""

@@ -66,7 +66,7 @@ class ReplicationResult(Result):
 
         return markdown(self.rows)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """The side-by-side table (``rows``: quantity, paper, with and without deviations,
         note) and the source."""
         return {"source": self.source, "rows": self.rows}

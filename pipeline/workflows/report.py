@@ -72,9 +72,9 @@ class ReportResult(Result):
         self.files = write_report(self.iso, out, self.meta)
         return self.files
 
-    def to_json(self) -> list[dict]:
+    def to_dict(self) -> list[dict]:
         """The figures of every test, as ``iso --json`` prints them."""
-        return self.iso.to_json()
+        return self.iso.to_dict()
 
 
 def report(data, format: str = "auto", drop_outliers: bool = False, uncertainty=None,

@@ -92,7 +92,7 @@ class SimulationResult(Result):
         return (f"{len(self.readings)} readings in {self.readings['test_id'].nunique()} tests "
                 f"({self.parameters['config']['system']} measuring system)")
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"readings": len(self.readings), "tests": int(self.readings["test_id"].nunique()),
                 "system": self.parameters["config"]["system"], "seed": self.parameters["seed"],
                 "files": {role: str(path) for role, path in self.files.items()}}
@@ -212,7 +212,7 @@ class TraceSimulationResult(Result):
         return (f"{len(self.trace)} samples of {self.truth['axis'].nunique()} axes over "
                 f"{self.truth['date'].nunique()} days")
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"samples": len(self.trace), "days": int(self.truth["date"].nunique()),
                 "seed": self.seed, "files": {k: str(v) for k, v in self.files.items()}}
 

@@ -77,7 +77,7 @@ class StiffnessResult(Result):
     dates: dict = field(default_factory=dict, repr=False)
     recorded: object = None
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """SCHEMA.md section 12: ``{"machines": [{"machine_id", "centres": [...], "map"}]}``;
         with ``at``, ``deflection`` (one record per point)."""
         from features.readings.fileio import clean_nan
@@ -114,7 +114,7 @@ class StiffnessResult(Result):
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        saved = self.to_json()
+        saved = self.to_dict()
         for m in saved["machines"]:  # the covariances, so that a saved map predicts again
             m["map"]["covariance"] = {name: cov.tolist() for name, (_, cov)
                                       in self.maps[m["machine_id"]].components.items()}
@@ -186,7 +186,7 @@ def stiffness(data, *, at=None, ram_top_mm: float | None = None, form: str = "au
         notes += [f"machine {machine_id!r}: {n}" for n in map_notes]
         maps[machine_id] = stiffness_map
         machines.append({"machine_id": machine_id, "centres": centres_json,
-                         "map": stiffness_map.to_json()})
+                         "map": stiffness_map.to_dict()})
     deflection = None
     if at is not None:
         deflection, at_notes = _deflection(at, maps, items)

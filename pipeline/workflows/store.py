@@ -58,7 +58,7 @@ class StoreCheckResult(Result):
     def ok(self) -> bool:
         return not self.problems
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"store": self.store, "ok": self.ok, "tests": self.tests,
                 "readings": self.readings, "problems": self.problems, "repaired": self.repaired}
 

@@ -83,7 +83,7 @@ class TargetsResult(Result):
 
         return unit_of(self.points["axis"])
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         """``target_kind``, ``target_reason``, ``coverage_factor`` (None without a budget),
         ``unit`` and one object per point; NaN becomes None."""
         from features.readings.fileio import clean_nan

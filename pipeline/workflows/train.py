@@ -125,7 +125,7 @@ class TrainResult(Result):
         self.files.update({p.stem: p for p in self.figures})
         return self.figures
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         from models.estimators.evaluation import resolution_verdict
 
         verdict = ({"resolution": resolution_verdict(self.metrics)}

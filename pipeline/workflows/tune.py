@@ -86,7 +86,7 @@ class TuneResult(Result):
     parameters: dict = field(default_factory=dict)
     trial_records: list = field(default_factory=list)
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"best_params": self.best_params, "best_cv_rmse_um": self.best_cv_rmse_um,
                 "best_trial": self.best_trial, "study": self.parameters.get("study"),
                 "trials": self.trials,

@@ -80,13 +80,13 @@ class UncertaintyResult(Result):
         return both
 
     def write(self, out) -> dict[str, Path]:
-        """``uncertainty.json`` (the ``to_json`` form) under ``out``."""
+        """``uncertainty.json`` (the ``to_dict`` form) under ``out``."""
         from features.readings.fileio import write_json
 
-        self.files = {"json": write_json(Path(out) / "uncertainty.json", self.to_json())}
+        self.files = {"json": write_json(Path(out) / "uncertainty.json", self.to_dict())}
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         b = self.budget
 
         def block(v: unc.BudgetValues) -> dict:

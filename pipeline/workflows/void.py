@@ -56,7 +56,7 @@ class VoidResult(Result):
     tests: list[dict] = field(default_factory=list)
     reason: str = ""
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"store": self.store, "action": self.action, "reason": self.reason,
                 "tests": self.tests}
 

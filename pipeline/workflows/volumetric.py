@@ -116,7 +116,7 @@ class VolumetricResult(Result):
         from features.readings.fileio import atomic_path, write_json
 
         out = Path(out)
-        self.files = {"json": write_json(out / "volumetric.json", self.to_json())}
+        self.files = {"json": write_json(out / "volumetric.json", self.to_dict())}
         frames = [("diagonals", self.readings), ("circles", self.circles)]
         if self.path is not None:
             frames.append(("path", self.path))
@@ -127,7 +127,7 @@ class VolumetricResult(Result):
             self.files[role] = path
         return self.files
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         out = {"seed": self.seed, "diagonals": self.diagonals, "axes": self.axes,
                "finding": {"abbe_below_traditional": self.finding,
                            "holds": all(self.finding.values())},

@@ -59,7 +59,7 @@ class WatchResult(Result):
     updates: int = 0
     config: str = ""
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"days": self.days, "updates": self.updates, "notes": list(self.notes)}
 
 
