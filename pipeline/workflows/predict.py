@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, note
 from models.serving.registry import TrainedModel
 from pipeline.results import Result
-from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only, readings
+from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only
 from pipeline.workflows import readings_of, source_of
 
 if TYPE_CHECKING:
@@ -32,10 +32,9 @@ EXAMPLE = (  # the model answers for the axis it was trained on (M01 X) only
 )
 
 PARAMETERS = {
-    "model": Param((str, os.PathLike, TrainedModel), "model directory written by backlash "
-                   "train", flag="DIR"),
-    "data": readings("readings file (linear tests suffice) or a plan table (target and "
-                     "conditions, no deviations)", accepts=(*READINGS, None)),
+    # both described by the docstring
+    "model": Param((str, os.PathLike, TrainedModel), flag="DIR"),
+    "data": Param((*READINGS, None), flag="DATA", reads_readings=True),
     "plan": python_only(*READINGS, None),  # the command line reads a plan as its DATA
     "format": FORMAT,
     "out": Param((str, os.PathLike, None), "predictions to write", metavar="PRED.csv",
@@ -128,8 +127,9 @@ def predict(model, data=None, *, plan=None, format: str = "auto") -> PredictionR
     model : str, path-like or TrainedModel
         A model directory written by ``train`` (or the model ``load_model`` returns).
     data : str, path-like or DataFrame, optional
-        Readings (linear tests suffice: they give the deviation inputs). A CSV/Parquet file
-        without deviations is read as a plan.
+        Readings (linear tests suffice: they give the deviation inputs), or a fleet store (a
+        folder or a postgresql:// URL, ``backlash ingest``). A CSV/Parquet file without
+        deviations is read as a plan (targets and conditions).
     plan : str, path-like or DataFrame, optional
         A plan table: targets and conditions of a visit not measured yet
         (``features.readings.plan``). Give ``data`` or ``plan``.
