@@ -54,8 +54,10 @@ def render(markdown: str, page: str) -> str:
     if PARAMETERS.search(markdown):
         _importable()
         from pipeline.steps.parameters import parameters_table
+        from pipeline.workflows import workflow
 
-        generated = "\n" + parameters_table(Path(page).stem) + "\n"
+        record = workflow(Path(page).stem)
+        generated = "\n" + parameters_table(record.function, record.parameters) + "\n"
         markdown = PARAMETERS.sub(lambda _: generated, markdown)
     return markdown
 

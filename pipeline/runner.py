@@ -173,7 +173,7 @@ def _live(record, track: bool):
 
 def _selected(record, declared, params: dict) -> dict:
     """``machine``, ``axis``, ``since``, ``until`` not taken by the workflow itself: its
-    ``data`` read with only the selected tests (``pipeline.workflows.readings_of``), or, for
+    ``data`` read with only the selected tests (``pipeline.steps.source.readings_of``), or, for
     a job that takes a Source (``Workflow.source``), the Source of its data."""
     chosen = {k: params.pop(k) for k in SELECTION if k in params and k not in declared}
     # a raw log's reader options the workflow's table declares but its function does not take
@@ -214,7 +214,7 @@ def _select(data, format: str, chosen: dict, raw: dict):
     import os
 
     from features.readings.selection import selection
-    from pipeline.workflows import readings_of
+    from pipeline.steps.source import readings_of
 
     if isinstance(data, (str, os.PathLike)):
         from pipeline.store import is_store

@@ -2,8 +2,9 @@
 and log nothing, so no module under ``pipeline/workflows`` imports the tracking package, MLflow
 or Optuna; the runner does the tracking their records declare. Nor do they open a fleet store
 or record in one: no workflow calls ``open_store`` or ``open_for_records`` or imports
-``pipeline.store.records``; the runner opens the store their records declare. Imports inside
-functions count too."""
+``pipeline.store.records``; the runner opens the store their records declare. The shared steps
+(``pipeline/steps``) sit below the workflows: no step imports ``pipeline.workflows``, neither a
+job nor the package's records and helpers. Imports inside functions count too."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOWS = sorted((ROOT / "pipeline" / "workflows").rglob("*.py"))
+STEPS = sorted((ROOT / "pipeline" / "steps").rglob("*.py"))
 FORBIDDEN = ("pipeline.tracking", "mlflow", "optuna")
 
 
@@ -75,15 +77,12 @@ OPENERS = ("open_store", "open_for_records")
 RECORDS = "pipeline.store.records"
 # what a record says, from records already read (fleet's axes): no store opened, nothing recorded
 PURE_RECORDS = {"summary"}
-# the one reader of a store a job takes as its data (``readings_of``)
-READS_DATA = {"__init__.py": {"readings_of"}}
 
 
-def store_use(source: str, package: str = "pipeline.workflows",
-              allowed: frozenset = frozenset()) -> list[str]:
+def store_use(source: str, package: str = "pipeline.workflows") -> list[str]:
     """``line: what`` of every call or import of ``open_store``/``open_for_records`` and
     every import from ``pipeline.store.records`` (but ``PURE_RECORDS``) in ``source``, at any
-    depth, outside the functions named in ``allowed``."""
+    depth."""
     found = []
 
     def imported(line: int, base: str, names: list[str]) -> None:
@@ -93,40 +92,31 @@ def store_use(source: str, package: str = "pipeline.workflows",
                     or (base == RECORDS and name not in PURE_RECORDS)):
                 found.append(f"{line}: imports {full}")
 
-    def visit(node, inside: bool) -> None:
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name in allowed:
-            inside = True
-        if not inside:
-            if isinstance(node, ast.Import):
-                for alias in node.names:
-                    if alias.name == RECORDS or alias.name.startswith(f"{RECORDS}."):
-                        found.append(f"{node.lineno}: imports {alias.name}")
-            elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    parts = package.split(".")[:len(package.split(".")) - node.level + 1]
-                    base = ".".join([*parts, *([base] if base else [])])
-                imported(node.lineno, base, [alias.name for alias in node.names])
-            elif isinstance(node, ast.Call):
-                name = getattr(node.func, "attr", getattr(node.func, "id", None))
-                literal = (node.args and isinstance(node.args[0], ast.Constant)
-                           and node.args[0].value)
-                if name in OPENERS:
-                    found.append(f"{node.lineno}: calls {name}")
-                elif (name in ("import_module", "__import__") and isinstance(literal, str)
-                      and (literal == RECORDS or literal.startswith(f"{RECORDS}."))):
-                    found.append(f"{node.lineno}: imports {literal}")
-        for child in ast.iter_child_nodes(node):
-            visit(child, inside)
-
-    visit(ast.parse(source), False)
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name == RECORDS or alias.name.startswith(f"{RECORDS}."):
+                    found.append(f"{node.lineno}: imports {alias.name}")
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join([*parts, *([base] if base else [])])
+            imported(node.lineno, base, [alias.name for alias in node.names])
+        elif isinstance(node, ast.Call):
+            name = getattr(node.func, "attr", getattr(node.func, "id", None))
+            literal = node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value
+            if name in OPENERS:
+                found.append(f"{node.lineno}: calls {name}")
+            elif (name in ("import_module", "__import__") and isinstance(literal, str)
+                  and (literal == RECORDS or literal.startswith(f"{RECORDS}."))):
+                found.append(f"{node.lineno}: imports {literal}")
     return found
 
 
 @pytest.mark.parametrize("path", WORKFLOWS, ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_workflow_opens_a_store_or_records_in_one(path):
-    allowed = frozenset(READS_DATA.get(path.name, ()))
-    assert store_use(path.read_text(encoding="utf-8"), allowed=allowed) == []
+    assert store_use(path.read_text(encoding="utf-8")) == []
 
 
 @pytest.mark.parametrize("source", [
@@ -149,7 +139,50 @@ def test_the_store_check_leaves_the_rest_alone():
                      "from pipeline.store.records import summary\n"
                      "from pipeline.store.content import KEYS\n"
                      "def f(store):\n    return store.exists() and store.location\n") == []
-    reader = "def readings_of(data):\n    from pipeline.store import open_store\n" \
-             "    return open_store(data)\n"
-    assert store_use(reader, allowed=frozenset({"readings_of"})) == []
-    assert store_use(reader) != []
+
+
+# ---------------------------------------------------------------------- the steps
+# The shared steps sit below the jobs: a step imports ``features``, ``models`` and the rest of
+# ``pipeline``, never ``pipeline.workflows`` (a job, its records or its helpers), not even
+# inside a function; no step is exempt. What a step needs of a job's record its caller passes.
+WORKFLOWS_PACKAGE = "pipeline.workflows"
+
+
+def imports_workflows(source: str, package: str = "pipeline.steps") -> list[str]:
+    """``line: module`` of every import of ``pipeline.workflows`` or a module under it in
+    ``source``, at any depth (``imported_names``)."""
+    return [f"{line}: {name}" for line, name in imported_names(source, package)
+            if name == WORKFLOWS_PACKAGE or name.startswith(f"{WORKFLOWS_PACKAGE}.")]
+
+
+def test_the_steps_are_checked():
+    assert {p.name for p in STEPS} >= {"__init__.py", "parameters.py", "source.py"}
+
+
+@pytest.mark.parametrize("path", STEPS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_step_imports_the_workflows(path):
+    assert imports_workflows(path.read_text(encoding="utf-8")) == []
+
+
+@pytest.mark.parametrize("source", [
+    "from pipeline.workflows import workflow\n",
+    "from pipeline import workflows\n",
+    "import pipeline.workflows\n",
+    "from pipeline.workflows.iso import IsoResult\n",
+    "def f():\n    from pipeline.workflows import readings_of\n",
+    "class S:\n    def g(self):\n        import pipeline.workflows.fleet as f\n",
+    "from ..workflows import check_params\n",
+    "from .. import workflows\n",
+    "import importlib\nimportlib.import_module('pipeline.workflows.drift')\n",
+    "__import__('pipeline.workflows')\n",
+])
+def test_the_steps_check_sees_every_kind_of_import(source):
+    assert imports_workflows(source) != []
+
+
+def test_the_steps_check_leaves_other_imports_alone():
+    assert imports_workflows("from pipeline.steps.constraints import Interval\n"
+                             "from pipeline.results import Result\n"
+                             "from . import source\nfrom .source import readings_of\n"
+                             "import pipeline.workflows_notes\n"
+                             "def f():\n    from pipeline.store import redact\n") == []

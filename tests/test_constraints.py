@@ -1,5 +1,5 @@
 """The jobs' tables declare scikit-learn's constraints without importing it
-(``pipeline.workflows.constraints``); ``pipeline.workflows.check_params`` converts them to
+(``pipeline.steps.constraints``); ``pipeline.workflows.check_params`` converts them to
 scikit-learn's own objects and lets its ``validate_parameter_constraints`` decide, wording the
 error from those objects: "must be A, B or C; got X", as scikit-learn lists them in its own
 message."""
@@ -19,8 +19,8 @@ import pytest
 from sklearn.utils import _param_validation as sk
 
 from features.readings.errors import InputError
+from pipeline.steps import constraints as ours
 from pipeline.workflows import WORKFLOWS, _converted, check_params
-from pipeline.workflows import constraints as ours
 
 REPO = Path(__file__).resolve().parents[1]
 VALUES = [None, True, False, 0, 0.0, -1, 1, 2, 0.5, 0.25, float("nan"), float("inf"),

@@ -159,12 +159,14 @@ def test_every_job_page_gets_its_parameter_table(job):
     """A job's page holds the ``<!-- parameters -->`` marker and the built page the table the
     command line generates its options from."""
     from pipeline.steps.parameters import parameters_table
+    from pipeline.workflows import workflow
 
     page = "store.md" if job == "store" else f"{job}.md"
     text = (DOCS / page).read_text(encoding="utf-8")
     assert "\n<!-- parameters -->\n" in text, f"docs/{page} lacks its <!-- parameters --> marker"
     rendered = load_hooks().render(text, page)
-    assert parameters_table(job) in rendered and "<!-- parameters -->" not in rendered
+    record = workflow(job)
+    assert parameters_table(record.function, record.parameters) in rendered and "<!-- parameters -->" not in rendered
 
 
 def test_the_nav_lists_every_job_page_from_the_records():

@@ -165,8 +165,9 @@ PACKAGE = {
 
         from pipeline.results import Result
         from pipeline.steps.parameters import FORMAT, Param, readings
-        from pipeline.workflows import check_params, readings_of
-        from pipeline.workflows.constraints import Interval
+        from pipeline.steps.constraints import Interval
+        from pipeline.steps.source import readings_of
+        from pipeline.workflows import check_params
         from numbers import Real
 
         EXAMPLE = (["{twin}", "--scale", "2"], {"data": "{twin}", "scale": 2.0})

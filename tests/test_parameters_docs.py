@@ -74,7 +74,8 @@ def test_a_param_without_help_takes_the_docstrings_description(monkeypatch):
     add_parameters(parser, "rank")
     option = next(a for a in parser._actions if a.dest == "k")
     assert option.help == "Neighbours of the weighted k-NN (default 5)"
-    assert "| `k` | `--k` | `5` | Neighbours of the weighted k-NN |" in parameters_table("rank")
+    assert "| `k` | `--k` | `5` | Neighbours of the weighted k-NN |" in parameters_table(
+        rank.rank, rank.PARAMETERS)
     model = helps(rank.rank, rank.PARAMETERS)["format"]
     assert model == "input layout of a file (default: detect)"  # its own help is kept
 

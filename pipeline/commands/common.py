@@ -14,7 +14,7 @@ from features.readings.errors import InputError
 
 def parse_list(text: str | None, parameter: str) -> list[str] | None:
     """A comma-separated option as a list of names (None when not given)."""
-    from pipeline.workflows import each_once
+    from pipeline.steps.parameters import each_once
 
     if text is None:
         return None

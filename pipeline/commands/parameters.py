@@ -50,7 +50,7 @@ def _names(name: str, param) -> tuple[str, ...]:
 
 def _keywords(name: str, param, default, described: str) -> dict:
     """argparse's keywords for ``param``: a flag for a boolean, else a checked type."""
-    from pipeline.workflows.constraints import takes_bool
+    from pipeline.steps.constraints import takes_bool
 
     # a required option has no default on the command line (the Python call's is not shown);
     # a help is plain text, not a format ("15 %")
@@ -86,7 +86,7 @@ def _default_text(help: str, default) -> str:
 
 def _options(accepts) -> tuple | None:
     """The choices of the first ``StrOptions`` declared, in its order (a set's sorted)."""
-    from pipeline.workflows.constraints import StrOptions
+    from pipeline.steps.constraints import StrOptions
 
     return next((c.options for c in accepts if isinstance(c, StrOptions)), None)
 
@@ -98,7 +98,7 @@ def _parser(name: str, param):
     never empty."""
     from numbers import Integral, Real
 
-    from pipeline.workflows.constraints import Interval
+    from pipeline.steps.constraints import Interval
 
     declared = next((c for c in param.accepts if isinstance(c, Interval)), None)
     if declared is None:

@@ -1,7 +1,7 @@
 """The ISO 230-2 analysis the ``iso`` and ``report`` jobs share: the figures of every test in
 one or more readings files, per target and per axis, with the readings far from their
-siblings flagged (and, on request, left out). The ``iso`` job (``pipeline.workflows.iso``)
-returns them with its files and chart; the ``report`` job prints them, one page per test.
+siblings flagged (and, on request, left out). The ``iso`` job returns them with its files
+and chart; the ``report`` job prints them, one page per test.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from features import standards
 from features.readings import schema
 from features.readings.errors import InputError, note
 from pipeline.results import Result
-from pipeline.workflows import readings_of
+from pipeline.steps.source import readings_of
 
 if TYPE_CHECKING:  # a budget is read when one is given: the module stays light for --help
     from features.uncertainty import UncertaintyBudget
@@ -31,7 +31,7 @@ TABLE_COLUMNS = ("test_id", "unit", "A", "E", "M", "R", "B", "B_mean")
 @dataclass
 class IsoFigures(Result):
     """ISO 230-2 figures of every test (um, arcsec for rotary axes): what the ``iso`` job
-    returns (``pipeline.workflows.iso.IsoResult``, with its files) and the ``report`` job prints.
+    returns (its ``IsoResult``, with its files) and the ``report`` job prints.
 
     Attributes
     ----------

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import pandas as pd
 
 from features.readings.errors import InputError
-from pipeline.workflows import each_once, readings_of, source_of
+from pipeline.steps.parameters import each_once
+from pipeline.steps.source import readings_of, source_of
 
 
 @dataclass

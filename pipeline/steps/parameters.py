@@ -3,7 +3,7 @@
 A job's ``PARAMETERS`` maps every Python parameter of its workflow to a ``Param``. The same
 table does two things, so that a parameter means the same wherever it is given:
 
-* the runner checks every call against it (``pipeline.workflows.check_params``: the
+* the runner checks every call against it (``check_params``: the
   signature bound, exact names, the constraints of scikit-learn's ``_parameter_constraints``);
 * the CLI generates the job's options from it (``pipeline.commands.parameters.add_parameters``):
   the option's name, type, choices, default (the workflow's own, from its signature) and
@@ -24,7 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from numbers import Integral, Real
 
-from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
+from features.readings.errors import InputError
+from pipeline.steps.constraints import HasMethods, Interval, StrOptions
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,7 @@ class Param:
     ----------
     accepts : tuple
         The values it takes: constraints in scikit-learn's language (types, None,
-        ``"boolean"``, ``Interval``, ``StrOptions``...: ``pipeline.workflows.constraints``'s
+        ``"boolean"``, ``Interval``, ``StrOptions``...: ``pipeline.steps.constraints``'s
         declarations, scikit-learn's objects once a value is checked; a heavy type by its
         dotted name).
     help : str or None
@@ -128,6 +129,14 @@ def comma_list(text: str) -> list[str]:
     if twice:
         raise argparse.ArgumentTypeError(f"names {twice[0]!r} twice")
     return listed
+
+
+def each_once(names: list, parameter: str) -> list:
+    """``names`` unchanged when none is given twice; else an InputError naming ``parameter``."""
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise InputError(f"names {duplicated[0]!r} twice", parameter=parameter)
+    return names
 
 
 def scale_offset(text: str) -> tuple[float, float]:
@@ -223,20 +232,18 @@ TARGET = Param((StrOptions(("auto", "paper", "iso")),), "backlash definition: pe
 SEED = (Interval(Integral, 0, 2**32 - 1, closed="both"),)  # numpy's and torch's seed range
 
 
-def parameters_table(job: str) -> str:
-    """The Markdown table of job ``job``'s parameters for its docs page, generated from its
-    table: the Python name, the command line's option (as ``pipeline.commands.parameters``
-    generates it), the default and the meaning (``docs/hooks.py`` puts it on the job's page at
-    its ``<!-- parameters -->`` marker as the site is built)."""
+def parameters_table(function, table) -> str:
+    """The Markdown table of a job's parameters for its docs page, generated from ``table``
+    (its ``PARAMETERS``) and its workflow ``function``: the Python name, the command line's
+    option (as ``pipeline.commands.parameters`` generates it), the default (``function``'s
+    signature's) and the meaning (``helps``). ``docs/hooks.py`` puts it on the job's page at
+    its ``<!-- parameters -->`` marker as the site is built, from the job's record."""
     import inspect
 
-    from pipeline.workflows import workflow
-
-    record = workflow(job)
-    signature = inspect.signature(record.function).parameters
-    described = helps(record.function, record.parameters)
+    signature = inspect.signature(function).parameters
+    described = helps(function, table)
     rows = ["| Python | command line | default | meaning |", "|---|---|---|---|"]
-    for name, param in record.parameters.items():
+    for name, param in table.items():
         if not param.on_cli:
             continue
         default = signature[name].default if name in signature else None

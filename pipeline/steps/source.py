@@ -1,7 +1,11 @@
 """A job's data as the user gave it: the readings, where they came from, and the selection.
 
-The runner hands a job whose record says ``source=True`` (``pipeline.workflows.Workflow``) a
-``Source`` instead of a frame it read itself: the file, store or frame as given, its format,
+``readings_of`` turns a job's data (a readings file, a fleet store or a frame) into the
+validated readings frame and ``source_of`` gives the name a result calls it by: every job
+reads its data through them, directly or through its ``Source``.
+
+The runner hands a job whose record says ``source=True`` (its ``Workflow``) a ``Source``
+instead of a frame it read itself: the file, store or frame as given, its format,
 the test selection (``features.readings.selection``) and a raw log's reader options. The job
 then reads what it needs: the selected tests (``readings``), or every machine axis
 (``all_readings``) when what it says about one axis depends on the others (the fleet's wear
@@ -19,7 +23,74 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
+from features.readings.errors import InputError
 from features.readings.selection import Selection
+
+
+def readings_of(data, format: str = "auto", parameter: str = "data", selection=None,
+                options: dict | None = None, axes: bool = True):
+    """The validated readings frame a job works on.
+
+    Parameters
+    ----------
+    data : str, path-like or DataFrame
+        A readings file (read in ``format``), a fleet store (a store folder or a
+        ``postgresql://`` URL: ``pipeline.store``) or a frame as ``read`` returns it (checked,
+        not re-read).
+    format : str
+        Layout of a readings file (``"auto"``: detect); a store takes only ``"auto"``.
+    parameter : str
+        The caller's parameter that passed ``data`` (named in errors).
+    selection : features.readings.selection.Selection, optional
+        Keep only these tests (a store reads only what it may keep).
+    options : dict, optional
+        Options of a raw log's reader (``channels``, ``reference_scale``: the ``camonitor``
+        layout); only a file of that layout takes them.
+    axes : bool, default True
+        False: every machine axis within the selection's dates, the machine and axis filters
+        only checked and naming a file that states none (``Selection.apply``).
+    """
+    selection = selection or Selection()
+    if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import is_store, open_store
+
+        if is_store(data) or os.path.isdir(data):
+            _no_options(options, data)
+            if format != "auto":
+                raise InputError(f"is {format!r}, but a fleet store holds validated readings; "
+                                 "expected 'auto'", parameter="format")
+            store = open_store(data)
+            if axes or selection.empty:
+                return store.read(selection)
+            # the dates read in the store (by partition or in SQL), the axes kept here
+            return selection.apply(store.read(selection.dates()), store.location, axes=False)
+        from features.readings.io import read_readings
+
+        frame = read_readings(data, format, **(options or {}))
+    else:
+        from features.readings.validation import check_readings
+
+        _no_options(options, parameter)
+        frame = check_readings(data, parameter)
+    return selection.apply(frame, frame.attrs.get("source", parameter), axes=axes)
+
+
+def _no_options(options: dict | None, source) -> None:
+    """A store or a frame holds readings already: a raw log's options do not apply."""
+    given = [name for name, value in (options or {}).items() if value is not None]
+    if given:
+        raise InputError(f"applies to a raw log (--format camonitor) only; {source} holds "
+                         "readings", parameter=given[0])
+
+
+def source_of(data, readings) -> str:
+    """The name a result gives its data: the path or store as given (a store URL without its
+    password), or the frame's ``attrs["source"]``."""
+    if isinstance(data, (str, os.PathLike)):
+        from pipeline.store import redact
+
+        return redact(data)
+    return readings.attrs.get("source", "readings")
 
 
 @dataclass
@@ -58,8 +129,6 @@ class Source:
 
     def readings(self):
         """The validated readings of the tests the selection keeps (read once)."""
-        from pipeline.workflows import readings_of
-
         if self._selected is None:
             self._selected = readings_of(self.data, self.format, self.parameter,
                                          self.selection, self.options)
@@ -69,8 +138,6 @@ class Source:
         """The validated readings of every machine axis within the selection's dates (read
         once). The machine and axis filters keep every axis here, but they still name a file
         that states none, and a selection that keeps no test is still refused."""
-        from pipeline.workflows import readings_of
-
         if self._all is None:
             self._all = readings_of(self.data, self.format, self.parameter, self.selection,
                                     self.options, axes=False)
@@ -155,8 +222,6 @@ class Source:
     def name(self, readings=None) -> str:
         """The name a result gives its data: the path or store as given (a URL without its
         password), else the frame's ``attrs["source"]`` (of ``readings`` when given)."""
-        from pipeline.workflows import source_of
-
         if isinstance(self.data, (str, os.PathLike)):
             return source_of(self.data, None)
         frame = readings if readings is not None else self.data

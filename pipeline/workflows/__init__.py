@@ -3,7 +3,7 @@
 The CLI (``pipeline.commands``), experiment files (``pipeline.experiment``) and Python users
 (``pipeline.api``) all call these functions. A workflow checks what it is given with
 ``check_params`` (scikit-learn's constraint language and its checking, the same as the
-estimators' ``_parameter_constraints``: ``pipeline.workflows.constraints``), never prints
+estimators' ``_parameter_constraints``: ``pipeline.steps.constraints``), never prints
 (notes are ``BacklashWarning`` or result fields, progress goes to the ``progress`` callback)
 and names Python parameters in its errors.
 """
@@ -25,7 +25,7 @@ def check_params(constraints: Mapping, values: dict, caller: str) -> None:
         Parameter name -> list of constraints (``Interval``, ``StrOptions``, types,
         ``"array-like"``, ``None``...), as in scikit-learn's ``_parameter_constraints``, or its
         ``Param`` (``pipeline.steps.parameters``: its ``accepts``); a constraint may be a
-        declaration of ``pipeline.workflows.constraints`` (converted to scikit-learn's object
+        declaration of ``pipeline.steps.constraints`` (converted to scikit-learn's object
         when its parameter is first checked, once per table) and a type may be named by its
         dotted path (``"pandas.DataFrame"``, imported then).
     values : dict
@@ -74,7 +74,7 @@ _KEPT = 64
 def _converted(table: Mapping, name: str) -> tuple[list, bool, str]:
     """Parameter ``name``'s constraints in ``table`` as scikit-learn's objects, whether it
     takes a boolean, and the constraints in scikit-learn's words (``_listed``)."""
-    from pipeline.workflows.constraints import resolved, takes_bool
+    from pipeline.steps.constraints import resolved, takes_bool
 
     kept = _CONVERTED.get(id(table))
     if kept is None or kept[0] is not table:
@@ -106,86 +106,6 @@ def readings_data() -> list:
     import pandas as pd
 
     return [str, os.PathLike, pd.DataFrame]
-
-
-def each_once(names: list, parameter: str) -> list:
-    """``names`` unchanged when none is given twice; else an InputError naming ``parameter``."""
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise InputError(f"names {duplicated[0]!r} twice", parameter=parameter)
-    return names
-
-
-def readings_of(data, format: str = "auto", parameter: str = "data", selection=None,
-                options: dict | None = None, axes: bool = True):
-    """The validated readings frame a workflow works on.
-
-    Parameters
-    ----------
-    data : str, path-like or DataFrame
-        A readings file (read in ``format``), a fleet store (a store folder or a
-        ``postgresql://`` URL: ``pipeline.store``) or a frame as ``read`` returns it (checked,
-        not re-read).
-    format : str
-        Layout of a readings file (``"auto"``: detect); a store takes only ``"auto"``.
-    parameter : str
-        The caller's parameter that passed ``data`` (named in errors).
-    selection : features.readings.selection.Selection, optional
-        Keep only these tests (a store reads only what it may keep).
-    options : dict, optional
-        Options of a raw log's reader (``channels``, ``reference_scale``: the ``camonitor``
-        layout); only a file of that layout takes them.
-    axes : bool, default True
-        False: every machine axis within the selection's dates, the machine and axis filters
-        only checked and naming a file that states none (``Selection.apply``).
-    """
-    import os
-
-    from features.readings.selection import Selection
-
-    selection = selection or Selection()
-    if isinstance(data, (str, os.PathLike)):
-        from pipeline.store import is_store, open_store
-
-        if is_store(data) or os.path.isdir(data):
-            _no_options(options, data)
-            if format != "auto":
-                raise InputError(f"is {format!r}, but a fleet store holds validated readings; "
-                                 "expected 'auto'", parameter="format")
-            store = open_store(data)
-            if axes or selection.empty:
-                return store.read(selection)
-            # the dates read in the store (by partition or in SQL), the axes kept here
-            return selection.apply(store.read(selection.dates()), store.location, axes=False)
-        from features.readings.io import read_readings
-
-        frame = read_readings(data, format, **(options or {}))
-    else:
-        from features.readings.validation import check_readings
-
-        _no_options(options, parameter)
-        frame = check_readings(data, parameter)
-    return selection.apply(frame, frame.attrs.get("source", parameter), axes=axes)
-
-
-def _no_options(options: dict | None, source) -> None:
-    """A store or a frame holds readings already: a raw log's options do not apply."""
-    given = [name for name, value in (options or {}).items() if value is not None]
-    if given:
-        raise InputError(f"applies to a raw log (--format camonitor) only; {source} holds "
-                         "readings", parameter=given[0])
-
-
-def source_of(data, readings) -> str:
-    """The name a result gives its data: the path or store as given (a store URL without its
-    password), or the frame's ``attrs["source"]``."""
-    import os
-
-    if isinstance(data, (str, os.PathLike)):
-        from pipeline.store import redact
-
-        return redact(data)
-    return readings.attrs.get("source", "readings")
 
 
 # --------------------------------------------------------------------------- the registry

@@ -21,8 +21,8 @@ from numbers import Real
 from pathlib import Path
 
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import Param
-from pipeline.workflows.constraints import Interval
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from features.readings.errors import InputError, Progress, note, report
 from models.serving import registry
 from pipeline.results import Result
+from pipeline.steps.constraints import StrOptions
 from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
@@ -25,10 +26,10 @@ from pipeline.steps.parameters import (
     TRUTH,
     Param,
     comma_list,
+    each_once,
     readings,
 )
-from pipeline.workflows import check_params, each_once
-from pipeline.workflows.constraints import StrOptions
+from pipeline.workflows import check_params
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -21,6 +21,7 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from pipeline.compensation import CONTROLLERS, SIGNS, read, resolve
 from pipeline.results import Result
+from pipeline.steps.constraints import HasMethods, Interval, StrOptions
 from pipeline.steps.parameters import (
     BUDGET,
     FORMAT,
@@ -29,8 +30,7 @@ from pipeline.steps.parameters import (
     Param,
     comma_list,
 )
-from pipeline.workflows import readings_of
-from pipeline.workflows.constraints import HasMethods, Interval, StrOptions
+from pipeline.steps.source import readings_of
 
 
 def controller_help() -> str:

@@ -18,7 +18,8 @@ from features.readings import schema
 from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, RAW_LOG, Param, python_only, readings
-from pipeline.workflows import check_params, readings_of
+from pipeline.steps.source import readings_of
+from pipeline.workflows import check_params
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

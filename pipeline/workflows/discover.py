@@ -15,7 +15,7 @@ from pathlib import Path
 from features.readings.errors import note
 from pipeline.results import Result, TrackingRecord
 from pipeline.steps.parameters import FORMAT, READINGS, SEED, Param
-from pipeline.workflows import readings_of, source_of
+from pipeline.steps.source import readings_of, source_of
 
 DEFAULT_BASELINE = "backlash,lead_error_linear"
 

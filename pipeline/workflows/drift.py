@@ -22,8 +22,7 @@ from features.readings.errors import note
 from models.condition.settings import DEFAULTS, MaintenanceSettings
 from pipeline.results import Result, TrackingRecord, axis_alerts
 from pipeline.steps.parameters import BUDGET, FORMAT, MAINTENANCE, MODEL, Param, readings
-from pipeline.steps.source import Source
-from pipeline.workflows import source_of
+from pipeline.steps.source import Source, source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

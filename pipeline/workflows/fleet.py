@@ -34,10 +34,9 @@ from features.readings import schema
 from features.readings.errors import InputError, note
 from models.condition.settings import DEFAULT_INTERVAL_DAYS, DEFAULTS, MaintenanceSettings
 from pipeline.results import Result, TrackingRecord, axis_alerts
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import FORMAT, MAINTENANCE, Param, python_only, readings
-from pipeline.steps.source import Source
-from pipeline.workflows import source_of
-from pipeline.workflows.constraints import Interval
+from pipeline.steps.source import Source, source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

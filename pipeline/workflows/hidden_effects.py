@@ -17,8 +17,8 @@ from pathlib import Path
 from features.readings.errors import InputError, Progress, report
 from models.physics import SHIPPED
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.constraints import HasMethods, Interval
 from pipeline.steps.parameters import PROGRESS, Param
-from pipeline.workflows.constraints import HasMethods, Interval
 
 SCENARIOS = SHIPPED / "hidden_effect_scenarios.toml"  # the product's, whatever the working folder
 FILES = {"scenarios": "scenarios.csv", "by_design": "score_by_design.csv", "score": "score.json"}

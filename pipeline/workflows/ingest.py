@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from features.readings.errors import InputError, note
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, readings
-from pipeline.workflows import readings_of
+from pipeline.steps.source import readings_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -21,9 +21,9 @@ from pathlib import Path
 
 from features import standards
 from features.readings.errors import InputError
+from pipeline.steps.constraints import StrOptions
 from pipeline.steps.iso import IsoFigures
 from pipeline.steps.parameters import BUDGET, FORMAT, RAW_LOG, READINGS, Param, readings
-from pipeline.workflows.constraints import StrOptions
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from features.readings.errors import InputError
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval, StrOptions
 from pipeline.steps.parameters import Param
-from pipeline.workflows.constraints import Interval, StrOptions
 
 # Controllers whose rotary-axis backlash is a machine parameter of its own (written alone, so
 # the axis's position-error table on the machine is left as it is).

@@ -29,8 +29,8 @@ from pathlib import Path
 from features.readings.errors import InputError, note
 from pipeline.engines import ENGINES
 from pipeline.results import Result, axis_alerts
+from pipeline.steps.constraints import Interval, StrOptions
 from pipeline.steps.parameters import PROGRESS, Param, python_only, scale_offset
-from pipeline.workflows.constraints import Interval, StrOptions
 
 _RAW = "raw controller logs (--log-format camonitor or halsampler)"
 _POSITIVE = Interval(Real, 0, None, closed="neither")

@@ -17,7 +17,7 @@ from features.readings.errors import InputError, note
 from models.serving.registry import TrainedModel
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, READINGS, Param, python_only
-from pipeline.workflows import readings_of, source_of
+from pipeline.steps.source import readings_of, source_of
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from features.readings.errors import InputError, Progress, report
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.constraints import Interval, StrOptions
 from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
@@ -25,8 +26,7 @@ from pipeline.steps.parameters import (
     Param,
     readings,
 )
-from pipeline.workflows import readings_of, source_of
-from pipeline.workflows.constraints import Interval, StrOptions
+from pipeline.steps.source import readings_of, source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from features.readings.errors import Progress
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import FORMAT, RANDOM_SEED, READINGS, TRUTH, Param
-from pipeline.workflows import readings_of, source_of
-from pipeline.workflows.constraints import Interval
+from pipeline.steps.source import readings_of, source_of
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -16,8 +16,8 @@ from pathlib import Path
 from features.readings.errors import InputError
 from models.physics import PRESETS
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import SEED, Param, python_only
-from pipeline.workflows.constraints import Interval
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

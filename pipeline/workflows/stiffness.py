@@ -19,8 +19,8 @@ from numbers import Real
 from pathlib import Path
 
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval, StrOptions
 from pipeline.steps.parameters import Param
-from pipeline.workflows.constraints import Interval, StrOptions
 
 FORMS = ("auto", "constant", "linear", "cubic", "quadratic")
 

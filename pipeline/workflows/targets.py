@@ -15,7 +15,7 @@ from pathlib import Path
 from features import uncertainty as unc
 from pipeline.results import Result
 from pipeline.steps.parameters import BUDGET, FORMAT, TARGET, Param, readings
-from pipeline.workflows import readings_of, source_of
+from pipeline.steps.source import readings_of, source_of
 
 # Columns of the printed table (those the points have).
 TABLE_COLUMNS = ("machine_id", "axis", "visit", "feed_mm_min", "dwell_s", "repeat", "target",

@@ -16,6 +16,7 @@ from numbers import Integral
 
 from features.readings.errors import InputError, Progress
 from pipeline.results import Result, TrackingRecord
+from pipeline.steps.constraints import HasMethods, Interval
 from pipeline.steps.parameters import (
     FEATURES,
     FORMAT,
@@ -25,7 +26,6 @@ from pipeline.steps.parameters import (
     python_only,
     readings,
 )
-from pipeline.workflows.constraints import HasMethods, Interval
 
 DEFAULT_STUDY = "backlash-network"  # the default study name: this, then the data's digest
 _COUNT = Interval(Integral, 1, None, closed="left")

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from features import uncertainty as unc
 from pipeline.results import Result
+from pipeline.steps.constraints import StrOptions
 from pipeline.steps.parameters import Param
-from pipeline.workflows.constraints import StrOptions
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).

@@ -21,8 +21,8 @@ from numbers import Integral, Real
 from pathlib import Path
 
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import SEED, Param
-from pipeline.workflows.constraints import Interval
 
 # The seed paper's Table 1 [um]: the extreme deviation before and after compensation
 PAPER_TABLE1 = {

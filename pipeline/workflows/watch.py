@@ -18,8 +18,8 @@ from numbers import Real
 
 from features.readings.errors import InputError
 from pipeline.results import Result
+from pipeline.steps.constraints import Interval
 from pipeline.steps.parameters import Param, python_only
-from pipeline.workflows.constraints import Interval
 
 _POSITIVE = Interval(Real, 0, None, closed="neither")
 # One call as the command line and Python spell it (tests/test_runner.py's agreement): a

@@ -9,7 +9,7 @@ heavy (scikit-learn brings numpy, scipy and pandas: a second or more). The comma
 what it needs from a declaration (an ``Options``'s choices, in order; an ``Interval``'s number
 type), and ``sklearn()`` builds scikit-learn's own object, imported then.
 
-``pipeline.workflows.check_params`` converts a table's declarations (``resolved``) and leaves
+The runner's ``check_params`` converts a table's declarations (``resolved``) and leaves
 the decision to scikit-learn's ``validate_parameter_constraints``; nothing here decides
 whether a value meets a constraint. Options given as a tuple keep its order (in scikit-learn's
 message and in the command line's choices); a set's are sorted.
