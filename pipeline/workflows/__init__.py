@@ -98,16 +98,6 @@ def _listed(given: list) -> str:
     return shown[0] if len(shown) == 1 else f"{', '.join(shown[:-1])} or {shown[-1]}"
 
 
-def readings_data() -> list:
-    """The constraint of a workflow's readings ``data``: a readings file or a fleet store (a
-    path or a ``postgresql://`` URL), or a readings frame."""
-    import os
-
-    import pandas as pd
-
-    return [str, os.PathLike, pd.DataFrame]
-
-
 # --------------------------------------------------------------------------- the registry
 import importlib
 from dataclasses import dataclass
