@@ -7,7 +7,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-from pipeline import api
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKFLOWS = ROOT / "pipeline" / "workflows"
@@ -45,12 +45,27 @@ def test_parameter_checks_finds_a_call_however_it_is_named(tmp_path):
     assert parameter_checks(module) == [("job", 4), ("R", 7), ("<module>", 8)]
 
 
-def test_no_job_module_checks_parameters_the_runner_checks():
-    """Only a plain function of ``bl`` that is not a job (``read``, ``validate``, ``write``...:
-    ``pipeline.api``'s table of them) checks its own parameters: no runner calls it."""
-    plain = {(module, name) for name, module in api._WHERE.items()}
+def test_no_job_module_calls_a_parameter_check():
+    """Not even a plain function of ``bl`` that is not a job (``read``, ``validate``,
+    ``write``, ``backtest``: ``pipeline.api``'s table of them): it declares its check with
+    ``pipeline.workflows.checked``, as scikit-learn's ``validate_params`` does."""
     calls = sorted(f"{path.relative_to(ROOT)}:{line} ({where})"
                    for path in WORKFLOWS.rglob("*.py") if path.name != "__init__.py"
-                   for where, line in parameter_checks(path)
-                   if (path.stem, where) not in plain)
+                   for where, line in parameter_checks(path))
     assert calls == []
+
+
+@pytest.mark.parametrize(("function", "call", "parameter"), [
+    ("read", {"path": 3}, "path"),
+    ("read", {"path": "x.csv", "format": "nope"}, "format"),
+    ("validate", {"frame": None, "source": 3}, "source"),
+    ("write", {"readings": None, "path": 3}, "path"),
+    ("backtest", {"data": "x.csv", "seed": -1}, "seed"),
+])
+def test_a_plain_function_refuses_a_bad_parameter_before_it_runs(function, call, parameter):
+    import backlash as bl
+    from features.readings.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        getattr(bl, function)(**call)
+    assert err.value.parameter == parameter

@@ -1,11 +1,13 @@
 """Workflows: one function per job, typed keyword parameters in, a result object out.
 
 The CLI (``pipeline.commands``), experiment files (``pipeline.experiment``) and Python users
-(``pipeline.api``) all call these functions. A workflow checks what it is given with
-``check_params`` (scikit-learn's constraint language and its checking, the same as the
-estimators' ``_parameter_constraints``: ``pipeline.steps.constraints``), never prints
-(notes are ``BacklashWarning`` or result fields, progress goes to the ``progress`` callback)
-and names Python parameters in its errors.
+(``pipeline.api``) all call these functions through the runner, which checks every call
+against the job's ``PARAMETERS`` with ``check_params`` (scikit-learn's constraint language and
+its checking, the same as the estimators' ``_parameter_constraints``:
+``pipeline.steps.constraints``); a plain function of a job module that Python users call
+directly (``bl.read``, ``bl.backtest``) declares its check with ``checked``, as scikit-learn's
+``validate_params`` does. A workflow never prints (notes are ``BacklashWarning`` or result
+fields, progress goes to the ``progress`` callback) and names Python parameters in its errors.
 """
 
 from __future__ import annotations
@@ -62,6 +64,31 @@ def check_params(constraints: Mapping, values: dict, caller: str) -> None:
                 refused = True
         if refused:
             raise InputError(f"must be {listed}; got {value!r}", parameter=name)
+
+
+def checked(table: Mapping, *names: str, caller: str | None = None):
+    """Decorator: each call of a plain function (not a job the runner calls) is checked
+    against ``table`` (its job's ``PARAMETERS``) with ``check_params`` before it runs, for the
+    parameters ``names`` (default: every parameter of the function ``table`` declares), as
+    scikit-learn's ``validate_params`` checks a function's arguments."""
+    import functools
+    import inspect
+
+    def decorate(function):
+        signature = inspect.signature(function)
+        chosen = names or tuple(n for n in signature.parameters if n in table)
+
+        @functools.wraps(function)
+        def call(*args, **kwargs):
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            given = {n: v for n, v in bound.arguments.items() if n in chosen}
+            check_params(table, given, caller or function.__name__)
+            return function(*args, **kwargs)
+
+        return call
+
+    return decorate
 
 
 # id(table) -> (table, {name: (declared, scikit-learn's constraints, takes a bool, words)}):

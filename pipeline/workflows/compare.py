@@ -29,7 +29,7 @@ from pipeline.steps.parameters import (
     each_once,
     readings,
 )
-from pipeline.workflows import check_params
+from pipeline.workflows import checked
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -273,6 +273,9 @@ class BacktestResult(Result):
                               artifacts=list(self.files.values()))
 
 
+# a plain function (``bl.backtest``), not a job the runner checks: checked against compare's
+# table
+@checked(PARAMETERS, "data", "models", "format", "target", "features", "truth", "seed")
 def backtest(data, *, models: list[str] | None = None, format: str = "auto",
              target: str = "auto", features: list[str] | None = None, truth=None,
              seed: int = 0, progress: Progress | None = None) -> BacktestResult:
@@ -285,11 +288,6 @@ def backtest(data, *, models: list[str] | None = None, format: str = "auto",
     -------
     BacktestResult
     """
-    # a plain function (``bl.backtest``), not a job the runner checks: its parameters are
-    # checked here against compare's table
-    check_params(PARAMETERS, {"data": data, "models": models, "format": format,
-                              "target": target, "features": features, "truth": truth,
-                              "seed": seed}, "backtest")
     return _backtest(data, models=models, format=format, target=target, features=features,
                      truth=truth, seed=seed, progress=progress)
 

@@ -19,7 +19,7 @@ from features.readings.errors import InputError
 from pipeline.results import Result
 from pipeline.steps.parameters import FORMAT, RAW_LOG, Param, python_only, readings
 from pipeline.steps.source import readings_of
-from pipeline.workflows import check_params
+from pipeline.workflows import checked
 
 # One call as the command line and as Python spell it, which tests/test_runner.py runs both
 # ways and compares (the {names} are its input files and each side's own folders).
@@ -42,6 +42,7 @@ PARAMETERS = {
 }
 
 
+@checked(PARAMETERS, "path", "format", "channels", "reference_scale", "unit")
 def read(path, format: str = "auto", *, machine=None, axis=None, since=None, until=None,
          channels=None, reference_scale=None, unit=None):
     """Read a readings file in any accepted layout, or a fleet store, into the validated
@@ -83,11 +84,11 @@ def read(path, format: str = "auto", *, machine=None, axis=None, since=None, unt
     from features.readings.selection import selection
 
     raw = {"channels": channels, "reference_scale": reference_scale, "unit": unit}
-    check_params(PARAMETERS, {"path": path, "format": format, **raw}, "read")
     chosen = selection(machine=machine, axis=axis, since=since, until=until)
     return readings_of(path, format, "path", chosen, raw)
 
 
+@checked(PARAMETERS, "source")
 def validate(frame, source: str = "<memory>"):
     """Check and normalise a readings frame built in code, as ``read`` does for a file.
 
@@ -110,10 +111,10 @@ def validate(frame, source: str = "<memory>"):
 
     if not isinstance(frame, pd.DataFrame):
         raise TypeError(f"frame must be a pandas DataFrame; got {type(frame).__name__}")
-    check_params(PARAMETERS, {"source": source}, "validate")
     return validate_frame(frame, Path(source), None)
 
 
+@checked(PARAMETERS, "path")
 def write(readings, path) -> Path:
     """Write validated readings as CSV or Parquet (by the suffix of ``path``), atomically.
 
@@ -123,7 +124,6 @@ def write(readings, path) -> Path:
         ``readings`` is not a validated readings frame, or ``path`` is not a .csv or .parquet
         name or cannot be written.
     """
-    check_params(PARAMETERS, {"path": path}, "write")
     from features.readings.io import write_readings
     from features.readings.validation import check_readings
 
