@@ -37,16 +37,10 @@ PARAMETERS = {
     "out": Param((str, os.PathLike, None), "output folder for the report (optional with --json)",
                  output="folder"),
     **MAINTENANCE,  # the analysis drift and fleet share
-    "model": Param((*MODEL, None), "trained model directory: monitor its residuals and inputs",
-                   metavar="DIR"),
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 uncertainty budget: the expanded uncertainty of "
-                         "each visit's backlash; steps within it do not alert",
-                         metavar="BUDGET.toml"),
-    "evidence": Param((str, list, tuple), "sources of each series: laser (default), trace, "
-                      "ballbar, a comma-separated list or all; the others are shifted onto the "
-                      "laser by their estimated offsets (docs/drift.md)", metavar="SOURCES"),
-    "store": Param((str, os.PathLike, None), "fleet store holding the trace and ballbar records "
-                   "(default the readings when they name a store)", metavar="STORE"),
+    "model": Param((*MODEL, None), metavar="DIR"),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
+    "evidence": Param((str, list, tuple), metavar="SOURCES"),
+    "store": Param((str, os.PathLike, None), metavar="STORE"),
 }
 
 

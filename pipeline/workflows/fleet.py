@@ -49,16 +49,11 @@ PARAMETERS = {
     "data": readings("readings with several visits per machine axis (visit, started_at)"),
     "format": FORMAT,
     **MAINTENANCE,  # the analysis drift and fleet share
-    "interval_days": Param((Interval(Real, 0, None, closed="neither"),),
-                           "maintenance interval [days]: the next visit is due this long after "
-                           "the last one at the latest", metavar="D"),
+    "interval_days": Param((Interval(Real, 0, None, closed="neither"),), metavar="D"),
     "out": Param((str, os.PathLike, None), "write the fleet site into DIR (index.html, one page "
                  "per axis, fleet.json); it opens from disk", metavar="DIR", output="folder"),
     "store": python_only(str, os.PathLike, None),
-    "stale_after_days": Param((Interval(Real, 0, None, closed="neither"),),
-                              "an axis whose watched feed (backlash watch) has sent no sample "
-                              "for this long alerts source_stale, unless its WATCH.toml says "
-                              "(stale_after_s)", metavar="D"),
+    "stale_after_days": Param((Interval(Real, 0, None, closed="neither"),), metavar="D"),
 }
 # A watched axis silent this long [d] is stale: a weekend without production is not.
 STALE_AFTER_DAYS = 2.0

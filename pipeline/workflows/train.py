@@ -48,8 +48,7 @@ PARAMETERS = {
     "model": Param((str, None),  # names checked by the registry
                    f"predictor (default: {registry.RECOMMENDED}): {', '.join(registry.names())}"
                    "; backlash compare lists what each does", metavar="NAME"),
-    "uncertainty": Param(BUDGET, "ISO/TR 230-9 uncertainty budget: score the test error "
-                         "against U(B), what the measurement can resolve", metavar="BUDGET.toml"),
+    "uncertainty": Param(BUDGET, metavar="BUDGET.toml"),
 }
 
 

@@ -42,15 +42,13 @@ PARAMETERS = {
     "target": TARGET,
     "features": FEATURES,
     "seed": RANDOM_SEED,
-    "trials": Param((_COUNT,), "trials to run in total"),
-    "storage": Param((str, None), "Optuna storage URL, e.g. postgresql://user@host/db "
-                     "(default: optuna.db in the tracking folder)"),
-    "study": Param((str, None), f"study name (default {DEFAULT_STUDY}-DIGEST, DIGEST the first "
-                   "12 hex digits of the data's SHA-256: one study per data)"),
-    "workers": Param((_COUNT,), "worker processes sharing the study"),
-    "folds": Param((Interval(Integral, 2, None, closed="left"),), "cross-validation folds"),
-    "heartbeat_s": Param((_COUNT,), "running trials report every S seconds; a trial silent for "
-                         "2 S (its worker was killed) is marked failed", metavar="S"),
+    # described by the docstring, as every parameter of the signature
+    "trials": Param((_COUNT,)),
+    "storage": Param((str, None)),
+    "study": Param((str, None)),
+    "workers": Param((_COUNT,)),
+    "folds": Param((Interval(Integral, 2, None, closed="left"),)),
+    "heartbeat_s": Param((_COUNT,), metavar="S"),
     # the runner's, when it tracks: the run logged while the search runs (Workflow record's
     # ``logs_while_running``); the command line's --no-track gives none
     "live": python_only(None, HasMethods(["start", "finish"])),
