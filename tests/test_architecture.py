@@ -21,7 +21,7 @@ FORBIDDEN = ("pipeline.tracking", "mlflow", "optuna")
 
 def imported_names(source: str, package: str) -> list[tuple[int, str]]:
     """(line, module) of every import in ``source``, at any depth: ``import a.b``, ``from a
-    import b`` (as ``a`` and ``a.b``), relative imports resolved against ``package``, and
+    import b`` (as ``a.b``), relative imports resolved against ``package``, and
     ``importlib.import_module("a")`` / ``__import__("a")`` with a literal name."""
     found = []
     for node in ast.walk(ast.parse(source)):
@@ -32,8 +32,8 @@ def imported_names(source: str, package: str) -> list[tuple[int, str]]:
             if node.level:
                 parts = package.split(".")[:len(package.split(".")) - node.level + 1]
                 base = ".".join([*parts, *([base] if base else [])])
-            found += [(node.lineno, base)]
-            found += [(node.lineno, f"{base}.{alias.name}") for alias in node.names]
+            found += [(node.lineno, f"{base}.{alias.name}" if base else alias.name)
+                      for alias in node.names]
         elif (isinstance(node, ast.Call) and node.args
               and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)
               and getattr(node.func, "attr", getattr(node.func, "id", None))
@@ -82,35 +82,19 @@ PURE_RECORDS = {"summary"}
 def store_use(source: str, package: str = "pipeline.workflows") -> list[str]:
     """``line: what`` of every call or import of ``open_store``/``open_for_records`` and
     every import from ``pipeline.store.records`` (but ``PURE_RECORDS``) in ``source``, at any
-    depth."""
-    found = []
+    depth (``imported_names``)."""
+    def recording(name: str) -> bool:
+        return (name.rsplit(".", 1)[-1] in OPENERS or name == RECORDS
+                or (name.startswith(f"{RECORDS}.")
+                    and name.removeprefix(f"{RECORDS}.") not in PURE_RECORDS))
 
-    def imported(line: int, base: str, names: list[str]) -> None:
-        for name in names:
-            full = f"{base}.{name}" if base else name
-            if (name in OPENERS or full == RECORDS
-                    or (base == RECORDS and name not in PURE_RECORDS)):
-                found.append(f"{line}: imports {full}")
-
+    found = [f"{line}: imports {name}" for line, name in imported_names(source, package)
+             if recording(name)]
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name == RECORDS or alias.name.startswith(f"{RECORDS}."):
-                    found.append(f"{node.lineno}: imports {alias.name}")
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")[:len(package.split(".")) - node.level + 1]
-                base = ".".join([*parts, *([base] if base else [])])
-            imported(node.lineno, base, [alias.name for alias in node.names])
-        elif isinstance(node, ast.Call):
-            name = getattr(node.func, "attr", getattr(node.func, "id", None))
-            literal = node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value
-            if name in OPENERS:
-                found.append(f"{node.lineno}: calls {name}")
-            elif (name in ("import_module", "__import__") and isinstance(literal, str)
-                  and (literal == RECORDS or literal.startswith(f"{RECORDS}."))):
-                found.append(f"{node.lineno}: imports {literal}")
+        name = isinstance(node, ast.Call) and getattr(node.func, "attr",
+                                                      getattr(node.func, "id", None))
+        if name in OPENERS:
+            found.append(f"{node.lineno}: calls {name}")
     return found
 
 
