@@ -174,7 +174,7 @@ def sensitivity(points: pd.DataFrame, cells: list[str]) -> Sensitivity:
     if p["test"].nunique() < MIN_TESTS:
         return Sensitivity()
     cols = ["backlash_um", "feed_mm_min", "machine_temp_c"]
-    w = _within(p.assign(machine_temp_c=p["machine_temp_c"].fillna(np.nan)), cells, cols)
+    w = _within(p, cells, cols)
     names = []
     if np.ptp(w["feed_mm_min"].to_numpy(float)) > 0:
         names.append("feed_mm_min")
@@ -201,7 +201,7 @@ def sensitivity(points: pd.DataFrame, cells: list[str]) -> Sensitivity:
     return Sensitivity(dict(zip(names, beta.tolist())), cov, g, n)
 
 
-def reference_corrections(readings: pd.DataFrame, points: pd.DataFrame | None = None
+def reference_corrections(readings: pd.DataFrame, points: pd.DataFrame
                           ) -> dict[tuple[str, str], AxisReference]:
     """Each machine axis's ``AxisReference``: its reference feed, its visits' mean
     conditions and the sensitivities (its own, else its unit's fleet-pooled; module
@@ -211,20 +211,15 @@ def reference_corrections(readings: pd.DataFrame, points: pd.DataFrame | None = 
     ----------
     readings : DataFrame
         Validated readings with ``feed_mm_min`` [mm/min] and ``machine_temp_c`` [°C].
-    points : DataFrame, optional
-        ``features.targets.targets_of(per_target(readings), "auto")`` when computed already.
+    points : DataFrame
+        The per-point targets of the readings, ``features.targets.targets_of(per_target(
+        readings), "auto")``, as the visits' values were computed from.
 
     Returns
     -------
     dict
         {(machine_id, axis): AxisReference}.
     """
-    from features import iso230
-    from features.targets import targets_of
-
-    if points is None:
-        points = targets_of(iso230.per_target(readings), "auto",
-                            readings.attrs.get("source", "readings"))
     return references_of(point_conditions(readings, points))
 
 

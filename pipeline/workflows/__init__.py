@@ -66,24 +66,23 @@ def check_params(constraints: Mapping, values: dict, caller: str) -> None:
             raise InputError(f"must be {listed}; got {value!r}", parameter=name)
 
 
-def checked(table: Mapping, *names: str, caller: str | None = None):
+def checked(table: Mapping, *names: str):
     """Decorator: each call of a plain function (not a job the runner calls) is checked
-    against ``table`` (its job's ``PARAMETERS``) with ``check_params`` before it runs, for the
-    parameters ``names`` (default: every parameter of the function ``table`` declares), as
-    scikit-learn's ``validate_params`` checks a function's arguments."""
+    against ``table`` (its job's ``PARAMETERS``) with ``check_params`` before it runs, for its
+    parameters ``names``, as scikit-learn's ``validate_params`` checks a function's
+    arguments."""
     import functools
     import inspect
 
     def decorate(function):
         signature = inspect.signature(function)
-        chosen = names or tuple(n for n in signature.parameters if n in table)
 
         @functools.wraps(function)
         def call(*args, **kwargs):
             bound = signature.bind(*args, **kwargs)
             bound.apply_defaults()
-            given = {n: v for n, v in bound.arguments.items() if n in chosen}
-            check_params(table, given, caller or function.__name__)
+            given = {n: v for n, v in bound.arguments.items() if n in names}
+            check_params(table, given, function.__name__)
             return function(*args, **kwargs)
 
         return call
