@@ -156,12 +156,24 @@ def _cycle(method: str, n: int):
                 yield (i, -1, c, True)
 
 
+# With ``conditions``: the lost motion grows with feed (friction windup) and with the machine
+# temperature (the nut's preload), linearly about 1000 mm/min and 20 °C; ``backlash_true_um``
+# is then the lost motion there, and a test at feed f and temperature T shows
+# backlash_true_um + SENSITIVITY_FEED (f - 1000) + SENSITIVITY_TEMP (T - 20).
+CONDITIONS_FEEDS = (600.0, 900.0, 1400.0)  # mm/min: each visit runs two pairs at two of them
+SENSITIVITY_FEED = 4e-4  # um per mm/min
+SENSITIVITY_TEMP = 0.3   # um/K
+
+
 def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: float = 1.0,
-          machines: tuple[Machine, ...] = MACHINES):
+          machines: tuple[Machine, ...] = MACHINES, conditions: bool = False):
     """Readings, truth and axes of the fleet (module docstring); ``rotary``: its rotary axes;
     ``rate_after``: the wear rate after an adjustment relative to before (a new nut that
     wears at another pace; 1: the adjustment resets the clearance only); ``machines``: other
-    machines than ``MACHINES`` (``ADJUSTED_LAST``: adjustments just before the last visit)."""
+    machines than ``MACHINES`` (``ADJUSTED_LAST``: adjustments just before the last visit);
+    ``conditions``: each visit runs a linear and a pendulum test at each of two feeds drawn
+    from ``CONDITIONS_FEEDS``, each pair at its own temperature, and the lost motion depends
+    on both (``SENSITIVITY_FEED``, ``SENSITIVITY_TEMP``)."""
     kind = ROTARY if rotary else LINEAR
     rng = np.random.default_rng(kind.seed + seed)
     axes = make_axes(rng, kind, machines)
@@ -182,6 +194,9 @@ def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: floa
                        "target": float(x), "backlash_true_um": float(b),
                        "operating_hours": hours, "hours_since_adjustment": since}
                       for x, b in zip(ax.targets, true)]
+            if conditions:
+                rows += _pairs_at_conditions(rng, ax, visit, true, date, hours)
+                continue
             feed = 1000.0 + 500.0 * (int(m.machine_id[1]) % 3)
             temp = 21.0 + rng.normal(0, 0.6)
             for k, method in enumerate(("linear", "pendulum")):
@@ -191,8 +206,22 @@ def fleet(seed: int = 0, visits: int = 8, rotary: bool = False, rate_after: floa
     return readings, pd.DataFrame(truth), axes
 
 
+def _pairs_at_conditions(rng, ax: Axis, visit: int, true: np.ndarray, date, hours) -> list:
+    """Two linear + pendulum pairs of a visit at two feeds, each pair at its own machine
+    temperature; the lost motion each pair shows is the truth at its mean conditions."""
+    rows = []
+    for p, feed in enumerate(rng.choice(CONDITIONS_FEEDS, size=2, replace=False)):
+        temp = 21.0 + rng.normal(0, 0.6)
+        shown = true + SENSITIVITY_FEED * (feed - 1000.0) + SENSITIVITY_TEMP * (temp + 0.15 - 20)
+        for k, method in enumerate(("linear", "pendulum")):
+            rows += _test(rng, ax, visit, method, shown,
+                          date + pd.Timedelta(minutes=40 * (2 * p + k)), hours, float(feed),
+                          temp + 0.3 * k, pair=p)
+    return rows
+
+
 def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start, hours,
-          feed, temp) -> list[dict]:
+          feed, temp, pair: int | None = None) -> list[dict]:
     m, k = ax.machine, ax.kind
     t = ax.targets
     length = t[-1] - t[0]
@@ -200,7 +229,8 @@ def _test(rng, ax: Axis, visit: int, method: str, lost_motion: np.ndarray, start
     geometric = k.lead * (t - t[0]) / 1000.0 + k.thermal * (temp - 20.0) * (t - t[0]) / 1000.0 \
         + k.periodic * np.sin(2 * np.pi * (t - t[0]) / (0.37 * length))
     offset = rng.normal(0, k.setup_sd)  # setup offset of the laser per test
-    test_id = f"{m.machine_id}{ax.axis}-v{visit}-{method[:3]}"
+    test_id = f"{m.machine_id}{ax.axis}-v{visit}-{method[:3]}" + ("" if pair is None
+                                                                   else f"-{pair}")
     out = []
     for i, sign, cycle, after_reversal in _cycle(method, len(t)):
         shows = (not m.direct) or after_reversal

@@ -206,7 +206,10 @@ def iso_b_row() -> Row:
                "term's rectangle dominates, so k = 2 covers all of it (k = 1.65 would be 95 %)")
 
 
-FORECAST_SEEDS = {"twin": (0, 1, 2, 3, 4), "independent": (0, 1, 2, 3)}
+FORECAST_SEEDS = {"twin": (0, 1, 2, 3, 4), "independent": (0, 1, 2, 3),
+                  "conditions": tuple(range(7))}
+FLEETS = {"twin": "twin fleet", "independent": "independent fleet",
+          "conditions": "independent fleet with feed and temperature effects"}
 
 
 def _conditions(readings):
@@ -256,13 +259,16 @@ def _twin_visits(seed: int):
                          ), conditions
 
 
-def _independent_visits(seed: int):
+def _independent_visits(seed: int, conditions: bool = False):
     """The same from the independent fleet (tests/independent_fleet.py): its truth per target,
-    averaged over the interior targets, and the visits its adjustments precede."""
+    averaged over the interior targets, and the visits its adjustments precede; with
+    ``conditions`` the fleet whose lost motion depends on feed and temperature, its truth at
+    1000 mm/min and 20 °C (``forecast_checks`` restates it at the conditions an interval is
+    for)."""
     import backlash as bl
     from tests.independent_fleet import MACHINES, fleet
 
-    readings, truth, _ = fleet(seed)
+    readings, truth, _ = fleet(seed, conditions=conditions)
     visits, conditions = _conditions(bl.validate(readings))
     ends = truth.groupby(["machine_id", "axis"])["target"].transform
     inner = truth[(truth["target"] > ends("min")) & (truth["target"] < ends("max"))]
@@ -276,7 +282,7 @@ def _independent_visits(seed: int):
                          adjusted=[adjusted[m] == int(v) for m, _, v in keys]), conditions
 
 
-@functools.lru_cache(maxsize=2)
+@functools.lru_cache(maxsize=3)
 def forecast_checks(which: str) -> dict:
     """Whether each forecast drift and fleet state for a next visit holds the truth:
     ``measurement`` (the next measurement), ``lost motion`` (the lost-motion interval at the
@@ -285,7 +291,8 @@ def forecast_checks(which: str) -> dict:
     ``models.condition.reference``, against the true lost motion at 20 °C and the reference
     feed over the series' targets), ``reference_all`` (the same against the twin's
     ``reference_backlash_um`` over all its targets, the turn-around ones included: reported,
-    not tested), ``none`` the count of series with no interval (fewer than three visits since
+    not tested; with ``which`` "conditions" the generator's lost motion at the conditions the
+    interval states), ``none`` the count of series with no interval (fewer than three visits since
     the last change point). The fleet is seen as of each of its visits in turn, analysed as the
     commands do (``analyse_visits``: change points, pooled scatter, backtests; the sensitivities
     from the readings up to that visit), each axis's forecast for the date of its next visit. A
@@ -297,8 +304,10 @@ def forecast_checks(which: str) -> dict:
     from features.visits import months_between
     from models.condition.drift import analyse_visits
     from models.condition.reference import references_of
+    from tests.independent_fleet import SENSITIVITY_FEED, SENSITIVITY_TEMP
 
-    make = {"twin": _twin_visits, "independent": _independent_visits}[which]
+    make = {"twin": _twin_visits, "independent": _independent_visits,
+            "conditions": functools.partial(_independent_visits, conditions=True)}[which]
     held = {"measurement": [], "lost motion": [], "reference": [], "reference_all": [],
             "corrections": [], "none": 0}
     truths = ["true_um", "reference_um", "reference_all_um", "adjusted"]
@@ -331,7 +340,12 @@ def forecast_checks(which: str) -> dict:
                                            <= g["lost_motion_high_um"])
                 for name, column in (("reference", "reference_um"),
                                      ("reference_all", "reference_all_um")):
-                    held[name].append(f["lost_motion_low_um"] <= row[column]
+                    truth = row[column]
+                    if which == "conditions":  # at the feed and temperature stated
+                        at = ref["conditions"]
+                        truth += (SENSITIVITY_FEED * (at["feed_mm_min"] - 1000.0)
+                                  + SENSITIVITY_TEMP * (at["temp_c"] - 20.0))
+                    held[name].append(f["lost_motion_low_um"] <= truth
                                       <= f["lost_motion_high_um"])
     return held
 
@@ -340,7 +354,10 @@ def forecast_row(which: str, interval: str) -> Row:
     checks = forecast_checks(which)
     held, none = checks[interval], checks["none"]
     data = {"twin": "the twin's fleet preset, 5 seeds x 12 axes x 8 visits",
-            "independent": "tests/independent_fleet.py, 4 seeds x 10 axes x 8 visits"}[which]
+            "independent": "tests/independent_fleet.py, 4 seeds x 10 axes x 8 visits",
+            "conditions": "tests/independent_fleet.py with conditions=True (two pairs per visit "
+                          "at two of three feeds, each at its own temperature), 7 seeds x 10 "
+                          "axes x 8 visits"}[which]
     quantity = {"measurement": "the next measurement", "lost motion": "the axis's lost motion "
                 "at the next visit", "reference": "the axis's lost motion at reference "
                 "conditions"}[interval]
@@ -360,7 +377,13 @@ def forecast_row(which: str, interval: str) -> Row:
                                f"included, {100 * np.mean(everywhere):.1f} %)"
                                if which == "twin" else
                                " (its lost motion depends on neither: no correction is made, "
-                               "one feed per machine and one temperature per visit)")}[interval]
+                               "one feed per machine and one temperature per visit)"
+                               if which == "independent" else
+                               " (0.4 um per 1000 mm/min and 0.3 um/K; the truth at the feed "
+                               "and temperature the interval states); the change points are "
+                               "found in the values at the tests' own conditions, so visits "
+                               "at other conditions can read as steps and leave a series "
+                               "without an interval")}[interval]
     method = ("OLS line since the last change point, fleet-pooled scatter, rolling-origin "
               "model error, t(ν) 95 %")
     if interval == "lost motion":
@@ -368,7 +391,7 @@ def forecast_row(which: str, interval: str) -> Row:
     if interval == "reference":
         method += ("; + feed and temperature sensitivity (within visit and target, "
                    "cluster-robust over tests) x (reference - the visits' mean conditions)")
-    return Row(f"forecast, {which} fleet: {quantity}", method, int(np.sum(held)), len(held),
+    return Row(f"forecast, {FLEETS[which]}: {quantity}", method, int(np.sum(held)), len(held),
                data, breaks, none)
 
 
@@ -378,7 +401,8 @@ def measure() -> list[Row]:
         return [monitor_row(), circle_row("backlash"), circle_row("squareness"),
                 kinematics_row(), stiffness_row(), iso_b_row(),
                 *(forecast_row(which, interval) for which in ("twin", "independent")
-                  for interval in ("measurement", "lost motion", "reference"))]
+                  for interval in ("measurement", "lost motion", "reference")),
+                forecast_row("conditions", "reference")]
 
 
 def table(rows: list[Row]) -> str:
@@ -418,7 +442,9 @@ def _row(prefix: str) -> Row:
                                     "forecast, independent fleet: the axis's lost motion",
                                     "forecast, twin fleet: the axis's lost motion at reference",
                                     ("forecast, independent fleet: the axis's lost motion "
-                                     "at reference")])
+                                     "at reference"),
+                                    ("forecast, independent fleet with feed and temperature "
+                                     "effects: the axis's lost motion at reference")])
 def test_the_k2_interval_holds_the_truth_85_to_99_percent(prefix):
     row = _row(prefix)
     assert row.intervals >= 100, row
